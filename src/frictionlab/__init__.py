@@ -1,0 +1,56 @@
+"""frictionlab: the rotary (Furuta) inverted pendulum with friction on the arm bearing.
+
+Built from C. F. Abelson, "The Effect of Friction on Stabilization of an
+Inverted Pendulum" (Lund, 1996).  The public API:
+
+* parameters: :class:`PlantParams`, :class:`DesignSpec`, :class:`FrictionParams`,
+  :class:`SimParams`, :class:`Config`, :func:`build_config`
+* physics: :func:`rhs` (eq. 6), :func:`linearize`, :func:`zoh`
+* friction: :func:`make_model`, :class:`FrictionModel`
+* design: :func:`design`, :func:`preset`
+* observers and controller: :class:`PendulumObserver`, :class:`ArmObserver`,
+  :class:`Controller`
+* simulation and analysis: :func:`simulate`, :func:`simulate_config`,
+  :class:`Trajectory`, :func:`features`, :func:`trajectory_features`
+* rig conversions: :class:`RigScaling`
+"""
+
+from .config import Config, ConfigError, SimParams, build_config
+from .controller import Controller
+from .design import Design, DesignSpec, design, preset
+from .friction import FrictionModel, FrictionParams, make_model
+from .limit_cycles import LimitCycleFeatures, features, trajectory_features
+from .observers import ArmObserver, PendulumObserver
+from .plant import PlantParams, linearize, rhs, zoh
+from .rig import RigScaling
+from .simulation import Trajectory, simulate, simulate_config
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ArmObserver",
+    "Config",
+    "ConfigError",
+    "Controller",
+    "Design",
+    "DesignSpec",
+    "FrictionModel",
+    "FrictionParams",
+    "LimitCycleFeatures",
+    "PendulumObserver",
+    "PlantParams",
+    "RigScaling",
+    "SimParams",
+    "Trajectory",
+    "build_config",
+    "design",
+    "features",
+    "linearize",
+    "make_model",
+    "preset",
+    "rhs",
+    "simulate",
+    "simulate_config",
+    "trajectory_features",
+    "zoh",
+]

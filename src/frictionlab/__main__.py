@@ -1,0 +1,7 @@
+"""``python -m frictionlab``."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

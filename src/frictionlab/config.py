@@ -1,0 +1,236 @@
+"""Run configuration: every parameter of a run, addressable by ``section.field`` keys.
+
+The keys are those of ``shared/INTERFACE.md`` (``plant.omega0``,
+``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``...).
+A configuration is built from, in order: the thesis defaults, the design
+preset (``fast``/``slow``), the per-model friction defaults, a TOML file, and
+``--set KEY=VALUE`` overrides (applied in order, the later winning).
+Unknown keys and bad values raise :class:`ConfigError` (a ``ValueError``)
+naming the key and what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ._validation import Validated, param
+from .design import DesignSpec, preset
+from .friction import KINDS, FrictionParams
+from .plant import PlantParams
+
+__all__ = [
+    "COMPENSATOR_KINDS",
+    "PLANT_FRICTION_KINDS",
+    "Config",
+    "ConfigError",
+    "SimParams",
+    "build_config",
+    "parse_assignment",
+    "valid_keys",
+]
+
+#: Plant friction models selectable with ``--friction``.
+PLANT_FRICTION_KINDS = KINDS
+#: Compensators selectable with ``--compensation``.
+COMPENSATOR_KINDS = ("none", "coulomb", "classical", "lugre")
+
+
+class ConfigError(ValueError):
+    """A configuration key or value is invalid (CLI exit status 2)."""
+
+
+@dataclass(frozen=True)
+class SimParams(Validated):
+    """Simulation settings (keys ``sim.*``)."""
+
+    _prefix = "sim."
+
+    initial_angle: float = param(0.05, "initial pendulum angle", "rad", lo=-1.0, hi=1.0)
+    substeps: int = param(10, "integrator substeps per sampling period", "1", lo=1, hi=10000,
+                          integer=True)
+    noise: float = param(0.0, "std. dev. of measurement noise on each measured signal "
+                         "(theta, Omega, Omega_dot) in its SI unit", "rad, rad, rad/s",
+                         lo=0.0, hi=1.0)
+    seed: int = param(0, "random seed of the measurement noise", "1", lo=0, hi=2**32 - 1,
+                      integer=True)
+    quantization: float = param(0.0, "1 = quantize measurements like the rig's 12-bit ADC "
+                                "(App. B scale factors), 0 = ideal", "1", lo=0.0, hi=1.0)
+    fall_angle: float = param(math.pi / 2, "|theta| beyond which the pendulum has fallen",
+                              "rad", lo=0.0, hi=math.pi, lo_open=True)
+    duration: float = param(40.0, "simulated time", "s", lo=0.0, hi=1e5, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything a closed-loop run needs."""
+
+    plant: PlantParams = dataclasses.field(default_factory=PlantParams)
+    design: DesignSpec = dataclasses.field(default_factory=DesignSpec)
+    friction_kind: str = "classical"
+    friction: FrictionParams = dataclasses.field(default_factory=FrictionParams)
+    compensation_kind: str = "none"
+    compensation: FrictionParams = dataclasses.field(
+        default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
+    sim: SimParams = dataclasses.field(default_factory=SimParams)
+
+    def __post_init__(self) -> None:
+        if self.friction_kind not in PLANT_FRICTION_KINDS:
+            raise ConfigError(f"friction must be one of {', '.join(PLANT_FRICTION_KINDS)}; "
+                              f"got {self.friction_kind!r}")
+        if self.compensation_kind not in COMPENSATOR_KINDS:
+            raise ConfigError(f"compensation must be one of {', '.join(COMPENSATOR_KINDS)}; "
+                              f"got {self.compensation_kind!r}")
+
+    def get(self, key: str) -> Any:
+        section, field = _split(key)
+        return getattr(getattr(self, section), field)
+
+    def with_values(self, values: Mapping[str, Any]) -> Config:
+        """A copy with ``{key: value}`` applied (validated)."""
+        return _apply(self, list(values.items()))
+
+    def as_flat_dict(self) -> dict[str, Any]:
+        """All keys and their values (for logs and sidecars)."""
+        out: dict[str, Any] = {"friction_kind": self.friction_kind,
+                               "compensation_kind": self.compensation_kind}
+        for section in _SECTIONS:
+            obj = getattr(self, section)
+            for f in dataclasses.fields(obj):
+                if "doc" in f.metadata:
+                    out[f"{section}.{f.name}"] = getattr(obj, f.name)
+        return out
+
+
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim")
+_CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
+            "compensation": FrictionParams, "sim": SimParams}
+
+
+def valid_keys() -> list[str]:
+    """Every accepted ``section.field`` key."""
+    keys = []
+    for section in _SECTIONS:
+        for f in dataclasses.fields(_CLASSES[section]):
+            if "doc" in f.metadata:
+                keys.append(f"{section}.{f.name}")
+    return keys
+
+
+def _split(key: str) -> tuple[str, str]:
+    if key.count(".") != 1 or key not in valid_keys():
+        raise ConfigError(f"unknown key {key!r}; valid keys: {', '.join(valid_keys())}")
+    section, field = key.split(".")
+    return section, field
+
+
+def _coerce(key: str, value: Any) -> Any:
+    if isinstance(value, str):
+        text = value.strip()
+        if text.lower() in ("none", "null", ""):
+            return None
+        try:
+            return float(text) if any(c in text.lower() for c in ".einf") else int(text)
+        except ValueError:
+            try:
+                return float(text)
+            except ValueError:
+                raise ConfigError(f"{key}: {value!r} is not a number") from None
+    if isinstance(value, bool) or not (value is None or isinstance(value, int | float)):
+        raise ConfigError(f"{key}: {value!r} is not a number")
+    return value
+
+
+def _apply(cfg: Config, items: list[tuple[str, Any]]) -> Config:
+    changes: dict[str, dict[str, Any]] = {}
+    for key, value in items:
+        section, field = _split(key)
+        changes.setdefault(section, {})[field] = _coerce(key, value)
+    kwargs = {}
+    for section, fields in changes.items():
+        obj = getattr(cfg, section)
+        try:
+            new = dataclasses.replace(obj, **fields)
+        except ValueError as exc:
+            msg = str(exc)
+            if section == "compensation":
+                msg = msg.replace("friction.", "compensation.")
+            raise ConfigError(msg) from None
+        kwargs[section] = new
+    return dataclasses.replace(cfg, **kwargs)
+
+
+def parse_assignment(text: str) -> tuple[str, str]:
+    """Split ``KEY=VALUE`` (the ``--set`` syntax)."""
+    if "=" not in text:
+        raise ConfigError(f"--set expects KEY=VALUE, got {text!r}")
+    key, value = text.split("=", 1)
+    return key.strip(), value.strip()
+
+
+def _flatten_toml(data: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    items: list[tuple[str, Any]] = []
+    for k, v in data.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            items.extend(_flatten_toml(v, key + "."))
+        else:
+            items.append((key, v))
+    return items
+
+
+def load_toml(path: str | Path) -> list[tuple[str, Any]]:
+    """Read ``[section] field = value`` (or dotted keys) from a TOML file."""
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except OSError as exc:
+        raise ConfigError(f"cannot read config file {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
+    return _flatten_toml(data)
+
+
+def build_config(
+    design: str | None = "fast",
+    friction: str = "classical",
+    compensation: str = "none",
+    config_file: str | Path | None = None,
+    sets: Iterable[str | tuple[str, Any]] = (),
+) -> Config:
+    """Assemble a :class:`Config` the way the command line does.
+
+    Parameters
+    ----------
+    design : {"fast", "slow"} or None
+        Design preset (Sec. 2.4) applied before the file and the overrides.
+    friction, compensation : str
+        Plant friction model and compensator.
+    config_file : path, optional
+        TOML file with ``[plant]``, ``[design]``, ``[friction]``,
+        ``[compensation]``, ``[sim]`` tables.
+    sets : iterable of ``"KEY=VALUE"`` or ``(key, value)``
+        Overrides, applied in order.
+    """
+    try:
+        spec = preset(design) if design else DesignSpec()
+        cfg = Config(design=spec, friction_kind=friction,
+                     friction=FrictionParams.defaults(friction, "plant"),
+                     compensation_kind=compensation,
+                     compensation=FrictionParams.defaults(
+                         compensation if compensation != "none" else "lugre", "compensation"))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    items: list[tuple[str, Any]] = []
+    if config_file is not None:
+        items.extend(load_toml(config_file))
+    for s in sets:
+        items.append(parse_assignment(s) if isinstance(s, str) else tuple(s))
+    for key, _ in items:
+        _split(key)
+    return _apply(cfg, items) if items else cfg

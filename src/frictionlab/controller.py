@@ -1,0 +1,269 @@
+r"""The sampled controller: observers, state feedback and friction compensation.
+
+One tick (Sec. 7.3, process *Regul*): read the measurements, compute
+:math:`u = -L\hat x + \hat F` from the *predicted* estimates, saturate it to
+the DAC range, output it, then update the observers.  The same compiled
+:func:`controller_step` runs inside the simulator and in the 200 Hz loop, so
+a logged run can be replayed exactly.
+
+What the observers are fed
+--------------------------
+The observers model the plant without friction.  Without compensation they
+receive the applied u.  With compensation the applied signal is
+:math:`u = u_{fb} + \hat F`, and the plant's net acceleration is
+:math:`u - F \approx u - \hat F`, so the observers receive
+:math:`u - \hat F` (the best available estimate of the net acceleration)
+rather than u, which would make them predict an acceleration the
+compensation spends on friction.
+
+Controller state (explicit, a float64 vector)
+---------------------------------------------
+====  =============  ==================================================
+idx   name           meaning
+====  =============  ==================================================
+0     ``S_X1``       pendulum observer :math:`\hat\theta` (rad)
+1     ``S_X2``       pendulum observer :math:`\hat{\dot\theta}/\omega_0`
+2     ``S_ARM``      arm observer :math:`\hat\Omega` (rad)
+3     ``S_ARMDOT``   arm observer :math:`\hat{\dot\Omega}` (rad/s)
+4     ``S_RELAY``    compensator relay state (Coulomb) or stick flag
+5     ``S_ZHAT``     compensator LuGre bristle estimate :math:`\hat z`
+6     ``S_FHAT``     last friction estimate :math:`\hat F` (m/s^2)
+7     ``S_U``        last applied u (m/s^2)
+====  =============  ==================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .design import Design
+from .friction import (
+    CLASSICAL,
+    COULOMB,
+    LUGRE,
+    P_EPS,
+    P_FS,
+    P_FSN,
+    STRIBECK,
+    FrictionParams,
+    coulomb_relay,
+    lugre_force,
+    lugre_step_exact,
+    stribeck_level,
+)
+from .observers import arm_observer_step, pendulum_observer_step
+
+__all__ = [
+    "ERROR_SIGNALS",
+    "Controller",
+    "ControllerOutput",
+    "controller_step",
+]
+
+S_X1, S_X2, S_ARM, S_ARMDOT, S_RELAY, S_ZHAT, S_FHAT, S_U = range(8)
+NS = 8
+
+G_L, G_K = 0, 4
+G_W0, G_G, G_ARMLEN, G_H, G_UMAX, G_COMP, G_ERR, G_FEEDNET = range(8, 16)
+NG = 16
+
+#: Candidate error signals e for the LuGre compensator's observer, eq. (19).
+ERROR_SIGNALS = ("none", "velocity_innovation", "position_innovation", "arm_velocity")
+E_NONE, E_VEL_INNOV, E_POS_INNOV, E_ARM_VEL = range(4)
+
+
+@njit(cache=True)
+def compensator_force(kind, s, cp, v, u_fb, e, h):
+    """Friction estimate of the compensator (Sec. 6.1-6.3) for the coming sample.
+
+    Parameters
+    ----------
+    kind : int
+        Compensator code (0 none, ``COULOMB``, ``STRIBECK`` for the classical
+        implementation form, ``LUGRE``).
+    s : ndarray
+        Controller state (relay and bristle entries are updated in place).
+    cp : ndarray
+        Packed compensator friction parameters.
+    v : float
+        Measured arm velocity (rad/s).
+    u_fb : float
+        Feedback control signal (the external force the classical form uses
+        inside the band).
+    e : float
+        Error signal of the LuGre observer.
+    h : float
+        Sampling period.
+    """
+    if kind == COULOMB:
+        f, r = coulomb_relay(v, s[S_RELAY], cp)
+        s[S_RELAY] = r
+        return f
+    if kind == STRIBECK or kind == CLASSICAL:
+        eps = cp[P_EPS]
+        if abs(v) < eps or v == 0.0:
+            fs = cp[P_FS] if u_fb >= 0.0 else cp[P_FSN]
+            return min(max(u_fb, -fs), fs)
+        sg = 1.0 if v > 0.0 else -1.0
+        return stribeck_level(v, cp) * sg
+    if kind == LUGRE:
+        z_new, z_mean, dz_mean = lugre_step_exact(v, s[S_ZHAT], e, h, cp)
+        s[S_ZHAT] = z_new
+        return lugre_force(v, z_mean, dz_mean, cp)
+    return 0.0
+
+
+@njit(cache=True)
+def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
+    """One controller tick; updates the state vector ``s`` in place.
+
+    Parameters
+    ----------
+    s : ndarray (NS,)
+        Controller state (see the module table).
+    gp : ndarray (NG,)
+        Packed gains (:meth:`Controller.pack`).
+    cp : ndarray
+        Packed compensator parameters.
+    theta_m, arm_m, arm_dot_m : float
+        Measured pendulum angle, arm angle (rad) and arm velocity (rad/s).
+
+    Returns
+    -------
+    (u, u_fb, F_hat) : applied control, feedback part, friction estimate.
+    """
+    w0 = gp[G_W0]
+    h = gp[G_H]
+    th_hat = s[S_X1]
+    thd_hat = w0 * s[S_X2]
+    arm_hat = s[S_ARM]
+    armd_hat = s[S_ARMDOT]
+    u_fb = -(gp[G_L] * th_hat + gp[G_L + 1] * thd_hat + gp[G_L + 2] * arm_hat
+             + gp[G_L + 3] * armd_hat)
+    kind = int(gp[G_COMP])
+    f_hat = 0.0
+    if kind != 0:
+        err = int(gp[G_ERR])
+        e = 0.0
+        if err == E_VEL_INNOV:
+            e = arm_dot_m - armd_hat
+        elif err == E_POS_INNOV:
+            e = arm_m - arm_hat
+        elif err == E_ARM_VEL:
+            e = arm_dot_m
+        f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
+    u = u_fb + f_hat
+    umax = gp[G_UMAX]
+    if u > umax:
+        u = umax
+    elif u < -umax:
+        u = -umax
+    u_obs = u - f_hat if gp[G_FEEDNET] != 0.0 else u
+    x1n, x2n = pendulum_observer_step(s[S_X1], s[S_X2], theta_m, armd_hat, u_obs, gp[G_K],
+                                      gp[G_K + 1], w0, gp[G_G], h)
+    an, adn = arm_observer_step(arm_hat, armd_hat, arm_m, u_obs, gp[G_K + 2], gp[G_K + 3], h,
+                                gp[G_ARMLEN])
+    s[S_X1] = x1n
+    s[S_X2] = x2n
+    s[S_ARM] = an
+    s[S_ARMDOT] = adn
+    s[S_FHAT] = f_hat
+    s[S_U] = u
+    return u, u_fb, f_hat
+
+
+@dataclass(frozen=True)
+class ControllerOutput:
+    """What one tick produced (all SI)."""
+
+    u: float
+    u_feedback: float
+    friction_estimate: float
+    theta_hat: float
+    theta_dot_hat: float
+    arm_hat: float
+    arm_dot_hat: float
+    z_hat: float
+
+
+@dataclass(frozen=True)
+class Controller:
+    """State feedback with observers and an optional friction compensator.
+
+    Parameters
+    ----------
+    design : Design
+        Gains from :func:`frictionlab.design.design`.
+    compensation : str
+        ``none``, ``coulomb``, ``classical`` (Sec. 6.2's implementation form)
+        or ``lugre`` (the observer eq. 19).
+    compensation_params : FrictionParams
+        The compensator's own friction model.
+    error_signal : str
+        The LuGre observer's error e (one of :data:`ERROR_SIGNALS`).
+    u_max : float
+        Saturation of u (the DAC range, App. B: 1/0.022 m/s^2).
+    feed_net : bool
+        Feed the observers ``u - F_hat`` (see the module docstring).
+    """
+
+    design: Design
+    compensation: str = "none"
+    compensation_params: FrictionParams = dataclasses.field(
+        default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
+    error_signal: str = "velocity_innovation"
+    u_max: float = 1.0 / 0.022
+    feed_net: bool = True
+
+    def __post_init__(self) -> None:
+        if self.compensation not in ("none", "coulomb", "classical", "lugre"):
+            raise ValueError("compensation must be one of none, coulomb, classical, lugre; "
+                             f"got {self.compensation!r}")
+        if self.error_signal not in ERROR_SIGNALS:
+            raise ValueError(f"error_signal must be one of {', '.join(ERROR_SIGNALS)}; "
+                             f"got {self.error_signal!r}")
+        if not self.u_max > 0:
+            raise ValueError(f"u_max must be > 0, got {self.u_max}")
+
+    @property
+    def compensator_code(self) -> int:
+        return {"none": 0, "coulomb": COULOMB, "classical": STRIBECK,
+                "lugre": LUGRE}[self.compensation]
+
+    def pack(self) -> tuple[np.ndarray, np.ndarray]:
+        """Packed (gains, compensator parameters) for the compiled step."""
+        d = self.design
+        gp = np.zeros(NG)
+        gp[G_L:G_L + 4] = d.L
+        gp[G_K:G_K + 4] = d.K
+        gp[G_W0] = d.spec.omega0
+        gp[G_G] = d.g
+        gp[G_ARMLEN] = d.arm_length
+        gp[G_H] = d.spec.h
+        gp[G_UMAX] = self.u_max
+        gp[G_COMP] = self.compensator_code
+        gp[G_ERR] = ERROR_SIGNALS.index(self.error_signal)
+        gp[G_FEEDNET] = 1.0 if (self.feed_net and self.compensation != "none") else 0.0
+        return gp, self.compensation_params.pack()
+
+    def init(self, theta0: float = 0.0) -> np.ndarray:
+        """Initial state: the observers start at the first measured angle, at rest."""
+        s = np.zeros(NS)
+        s[S_X1] = theta0
+        return s
+
+    def step(self, state: np.ndarray, theta_m: float, arm_m: float, arm_dot_m: float):
+        """One tick: ``(output, next_state)``; ``state`` is not modified."""
+        s = np.array(state, dtype=float, copy=True)
+        gp, cp = self.pack()
+        w0 = self.design.spec.omega0
+        est = (s[S_X1], w0 * s[S_X2], s[S_ARM], s[S_ARMDOT])
+        u, u_fb, f_hat = controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m)
+        out = ControllerOutput(float(u), float(u_fb), float(f_hat), *map(float, est),
+                               float(s[S_ZHAT]))
+        return out, s
+

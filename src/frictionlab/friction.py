@@ -1,0 +1,409 @@
+r"""Friction models of the arm bearing (Sec. 3, 6.1-6.3).
+
+All friction levels are in the units of the control signal u (m/s^2, i.e.
+the thesis's :math:`F_{fr}/m`); velocities are the arm angular velocity
+:math:`\dot\Omega` in rad/s.  A positive force opposes a positive velocity;
+the plant's net arm acceleration is :math:`k_u u - F` (eq. 5).
+
+Models
+------
+``none``
+    No friction.
+``viscous``
+    :math:`F = F_v v`.
+``coulomb``
+    Pure Coulomb relay with hysteresis :math:`\pm\varepsilon` (Sec. 6.1):
+    the relay output :math:`s\in\{-1, 0, +1\}` switches to +1 when
+    :math:`v > \varepsilon`, to -1 when :math:`v < -\varepsilon`, and keeps its
+    previous value in between; :math:`F = F_C s`.  With :math:`\varepsilon = 0`
+    it is the ideal relay :math:`F_C\,\mathrm{sgn}(v)`.  ``s`` is memory and
+    belongs to the caller's state.
+``classical``
+    Stiction plus Coulomb friction, eq. (17).  Simulation needs a finite
+    "zero velocity" band (Sec. 5.2): speeds with :math:`|v| <` ``zero_velocity_band``
+    count as rest, where the friction balances the external force
+    :math:`F_e` up to the stiction level :math:`F_S`.
+``stribeck``
+    The classical model's "implementation form" of Sec. 6.2: outside the band
+    the level decays exponentially from :math:`F_S` to :math:`F_C` (the Stribeck
+    curve), inside the band the friction balances :math:`F_e`, limited to
+    :math:`\pm F_S` (the thesis writes ``F = u``; the limit keeps the friction
+    physical and only matters when :math:`|F_e| > F_S`).  The band half-width is
+    ``hysteresis`` (:math:`\varepsilon`, as in Sec. 6.2) when given, else
+    ``zero_velocity_band``.
+``lugre``
+    The LuGre model, eq. (18), with the observer correction of eq. (19):
+
+    .. math::
+
+        \dot z = v - \frac{|v|}{g(v)} z - k e,\quad
+        g(v) = \frac{F_C + (F_S - F_C) e^{-(v/v_S)^2}}{\sigma_0},\quad
+        F = \sigma_0 z + \sigma_1(v)\dot z + F_v v
+
+    ``observer_gain`` is :math:`k` (0 gives the plain eq. 18).  Optional
+    variants: direction-dependent :math:`F_S, F_C, F_v` (``*_negative``
+    fields, used for :math:`v < 0`) and the velocity-dependent damping
+    :math:`\sigma_1(v) = \sigma_1 e^{-(v/v_d)^2}` of Sec. 3.3 (``sigma1_velocity``
+    = :math:`v_d`).
+
+The pure force laws are numba-compiled functions over a packed parameter
+vector (:meth:`FrictionParams.pack`) so that the simulator, the observers and
+the real-time loop share them.  The Python classes returned by
+:func:`make_model` wrap the same functions for interactive use and tests.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ._validation import Validated, param
+
+__all__ = [
+    "KINDS",
+    "FrictionModel",
+    "FrictionParams",
+    "classical_force",
+    "coulomb_relay",
+    "lugre_dz",
+    "lugre_force",
+    "lugre_step_exact",
+    "make_model",
+    "static_force",
+    "stribeck_curve",
+    "stribeck_level",
+]
+
+#: Integer codes of the friction models (index = code).
+KINDS = ("none", "viscous", "coulomb", "classical", "stribeck", "lugre")
+NONE, VISCOUS, COULOMB, CLASSICAL, STRIBECK, LUGRE = range(6)
+
+# packed parameter layout
+P_FS, P_FC, P_FV, P_VS, P_S0, P_S1, P_K, P_BAND, P_EPS, P_FSN, P_FCN, P_FVN, P_VD = range(13)
+NP = 13
+
+
+@dataclass(frozen=True)
+class FrictionParams(Validated):
+    """Parameters of every friction model (keys ``friction.*`` / ``compensation.*``).
+
+    Each model reads the fields it needs (see the module docstring); the
+    defaults are the thesis values (eq. 20, eq. 21, App. E).  Use
+    :meth:`defaults` for the per-model defaults of the plant or the
+    compensator.
+    """
+
+    _prefix = "friction."
+
+    stiction: float = param(2.3, "stiction level [F_S]", "m/s^2", lo=0.0, hi=1e3)
+    coulomb: float = param(1.5, "Coulomb friction level [F_C]", "m/s^2", lo=0.0, hi=1e3)
+    viscous: float = param(0.07, "viscous coefficient [F_v] (LuGre, viscous)", "m/s^2/(rad/s)",
+                           lo=0.0, hi=1e3)
+    stribeck_velocity: float = param(1.0, "Stribeck velocity [v_S]", "rad/s", lo=0.0, hi=1e3,
+                                     lo_open=True)
+    sigma0: float = param(100.0, "LuGre bristle stiffness [sigma_0]", "1/s^2", lo=0.0, hi=1e7,
+                          lo_open=True)
+    sigma1: float = param(5.0, "LuGre bristle damping [sigma_1]", "1/s", lo=0.0, hi=1e5)
+    observer_gain: float = param(0.0, "LuGre observer gain [k] of eq. (19)", "1",
+                                 lo=0.0, hi=1e4)
+    zero_velocity_band: float = param(0.001, "classical model: |v| below this counts as rest "
+                                      "(Sec. 5.2)", "rad/s", lo=0.0, hi=10.0)
+    hysteresis: float = param(0.0, "Coulomb/Stribeck-classical hysteresis half-width "
+                              "[epsilon] (Sec. 6.1-6.2)", "rad/s", lo=0.0, hi=10.0)
+    stiction_negative: float | None = param(None, "F_S for v < 0 (asymmetric variant; None = "
+                                            "same as stiction)", "m/s^2", lo=0.0, hi=1e3,
+                                            optional=True)
+    coulomb_negative: float | None = param(None, "F_C for v < 0 (asymmetric variant)", "m/s^2",
+                                           lo=0.0, hi=1e3, optional=True)
+    viscous_negative: float | None = param(None, "F_v for v < 0 (asymmetric variant)",
+                                           "m/s^2/(rad/s)", lo=0.0, hi=1e3, optional=True)
+    sigma1_velocity: float | None = param(None, "v_d of sigma_1(v) = sigma_1 exp(-(v/v_d)^2) "
+                                          "(None = constant sigma_1)", "rad/s", lo=0.0,
+                                          hi=1e3, lo_open=True, optional=True)
+
+    @staticmethod
+    def defaults(kind: str, role: str = "plant") -> FrictionParams:
+        """Thesis defaults of ``kind`` for the plant or the compensator.
+
+        Parameters
+        ----------
+        kind : str
+            One of :data:`KINDS`.
+        role : {"plant", "compensation"}
+            ``compensation`` gives the settings Sec. 6 found best on the rig:
+            Coulomb eps 0.05 (F_C 1.5); classical F_S 2.3, F_C 1.55, v_S 1,
+            eps 0.08; LuGre F_S 2.3, F_C 1.55, F_v 0.07, sigma0 300, sigma1 6,
+            v_S 1, k 7.
+        """
+        _check_kind(kind)
+        base = FrictionParams()
+        if role == "plant":
+            return base
+        if role != "compensation":
+            raise ValueError(f"role must be 'plant' or 'compensation', got {role!r}")
+        if kind == "coulomb":
+            return dataclasses.replace(base, coulomb=1.5, hysteresis=0.05)
+        if kind in ("classical", "stribeck"):
+            return dataclasses.replace(base, stiction=2.3, coulomb=1.55, stribeck_velocity=1.0,
+                                       hysteresis=0.08)
+        if kind == "lugre":
+            return dataclasses.replace(base, stiction=2.3, coulomb=1.55, viscous=0.07,
+                                       sigma0=300.0, sigma1=6.0, stribeck_velocity=1.0,
+                                       observer_gain=7.0)
+        return base
+
+    def pack(self) -> np.ndarray:
+        """Packed float64 vector read by the compiled force laws."""
+        p = np.zeros(NP)
+        p[P_FS] = self.stiction
+        p[P_FC] = self.coulomb
+        p[P_FV] = self.viscous
+        p[P_VS] = self.stribeck_velocity
+        p[P_S0] = self.sigma0
+        p[P_S1] = self.sigma1
+        p[P_K] = self.observer_gain
+        p[P_BAND] = self.zero_velocity_band
+        p[P_EPS] = self.hysteresis
+        p[P_FSN] = self.stiction if self.stiction_negative is None else self.stiction_negative
+        p[P_FCN] = self.coulomb if self.coulomb_negative is None else self.coulomb_negative
+        p[P_FVN] = self.viscous if self.viscous_negative is None else self.viscous_negative
+        p[P_VD] = math.inf if self.sigma1_velocity is None else self.sigma1_velocity
+        return p
+
+
+def _check_kind(kind: str) -> int:
+    if kind not in KINDS:
+        raise ValueError(f"friction model must be one of {', '.join(KINDS)}; got {kind!r}")
+    return KINDS.index(kind)
+
+
+# --------------------------------------------------------------------------
+# compiled force laws
+# --------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _sgn(x):
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return 0.0
+
+
+@njit(cache=True)
+def stribeck_level(v, p):
+    """Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (direction-dependent)."""
+    if v >= 0.0:
+        fs, fc = p[P_FS], p[P_FC]
+    else:
+        fs, fc = p[P_FSN], p[P_FCN]
+    r = v / p[P_VS]
+    return fc + (fs - fc) * np.exp(-r * r)
+
+
+@njit(cache=True)
+def stribeck_curve(v, p):
+    """Steady-state (Stribeck) friction :math:`s(v)\\,\\mathrm{sgn}(v) + F_v v`."""
+    fv = p[P_FV] if v >= 0.0 else p[P_FVN]
+    return stribeck_level(v, p) * _sgn(v) + fv * v
+
+
+@njit(cache=True)
+def coulomb_relay(v, s_prev, p):
+    """Coulomb relay with hysteresis (Sec. 6.1).
+
+    Returns
+    -------
+    (F, s) : the friction and the new relay state (-1, 0 or +1).
+    """
+    eps = p[P_EPS]
+    s = s_prev
+    if v > eps:
+        s = 1.0
+    elif v < -eps:
+        s = -1.0
+    fc = p[P_FC] if s >= 0.0 else p[P_FCN]
+    return fc * s, s
+
+
+@njit(cache=True)
+def classical_force(v, fe, p):
+    """Stiction + Coulomb friction, eq. (17), with a zero-velocity band.
+
+    Parameters
+    ----------
+    v : float
+        Arm velocity, rad/s.
+    fe : float
+        External force on the arm in units of u (the applied :math:`k_u u`).
+    p : ndarray
+        Packed parameters.
+    """
+    if abs(v) >= p[P_BAND] and v != 0.0:
+        return p[P_FC] * _sgn(v) if v > 0.0 else p[P_FCN] * _sgn(v)
+    fs = p[P_FS] if fe >= 0.0 else p[P_FSN]
+    if abs(fe) < fs:
+        return fe
+    return fs * _sgn(fe)
+
+
+@njit(cache=True)
+def stribeck_classical_force(v, fe, p):
+    """The classical model's implementation form with Stribeck decay (Sec. 6.2)."""
+    band = p[P_EPS] if p[P_EPS] > 0.0 else p[P_BAND]
+    if abs(v) < band or v == 0.0:
+        fs = p[P_FS] if fe >= 0.0 else p[P_FSN]
+        if abs(fe) < fs:
+            return fe
+        return fs * _sgn(fe)
+    return stribeck_level(v, p) * _sgn(v)
+
+
+@njit(cache=True)
+def static_force(kind, v, fe, s_prev, p):
+    """Force of any static (memoryless or relay) model.
+
+    Returns
+    -------
+    (F, s) : friction and the (possibly updated) relay state.
+    """
+    if kind == VISCOUS:
+        fv = p[P_FV] if v >= 0.0 else p[P_FVN]
+        return fv * v, s_prev
+    if kind == COULOMB:
+        return coulomb_relay(v, s_prev, p)
+    if kind == CLASSICAL:
+        return classical_force(v, fe, p), s_prev
+    if kind == STRIBECK:
+        return stribeck_classical_force(v, fe, p), s_prev
+    return 0.0, s_prev
+
+
+@njit(cache=True)
+def _sigma1(v, p):
+    vd = p[P_VD]
+    if np.isinf(vd):
+        return p[P_S1]
+    r = v / vd
+    return p[P_S1] * np.exp(-r * r)
+
+
+@njit(cache=True)
+def lugre_dz(v, z, e, p):
+    """Bristle rate :math:`\\dot z` of eq. (18)/(19) (``e`` enters with gain k)."""
+    return v - abs(v) * p[P_S0] / stribeck_level(v, p) * z - p[P_K] * e
+
+
+@njit(cache=True)
+def lugre_force(v, z, dz, p):
+    """LuGre friction :math:`\\sigma_0 z + \\sigma_1(v)\\dot z + F_v v`."""
+    fv = p[P_FV] if v >= 0.0 else p[P_FVN]
+    return p[P_S0] * z + _sigma1(v, p) * dz + fv * v
+
+
+@njit(cache=True)
+def lugre_step_exact(v, z, e, dt, p):
+    """Advance the bristle state over ``dt`` with ``v`` and ``e`` held constant.
+
+    The bristle equation is linear in z for frozen v,
+    :math:`\\dot z = b - a z` with :math:`a = \\sigma_0|v|/s(v) \\ge 0`,
+    :math:`b = v - k e`, so it is integrated exactly (exponential update);
+    this is unconditionally stable however stiff :math:`\\sigma_0|v|/F_C`
+    is, unlike forward Euler which diverges once ``a*dt > 2``.
+
+    Returns
+    -------
+    (z_new, z_mean, dz_mean)
+        The new state, the mean of z over the interval and the mean rate
+        ``(z_new - z)/dt``; ``lugre_force(v, z_mean, dz_mean, p)`` is then the
+        mean friction over the interval.
+    """
+    a = abs(v) * p[P_S0] / stribeck_level(v, p)
+    b = v - p[P_K] * e
+    x = a * dt
+    if x < 1e-9:
+        z_new = z + (b - a * z) * dt
+        z_mean = z + 0.5 * (b - a * z) * dt
+    else:
+        z_ss = b / a
+        ex = np.exp(-x)
+        z_new = z_ss + (z - z_ss) * ex
+        z_mean = z_ss + (z - z_ss) * (1.0 - ex) / x
+    return z_new, z_mean, (z_new - z) / dt
+
+
+# --------------------------------------------------------------------------
+# Python objects
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FrictionModel:
+    """A friction model: its kind, parameters, and pure force law.
+
+    Stateful models keep no state inside: the relay state ``s`` (Coulomb)
+    and the bristle deflection ``z`` (LuGre) are passed in and returned.
+    """
+
+    kind: str
+    params: FrictionParams = dataclasses.field(default_factory=FrictionParams)
+
+    def __post_init__(self) -> None:
+        _check_kind(self.kind)
+
+    @property
+    def code(self) -> int:
+        return KINDS.index(self.kind)
+
+    @property
+    def has_state(self) -> bool:
+        return self.kind in ("coulomb", "lugre")
+
+    def force(self, v: float, fe: float = 0.0, state: float = 0.0, e: float = 0.0):
+        """Friction force.
+
+        Parameters
+        ----------
+        v : float
+            Arm velocity (rad/s).
+        fe : float
+            External force in units of u (classical models only).
+        state : float
+            Relay state s (Coulomb) or bristle deflection z (LuGre).
+        e : float
+            Observer error of eq. (19) (LuGre only).
+
+        Returns
+        -------
+        (F, state_or_rate)
+            For the Coulomb relay the new relay state; for LuGre the bristle
+            rate dz/dt; otherwise the input ``state`` unchanged.
+        """
+        p = self.params.pack()
+        if self.kind == "lugre":
+            dz = lugre_dz(v, state, e, p)
+            return lugre_force(v, state, dz, p), dz
+        return static_force(self.code, v, fe, state, p)
+
+    def steady_state(self, v: float) -> float:
+        """Friction in steady sliding at constant velocity ``v`` (the Stribeck curve
+        for LuGre and the ``stribeck`` model)."""
+        p = self.params.pack()
+        if self.kind in ("lugre", "stribeck"):
+            return float(stribeck_curve(v, p)) if self.kind == "lugre" else float(
+                stribeck_classical_force(v, 0.0, p))
+        f, _ = static_force(self.code, v, 0.0, float(np.sign(v)), p)
+        return float(f)
+
+
+def make_model(kind: str, params: FrictionParams | None = None, **overrides) -> FrictionModel:
+    """Build a friction model, e.g. ``make_model("lugre", sigma0=300)``."""
+    base = params if params is not None else FrictionParams()
+    if overrides:
+        base = dataclasses.replace(base, **overrides)
+    return FrictionModel(kind, base)

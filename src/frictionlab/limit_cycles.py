@@ -1,0 +1,226 @@
+r"""Limit-cycle features of the measured pendulum angle (Table 1's columns).
+
+For each positive half-cycle of the measured angle (from an upward zero
+crossing to the next downward one):
+
+* ``peak1`` - the first local maximum,
+* ``peak2`` - the last local maximum,
+* ``valley`` - the minimum between them.
+
+A half-cycle with a single maximum contributes ``peak1`` only (its
+``peak2``/``valley`` are missing).  Each feature is averaged over the
+half-cycles inside the analysis window; a feature no half-cycle has is
+reported as ``None``.  ``period`` is the mean spacing of upward zero crossings
+(linearly interpolated); ``max_u`` and ``max_arm_velocity`` are the maxima of
+``|u|`` and ``|measured arm velocity|``; ``peak_to_peak`` is max - min of the
+measured angle.  The same figures for the negative half-cycles (of
+``-theta``) are returned as ``neg_peak1``/``neg_peak2``/``neg_valley``, a
+symmetry check.
+
+Local maxima are found with :func:`scipy.signal.find_peaks` with a
+prominence threshold (by default 2% of the half-cycle's height, at least
+3 noise standard deviations), so that measurement noise and quantisation
+steps do not count as peaks.  Zero crossings use a small hysteresis for the
+same reason.
+
+``status`` is ``"fell"`` when the run fell, ``"settled"`` when the angle's
+peak-to-peak over the window is below ``settle_tol`` or fewer than two
+upward crossings occur, else ``"limit_cycle"``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.signal import find_peaks
+
+__all__ = ["FEATURES", "LimitCycleFeatures", "features", "trajectory_features"]
+
+#: Feature names of INTERFACE.md, in Table 1's order plus peak_to_peak.
+FEATURES = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity", "peak_to_peak")
+
+
+@dataclass(frozen=True)
+class LimitCycleFeatures:
+    """Limit-cycle features (SI units; ``None`` where undefined)."""
+
+    status: str
+    peak1: float | None
+    peak2: float | None
+    valley: float | None
+    period: float | None
+    max_u: float | None
+    max_arm_velocity: float | None
+    peak_to_peak: float | None
+    neg_peak1: float | None = None
+    neg_peak2: float | None = None
+    neg_valley: float | None = None
+    cycles: int = 0
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def interface_dict(self) -> dict:
+        """The ``features`` object of ``frictionlab simulate --json``."""
+        return {k: getattr(self, k) for k in FEATURES}
+
+
+def _mean(values: list[float]) -> float | None:
+    return float(np.mean(values)) if values else None
+
+
+def _crossings(t: np.ndarray, y: np.ndarray, hyst: float) -> tuple[np.ndarray, np.ndarray]:
+    """Interpolated times and sample indices of upward / downward zero crossings.
+
+    A crossing counts once the signal has moved from beyond ``-hyst`` to beyond
+    ``+hyst`` (Schmitt trigger); its time is the last sign change in between.
+    """
+    up_t, up_i, dn_t, dn_i = [], [], [], []
+    state = 0  # -1 below, +1 above
+    last_change = -1
+    for i in range(1, len(y)):
+        if (y[i - 1] < 0.0) != (y[i] < 0.0):
+            last_change = i
+        if y[i] > hyst and state <= 0:
+            if state < 0 and last_change > 0:
+                j = last_change
+                tc = t[j - 1] + (t[j] - t[j - 1]) * (-y[j - 1]) / (y[j] - y[j - 1])
+                up_t.append(tc)
+                up_i.append(j)
+            state = 1
+        elif y[i] < -hyst and state >= 0:
+            if state > 0 and last_change > 0:
+                j = last_change
+                tc = t[j - 1] + (t[j] - t[j - 1]) * (-y[j - 1]) / (y[j] - y[j - 1])
+                dn_t.append(tc)
+                dn_i.append(j)
+            state = -1
+    return (np.array(up_t), np.array(up_i, dtype=int), np.array(dn_t), np.array(dn_i, dtype=int))
+
+
+def _half_cycle_peaks(y: np.ndarray, starts: np.ndarray, ends: np.ndarray, noise: float,
+                      rel_prominence: float):
+    p1, p2, va = [], [], []
+    for a, b in zip(starts, ends, strict=False):
+        seg = y[a:b]
+        if len(seg) < 3:
+            continue
+        height = float(seg.max())
+        prom = max(rel_prominence * height, 3.0 * noise, 1e-12)
+        # pad with the crossing level so that maxima at the edges still count
+        padded = np.concatenate([[0.0], seg, [0.0]])
+        idx, _ = find_peaks(padded, prominence=prom)
+        idx = idx - 1
+        if len(idx) == 0:
+            continue
+        p1.append(float(seg[idx[0]]))
+        if len(idx) >= 2:
+            p2.append(float(seg[idx[-1]]))
+            va.append(float(seg[idx[0]:idx[-1] + 1].min()))
+    return p1, p2, va
+
+
+def features(
+    t,
+    theta,
+    u=None,
+    arm_velocity=None,
+    *,
+    window: float | None = None,
+    fell: bool = False,
+    noise: float = 0.0,
+    rel_prominence: float = 0.02,
+    settle_tol: float = 2e-3,
+) -> LimitCycleFeatures:
+    """Limit-cycle features of a measured pendulum angle.
+
+    Parameters
+    ----------
+    t, theta : array_like
+        Time (s) and measured pendulum angle (rad).
+    u, arm_velocity : array_like, optional
+        Control signal and measured arm velocity, for ``max_u`` and
+        ``max_arm_velocity``.
+    window : float, optional
+        Analyse only the last ``window`` seconds (default: the last half).
+    fell : bool
+        The run fell (status ``"fell"``; features are still computed on what
+        there is).
+    noise : float
+        Measurement-noise standard deviation (rad): raises the peak
+        prominence and crossing hysteresis above the noise.
+    rel_prominence : float
+        Minimum peak prominence relative to the half-cycle's height.
+    settle_tol : float
+        Peak-to-peak (rad) below which the loop counts as settled.
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(theta, dtype=float)
+    if t.shape != y.shape or t.ndim != 1:
+        raise ValueError("t and theta must be 1-D arrays of equal length")
+    n = len(t)
+    empty = LimitCycleFeatures("fell" if fell else "settled", *([None] * 7))
+    if n < 3:
+        return empty
+    span = window if window is not None else 0.5 * (t[-1] - t[0])
+    if not span > 0:
+        raise ValueError(f"window must be > 0 s, got {window}")
+    m = t >= t[-1] - span - 1e-12
+    tw, yw = t[m], y[m]
+    finite = np.isfinite(yw)
+    if not finite.all():
+        tw, yw = tw[finite], yw[finite]
+        if len(yw) < 3:
+            return empty
+    ptp = float(yw.max() - yw.min())
+    max_u = float(np.max(np.abs(np.asarray(u, dtype=float)[m]))) if u is not None else None
+    max_v = (float(np.max(np.abs(np.asarray(arm_velocity, dtype=float)[m])))
+             if arm_velocity is not None else None)
+    hyst = max(0.02 * 0.5 * ptp, 3.0 * noise)
+    up_t, up_i, _dn_t, dn_i = _crossings(tw, yw, hyst)
+    period = float(np.mean(np.diff(up_t))) if len(up_t) >= 2 else None
+    # positive half-cycles: an upward crossing followed by the next downward one
+    pos_s, pos_e, neg_s, neg_e = [], [], [], []
+    for i in up_i:
+        later = dn_i[dn_i > i]
+        if len(later):
+            pos_s.append(i)
+            pos_e.append(int(later[0]))
+    for i in dn_i:
+        later = up_i[up_i > i]
+        if len(later):
+            neg_s.append(i)
+            neg_e.append(int(later[0]))
+    p1, p2, va = _half_cycle_peaks(yw, np.array(pos_s), np.array(pos_e), noise, rel_prominence)
+    n1, n2, nv = _half_cycle_peaks(-yw, np.array(neg_s), np.array(neg_e), noise,
+                                   rel_prominence)
+    if fell:
+        status = "fell"
+    elif ptp < settle_tol or len(up_t) < 2:
+        status = "settled"
+    else:
+        status = "limit_cycle"
+    return LimitCycleFeatures(
+        status, _mean(p1), _mean(p2), _mean(va), period, max_u, max_v, ptp,
+        _mean(n1), _mean(n2), _mean(nv), len(p1),
+    )
+
+
+def trajectory_features(traj, window: float | None = None) -> LimitCycleFeatures:
+    """:func:`features` of a :class:`frictionlab.simulation.Trajectory`."""
+    cfg = traj.config
+    noise = cfg.sim.noise if cfg is not None else 0.0
+    if len(traj) < 3:
+        return LimitCycleFeatures("fell" if traj.status == "fell" else "settled", *([None] * 7))
+    if window is not None and cfg is not None and traj.status != "fell":
+        window = min(window, traj.t[-1])
+    return features(
+        traj.t, traj["theta_m"], traj["u"], traj["arm_dot_m"], window=window,
+        fell=traj.status == "fell", noise=noise,
+    )
+
+
+def _isnan(x) -> bool:
+    return x is None or (isinstance(x, float) and math.isnan(x))

@@ -1,0 +1,60 @@
+"""Figures (matplotlib, headless).  Only the CLI and reports import this module."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+__all__ = ["plot_trajectory"]
+
+
+def plot_trajectory(traj, path: str, window: float | None = None, title: str | None = None):
+    """The figure a reader of Sec. 5 expects (cf. Figs. 17-18).
+
+    Four panels over the analysis window: measured (and estimated) pendulum
+    angle, measured (and estimated) arm velocity, control signal, and the
+    friction force (true and, when compensating, estimated).
+    """
+    t = traj.t
+    if len(t) == 0:
+        raise ValueError("empty trajectory: nothing to plot")
+    span = window if window is not None else 0.5 * t[-1]
+    span = max(span, min(5.0, t[-1]))
+    m = t >= t[-1] - span
+    fig, axes = plt.subplots(4, 1, figsize=(9, 9), sharex=True)
+    ax = axes[0]
+    ax.plot(t[m], traj["theta_m"][m], label=r"measured $\theta$")
+    ax.plot(t[m], traj["theta_hat"][m], "--", lw=0.9, label=r"estimated $\hat\theta$")
+    ax.set_ylabel("pendulum angle [rad]")
+    ax.legend(loc="upper right", fontsize=8)
+    ax = axes[1]
+    ax.plot(t[m], traj["arm_dot_m"][m], label=r"measured $\dot\Omega$")
+    ax.plot(t[m], traj["arm_dot_hat"][m], "--", lw=0.9, label=r"estimated")
+    ax.set_ylabel("arm velocity [rad/s]")
+    ax.legend(loc="upper right", fontsize=8)
+    ax = axes[2]
+    ax.plot(t[m], traj["u"][m], color="C2")
+    ax.set_ylabel(r"control $u$ [m/s$^2$]")
+    ax = axes[3]
+    ax.plot(t[m], traj["friction"][m], color="C3", label="friction (plant)")
+    if np.any(traj["friction_hat"][m] != 0):
+        ax.plot(t[m], traj["friction_hat"][m], "--", color="C4", lw=0.9, label="estimate")
+    ax.set_ylabel(r"friction [m/s$^2$]")
+    ax.set_xlabel("time [s]")
+    ax.legend(loc="upper right", fontsize=8)
+    for a in axes:
+        a.grid(alpha=0.3)
+    cfg = traj.config
+    if title is None and cfg is not None:
+        title = (f"{cfg.friction_kind} friction, compensation {cfg.compensation_kind}, "
+                 f"omega0 plant {cfg.plant.omega0:g} / design {cfg.design.omega0:g}"
+                 + ("" if traj.status == "ok" else "  [FELL]"))
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

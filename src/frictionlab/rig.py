@@ -1,0 +1,125 @@
+r"""Conversion between the rig's raw ADC/DAC values and SI units (App. B, Sec. 2.1).
+
+.. math::
+
+    \theta = \pi(y + 0.503),\quad \Omega = 25.8(x - x_0),\quad
+    \dot\Omega = 28.7(v + 0.02),\quad u_{DA} = -0.022\,u
+
+All raw values live in [-1, 1].  The DAC saturates there, so the largest
+control signal is :math:`|u| \le 1/0.022 \approx 45.5` m/s^2.  The pendulum
+angle and arm position channels *wrap*: passing 1 the reading jumps to -1
+(App. B.1-B.2); :func:`wrap_raw` reproduces that and :func:`unwrap_raw`
+undoes it sample to sample.  The rig's converters have 12 bits
+(:data:`ADC_BITS`); :func:`quantize` rounds a raw value to that grid.
+
+Raw units appear only at the I/O edge (rig backends); everything else in the
+package works in SI units.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ._validation import Validated, param
+
+__all__ = [
+    "ADC_BITS",
+    "RigScaling",
+    "quantize",
+    "unwrap_raw",
+    "wrap_raw",
+]
+
+ADC_BITS = 12
+
+
+@dataclass(frozen=True)
+class RigScaling(Validated):
+    """Scale factors and biases of App. B (B.5 summary)."""
+
+    _prefix = "rig."
+
+    theta_scale: float = param(math.pi, "pendulum angle per ADC unit", "rad", lo=0.0,
+                               lo_open=True)
+    theta_bias: float = param(0.503, "added to y before scaling (upright reads -0.503)", "1",
+                              lo=-1.0, hi=1.0)
+    arm_scale: float = param(25.8, "arm angle per ADC unit", "rad", lo=0.0, lo_open=True)
+    arm_bias: float = param(0.0, "x_0: arm reading at Omega = 0 (set when control starts)",
+                            "1", lo=-1.0, hi=1.0)
+    velocity_scale: float = param(28.7, "arm velocity per ADC unit", "rad/s", lo=0.0,
+                                  lo_open=True)
+    velocity_bias: float = param(0.02, "added to v before scaling", "1", lo=-1.0, hi=1.0)
+    u_scale: float = param(-0.022, "k_u: DAC units per m/s^2 of u", "1/(m/s^2)", lo=-1.0,
+                           hi=1.0)
+
+    # --- raw -> SI -------------------------------------------------------
+    def theta(self, y):
+        """Pendulum angle (rad) from the raw reading y."""
+        return self.theta_scale * (np.asarray(y, dtype=float) + self.theta_bias)
+
+    def arm(self, x):
+        """Arm angle (rad) from the raw reading x."""
+        return self.arm_scale * (np.asarray(x, dtype=float) - self.arm_bias)
+
+    def arm_velocity(self, v):
+        """Arm velocity (rad/s) from the raw reading v."""
+        return self.velocity_scale * (np.asarray(v, dtype=float) + self.velocity_bias)
+
+    def u_da(self, u):
+        """DAC value for the control signal u (m/s^2), saturated at [-1, 1]."""
+        return np.clip(self.u_scale * np.asarray(u, dtype=float), -1.0, 1.0)
+
+    # --- SI -> raw (the emulated rig) -------------------------------------
+    def raw_theta(self, theta):
+        """Raw pendulum reading for angle theta (wrapped into [-1, 1))."""
+        return wrap_raw(np.asarray(theta, dtype=float) / self.theta_scale - self.theta_bias)
+
+    def raw_arm(self, arm):
+        """Raw arm reading for angle Omega (wrapped into [-1, 1))."""
+        return wrap_raw(np.asarray(arm, dtype=float) / self.arm_scale + self.arm_bias)
+
+    def raw_arm_velocity(self, arm_dot):
+        """Raw velocity reading (clipped to the ADC range [-1, 1])."""
+        return np.clip(np.asarray(arm_dot, dtype=float) / self.velocity_scale
+                       - self.velocity_bias, -1.0, 1.0)
+
+    def u_from_da(self, u_da):
+        """Control signal (m/s^2) the DAC value corresponds to."""
+        return np.clip(np.asarray(u_da, dtype=float), -1.0, 1.0) / self.u_scale
+
+    @property
+    def u_max(self) -> float:
+        """Largest |u| the DAC can express (m/s^2)."""
+        return 1.0 / abs(self.u_scale)
+
+    def quanta(self) -> tuple[float, float, float]:
+        """SI size of one ADC step for (theta, Omega, Omega_dot)."""
+        q = 2.0 / 2**ADC_BITS
+        return self.theta_scale * q, self.arm_scale * q, self.velocity_scale * q
+
+
+def wrap_raw(r):
+    """Wrap raw values into [-1, 1) like the pendulum and arm channels."""
+    return (np.asarray(r, dtype=float) + 1.0) % 2.0 - 1.0
+
+
+def unwrap_raw(previous: float, current: float) -> float:
+    """Undo a wrap between two consecutive raw samples (jumps of more than 1)."""
+    d = current - previous
+    if d > 1.0:
+        return current - 2.0
+    if d < -1.0:
+        return current + 2.0
+    return current
+
+
+@njit(cache=True)
+def quantize(value, step):
+    """Round ``value`` to a multiple of ``step`` (``step <= 0``: unchanged)."""
+    if step <= 0.0:
+        return value
+    return np.floor(value / step + 0.5) * step

@@ -1,0 +1,317 @@
+r"""Sampled-data closed-loop simulation (Sec. 5).
+
+The continuous plant eq. (6) with arm friction is integrated between samples;
+the controller (:func:`frictionlab.controller.controller_step`: observers,
+state feedback, compensator) runs every h with zero-order hold on u.  Time is
+the integer tick k, t = k h.
+
+Integration scheme
+------------------
+Each sampling period is split into ``sim.substeps`` equal substeps.  In a
+substep the friction force is evaluated once from the state at its start and
+held (friction is discontinuous, so a higher-order integration *through* it
+gains nothing); the arm then moves with constant acceleration (exact) and
+the pendulum is advanced by classical RK4 with the exact arm velocity at
+each stage.  The LuGre bristle state is advanced with the exact exponential
+update for frozen velocity (:func:`frictionlab.friction.lugre_step_exact`),
+so a stiff bristle (``sigma0`` = 1000) stays stable at any substep count, and
+the force uses the bristle's mean over the substep.
+
+Zero-velocity band (classical model)
+------------------------------------
+As in the thesis's Simnon runs (Sec. 5.2), speeds inside the band count as
+rest: friction balances the applied force (the arm's acceleration is zero)
+unless that force exceeds the stiction level.  The arm keeps the small speed
+it entered the band with until the force breaks it loose; the band must
+therefore be wider than the speed change of one substep for sticking to be
+seen at all (the thesis needed 0.03 rad/s; with 0.001 the arm skips over it).
+
+A run whose pendulum falls (``|theta| > sim.fall_angle``) or whose state
+becomes non-finite stops at once with status ``"fell"``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from .config import Config, build_config
+from .controller import NS, S_ARMDOT, S_X1, S_X2, S_ZHAT, Controller, controller_step
+from .design import design as make_design
+from .friction import KINDS, LUGRE, NONE, lugre_force, lugre_step_exact, static_force
+from .plant import accelerations
+from .rig import RigScaling, quantize
+
+__all__ = [
+    "COLUMNS",
+    "LOGGED",
+    "Trajectory",
+    "simulate",
+    "simulate_config",
+]
+
+#: The ten signals the thesis's controller saves (Sec. 7.1), in its order.
+LOGGED = (
+    "theta_m", "theta_hat", "theta_dot_hat", "u", "arm_m", "arm_dot_m", "arm_hat",
+    "arm_dot_hat", "friction_hat", "z_hat",
+)
+#: All recorded columns: the ten logged signals, then the true plant signals.
+COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction")
+NC = len(COLUMNS)
+
+STATUS = ("ok", "fell")
+
+
+@njit(cache=True)
+def _substep(x, u_applied, dt, pp, fkind, fp, relay):
+    """Advance the plant state x (5,) by dt in place; return (mean friction, relay)."""
+    omega0, zeta, g, arm_len, ku = pp[0], pp[1], pp[2], pp[3], pp[4]
+    fe = ku * u_applied
+    v = x[3]
+    if fkind == LUGRE:
+        z_new, z_mean, dz_mean = lugre_step_exact(v, x[4], 0.0, dt, fp)
+        f = lugre_force(v, z_mean, dz_mean, fp)
+        x[4] = z_new
+    elif fkind == NONE:
+        f = 0.0
+    else:
+        f, relay = static_force(fkind, v, fe, relay, fp)
+    a = fe - f
+    arm_acc = a / arm_len
+    th, thd, ad = x[0], x[1], x[3]
+    half = 0.5 * dt
+    k1p = thd
+    k1v, _ = accelerations(th, thd, ad, a, omega0, zeta, g, arm_len)
+    ad_mid = ad + arm_acc * half
+    k2p = thd + half * k1v
+    k2v, _ = accelerations(th + half * k1p, k2p, ad_mid, a, omega0, zeta, g, arm_len)
+    k3p = thd + half * k2v
+    k3v, _ = accelerations(th + half * k2p, k3p, ad_mid, a, omega0, zeta, g, arm_len)
+    k4p = thd + dt * k3v
+    k4v, _ = accelerations(th + dt * k3p, k4p, ad + arm_acc * dt, a, omega0, zeta, g, arm_len)
+    x[0] = th + dt / 6.0 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
+    x[1] = thd + dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    x[2] = x[2] + ad * dt + 0.5 * arm_acc * dt * dt
+    x[3] = ad + arm_acc * dt
+    return f, relay
+
+
+@njit(cache=True)
+def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fall_angle,
+         out, record):
+    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code).
+
+    ``x`` (plant state) and ``s`` (controller state) are advanced in place.
+    Row k of ``out`` receives the signals of tick k when ``record`` is true.
+    """
+    h = gp[11]
+    dt = h / substeps
+    noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
+    if noisy:
+        np.random.seed(seed)
+    relay = 0.0
+    w0 = gp[8]
+    for k in range(n_ticks):
+        th_m = x[0]
+        arm_m = x[2]
+        armd_m = x[3]
+        if noisy:
+            th_m += noise[0] * np.random.standard_normal()
+            arm_m += noise[1] * np.random.standard_normal()
+            armd_m += noise[2] * np.random.standard_normal()
+        th_m = quantize(th_m, quanta[0])
+        arm_m = quantize(arm_m, quanta[1])
+        armd_m = quantize(armd_m, quanta[2])
+        th_hat = s[S_X1]
+        thd_hat = w0 * s[S_X2]
+        arm_hat = s[2]
+        armd_hat = s[S_ARMDOT]
+        z_hat = s[S_ZHAT]
+        u, _u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
+        if record:
+            out[k, 0] = th_m
+            out[k, 1] = th_hat
+            out[k, 2] = thd_hat
+            out[k, 3] = u
+            out[k, 4] = arm_m
+            out[k, 5] = armd_m
+            out[k, 6] = arm_hat
+            out[k, 7] = armd_hat
+            out[k, 8] = f_hat
+            out[k, 9] = z_hat
+            out[k, 10] = x[0]
+            out[k, 11] = x[1]
+            out[k, 12] = x[2]
+            out[k, 13] = x[3]
+            out[k, 14] = x[4]
+        f_sum = 0.0
+        for _ in range(substeps):
+            f, relay = _substep(x, u, dt, pp, fkind, fp, relay)
+            f_sum += f
+        if record:
+            out[k, 15] = f_sum / substeps
+        if not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
+            return k + 1, 1
+    return n_ticks, 0
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Result of a closed-loop run.
+
+    Attributes
+    ----------
+    k : ndarray of int
+        Tick numbers; time is ``t = k * h``.
+    h : float
+        Sampling period (s).
+    data : ndarray (n, len(COLUMNS))
+        Signals per tick, columns :data:`COLUMNS` (SI units).  The first ten
+        are the thesis's logged signals (Sec. 7.1); the estimates are those
+        the controller used at that tick.  ``friction`` is the true friction
+        averaged over the sample that follows.
+    status : {"ok", "fell"}
+        ``fell`` if the run stopped early because the pendulum fell.
+    config : Config
+    """
+
+    k: np.ndarray
+    h: float
+    data: np.ndarray
+    status: str
+    config: Config | None = None
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.k * self.h
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name == "t":
+            return self.t
+        try:
+            return self.data[:, COLUMNS.index(name)]
+        except ValueError:
+            raise KeyError(
+                f"unknown signal {name!r}; available: t, {', '.join(COLUMNS)}") from None
+
+    def __len__(self) -> int:
+        return len(self.k)
+
+    def save_dat(self, path) -> None:
+        """Write the ten logged signals as ASCII columns (the thesis's ``.dat``)."""
+        np.savetxt(path, self.data[:, :10], fmt="%.9g")
+
+    def save_csv(self, path) -> None:
+        """Write time and every signal as CSV with a header line."""
+        arr = np.column_stack([self.t, self.data])
+        np.savetxt(path, arr, fmt="%.9g", delimiter=",", header="t," + ",".join(COLUMNS),
+                   comments="")
+
+    def save(self, path) -> None:
+        """Save by extension: ``.dat`` (thesis format) or ``.csv``."""
+        p = str(path)
+        if p.endswith(".dat"):
+            self.save_dat(p)
+        elif p.endswith(".csv"):
+            self.save_csv(p)
+        else:
+            raise ValueError(f"cannot save {p!r}: the extension must be .dat or .csv")
+
+
+def _pack_plant(cfg: Config) -> np.ndarray:
+    p = cfg.plant
+    return np.array([p.omega0, p.zeta, p.g, p.arm_length, p.input_gain])
+
+
+def _quanta(cfg: Config) -> np.ndarray:
+    if cfg.sim.quantization:
+        return np.array(RigScaling().quanta())
+    return np.zeros(3)
+
+
+def make_controller(cfg: Config, error_signal: str = "velocity_innovation") -> Controller:
+    """The controller a configuration describes."""
+    d = make_design(cfg.design, cfg.plant)
+    return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal)
+
+
+def simulate_config(
+    cfg: Config,
+    duration: float | None = None,
+    *,
+    record: bool = True,
+    progress: Callable[[float], None] | None = None,
+    controller: Controller | None = None,
+) -> Trajectory:
+    """Run the closed loop described by ``cfg``.
+
+    Parameters
+    ----------
+    cfg : Config
+        Plant, design, friction, compensation and simulation settings.
+    duration : float, optional
+        Simulated time in s (default ``cfg.sim.duration``).
+    record : bool
+        Keep every tick's signals (always true for the public API).
+    progress : callable, optional
+        Called with the fraction done (runs are chunked so long runs can
+        report progress).
+    controller : Controller, optional
+        Use this controller instead of the one ``cfg`` describes.
+    """
+    duration = cfg.sim.duration if duration is None else float(duration)
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    ctrl = controller or make_controller(cfg)
+    gp, cp = ctrl.pack()
+    h = cfg.design.h
+    n = round(duration / h)
+    x = np.zeros(5)
+    x[0] = cfg.sim.initial_angle
+    s = ctrl.init(cfg.sim.initial_angle)
+    assert s.shape == (NS,)
+    out = np.zeros((n, NC)) if record else np.zeros((1, NC))
+    noise = np.full(3, cfg.sim.noise)
+    fkind = KINDS.index(cfg.friction_kind)
+    fp = cfg.friction.pack()
+    pp = _pack_plant(cfg)
+    q = _quanta(cfg)
+    if progress is None:
+        done, status = _run(x, n, cfg.sim.substeps, pp, fkind, fp, gp, cp, s, noise,
+                            cfg.sim.seed, q, cfg.sim.fall_angle, out, record)
+    else:
+        # chunks of whole ticks; the RNG is re-seeded per chunk from the seed and
+        # the chunk index, so chunked runs stay reproducible
+        chunk = max(1, n // 50)
+        done, status = 0, 0
+        while done < n and status == 0:
+            m = min(chunk, n - done)
+            view = out[done:done + m] if record else out
+            seed = cfg.sim.seed + 7919 * (done // chunk)
+            d, status = _run(x, m, cfg.sim.substeps, pp, fkind, fp, gp, cp, s, noise, seed, q,
+                             cfg.sim.fall_angle, view, record)
+            done += d
+            progress(done / n)
+    data = out[:done] if record else out[:0]
+    return Trajectory(np.arange(len(data)), h, data, STATUS[status], cfg)
+
+
+def simulate(
+    design: str = "fast",
+    friction: str = "classical",
+    compensation: str = "none",
+    duration: float | None = None,
+    **values,
+) -> Trajectory:
+    """Convenience wrapper: ``simulate("fast", "classical", friction__coulomb=1.3)``.
+
+    Keyword names are keys with ``.`` written as ``__``.
+    """
+    sets = [(k.replace("__", "."), v) for k, v in values.items()]
+    cfg = build_config(design, friction, compensation, sets=sets)
+    return simulate_config(cfg, duration)

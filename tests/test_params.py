@@ -1,0 +1,132 @@
+"""Parameter validation and configuration keys."""
+
+import dataclasses
+import math
+
+import pytest
+
+from frictionlab.config import ConfigError, SimParams, build_config, valid_keys
+from frictionlab.design import DesignSpec
+from frictionlab.friction import FrictionParams
+from frictionlab.plant import PlantParams
+
+
+@pytest.mark.parametrize(
+    "cls, field, value, needle",
+    [
+        (PlantParams, "omega0", math.nan, "plant.omega0 is NaN"),
+        (PlantParams, "omega0", 0.0, "plant.omega0"),
+        (PlantParams, "arm_length", -0.2, "plant.arm_length"),
+        (PlantParams, "zeta", 1.5, "[0, 1]"),
+        (PlantParams, "input_gain", math.inf, "plant.input_gain"),
+        (DesignSpec, "h", 0.0, "design.h"),
+        (DesignSpec, "h", -0.005, "(0, 1]"),
+        (DesignSpec, "zeta1", 0.0, "(0, 1]"),
+        (DesignSpec, "zeta2", 2.0, "design.zeta2"),
+        (DesignSpec, "observer_zeta1", 1.01, "design.observer_zeta1"),
+        (DesignSpec, "omega2", math.nan, "NaN"),
+        (FrictionParams, "sigma0", -1.0, "friction.sigma0"),
+        (FrictionParams, "sigma0", 0.0, "(0, 1e+07]"),
+        (FrictionParams, "coulomb", -0.1, "friction.coulomb"),
+        (FrictionParams, "stribeck_velocity", 0.0, "friction.stribeck_velocity"),
+        (FrictionParams, "hysteresis", -0.01, "friction.hysteresis"),
+        (FrictionParams, "stiction_negative", -1.0, "friction.stiction_negative"),
+        (SimParams, "substeps", 0, "sim.substeps"),
+        (SimParams, "substeps", 2.5, "integer"),
+        (SimParams, "noise", -1e-3, "sim.noise"),
+        (SimParams, "seed", -1, "sim.seed"),
+    ],
+)
+def test_bad_values_name_field_and_range(cls, field, value, needle):
+    with pytest.raises(ValueError) as info:
+        cls(**{field: value})
+    assert needle in str(info.value)
+    assert field in str(info.value)
+
+
+@pytest.mark.parametrize("cls", [PlantParams, DesignSpec, FrictionParams, SimParams])
+def test_non_numbers_are_rejected(cls):
+    name = next(f.name for f in dataclasses.fields(cls) if "doc" in f.metadata)
+    with pytest.raises(ValueError, match="must be a number"):
+        cls(**{name: "abc"})
+
+
+def test_frozen_and_replace():
+    p = PlantParams()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        p.omega0 = 7.0
+    q = dataclasses.replace(p, omega0=7.5)
+    assert q.omega0 == 7.5 and p.omega0 == 6.8
+    with pytest.raises(ValueError):
+        dataclasses.replace(p, omega0=-1)
+
+
+def test_defaults_are_thesis_values():
+    p = PlantParams()
+    assert (p.omega0, p.zeta, p.arm_length, p.g) == (6.8, 0.04, 0.21, 9.82)
+    f = FrictionParams()
+    assert (f.stiction, f.coulomb, f.viscous, f.sigma0, f.sigma1, f.stribeck_velocity) == (
+        2.3, 1.5, 0.07, 100.0, 5.0, 1.0)
+    assert f.observer_gain == 0.0
+    c = FrictionParams.defaults("lugre", "compensation")
+    assert (c.coulomb, c.sigma0, c.sigma1, c.observer_gain) == (1.55, 300.0, 6.0, 7.0)
+    assert FrictionParams.defaults("coulomb", "compensation").hysteresis == 0.05
+    assert FrictionParams.defaults("classical", "compensation").hysteresis == 0.08
+
+
+def test_set_overrides_apply_in_order_later_wins():
+    cfg = build_config("fast", sets=["plant.omega0=7.0", "plant.omega0=7.5", "sim.seed=3"])
+    assert cfg.plant.omega0 == 7.5
+    assert cfg.sim.seed == 3
+    assert cfg.design.omega0 == 6.8
+
+
+def test_slow_preset_then_set():
+    cfg = build_config("slow", sets=["design.omega2=4"])
+    assert cfg.design.omega2 == 4.0
+    assert cfg.design.observer_omega2 == 7.5
+
+
+def test_unknown_key_lists_valid_keys():
+    with pytest.raises(ConfigError) as info:
+        build_config(sets=["plant.nope=1"])
+    msg = str(info.value)
+    assert "plant.nope" in msg and "plant.omega0" in msg and "friction.sigma0" in msg
+
+
+def test_bad_value_text_and_range():
+    with pytest.raises(ConfigError, match="not a number"):
+        build_config(sets=["plant.omega0=abc"])
+    with pytest.raises(ConfigError, match=r"compensation\.sigma0"):
+        build_config(sets=["compensation.sigma0=-3"])
+    with pytest.raises(ConfigError, match=r"KEY=VALUE"):
+        build_config(sets=["plant.omega0"])
+
+
+def test_toml_config_and_set_override(tmp_path):
+    f = tmp_path / "c.toml"
+    f.write_text("[plant]\nomega0 = 7.1\nzeta = 0.05\n[friction]\ncoulomb = 1.35\n")
+    cfg = build_config(config_file=f, sets=["plant.zeta=0.03"])
+    assert cfg.plant.omega0 == 7.1 and cfg.plant.zeta == 0.03 and cfg.friction.coulomb == 1.35
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[plant]\nfoo = 1\n")
+    with pytest.raises(ConfigError, match=r"plant\.foo"):
+        build_config(config_file=bad)
+    with pytest.raises(ConfigError, match="cannot read"):
+        build_config(config_file=tmp_path / "missing.toml")
+
+
+def test_interface_keys_exist():
+    keys = set(valid_keys())
+    for k in [
+        "plant.omega0", "plant.zeta", "plant.arm_length", "plant.g", "plant.input_gain",
+        "design.omega0", "design.h", "design.omega1", "design.zeta1", "design.omega2",
+        "design.zeta2", "design.observer_omega1", "design.observer_zeta1",
+        "design.observer_omega2", "design.observer_zeta2", "friction.stiction",
+        "friction.coulomb", "friction.viscous", "friction.stribeck_velocity",
+        "friction.sigma0", "friction.sigma1", "friction.observer_gain",
+        "friction.zero_velocity_band", "friction.hysteresis", "compensation.sigma0",
+        "compensation.observer_gain", "compensation.hysteresis", "sim.initial_angle",
+        "sim.substeps", "sim.noise", "sim.seed",
+    ]:
+        assert k in keys, k
