@@ -49,6 +49,7 @@ from .rig import RigScaling, quantize
 __all__ = [
     "COLUMNS",
     "LOGGED",
+    "SimulatedPlant",
     "Trajectory",
     "simulate",
     "simulate_config",
@@ -101,6 +102,22 @@ def _substep(x, u_applied, dt, pp, fkind, fp, relay):
 
 
 @njit(cache=True)
+def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
+    """Advance the plant state ``x`` (5,) in place over one sample with u held.
+
+    Returns
+    -------
+    (mean friction over the sample, relay state)
+    """
+    dt = h / substeps
+    f_sum = 0.0
+    for _ in range(substeps):
+        f, relay = _substep(x, u, dt, pp, fkind, fp, relay)
+        f_sum += f
+    return f_sum / substeps, relay
+
+
+@njit(cache=True)
 def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fall_angle,
          out, record):
     """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code).
@@ -109,7 +126,6 @@ def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fa
     Row k of ``out`` receives the signals of tick k when ``record`` is true.
     """
     h = gp[11]
-    dt = h / substeps
     noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
     if noisy:
         np.random.seed(seed)
@@ -148,12 +164,9 @@ def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fa
             out[k, 12] = x[2]
             out[k, 13] = x[3]
             out[k, 14] = x[4]
-        f_sum = 0.0
-        for _ in range(substeps):
-            f, relay = _substep(x, u, dt, pp, fkind, fp, relay)
-            f_sum += f
+        f_mean, relay = plant_tick(x, u, relay, substeps, h, pp, fkind, fp)
         if record:
-            out[k, 15] = f_sum / substeps
+            out[k, 15] = f_mean
         if not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
             return k + 1, 1
     return n_ticks, 0
@@ -221,6 +234,58 @@ class Trajectory:
             self.save_csv(p)
         else:
             raise ValueError(f"cannot save {p!r}: the extension must be .dat or .csv")
+
+
+@dataclass(frozen=True)
+class PlantState:
+    """Explicit state of :class:`SimulatedPlant`: the plant vector and the relay."""
+
+    x: np.ndarray
+    relay: float = 0.0
+    friction: float = 0.0
+
+    @property
+    def theta(self) -> float:
+        return float(self.x[0])
+
+
+class SimulatedPlant:
+    """The plant with its friction, stepped one sample at a time.
+
+    The same compiled integrator as :func:`simulate_config`; used by the
+    emulated rig and the real-time loop's ``sim`` backend.
+
+    Examples
+    --------
+    >>> plant = SimulatedPlant(build_config())
+    >>> st = plant.init()
+    >>> st = plant.step(st, u=0.0)
+    """
+
+    def __init__(self, cfg: Config):
+        self.cfg = cfg
+        self.h = cfg.design.h
+        self._pp = _pack_plant(cfg)
+        self._fkind = KINDS.index(cfg.friction_kind)
+        self._fp = cfg.friction.pack()
+
+    def init(self, theta0: float | None = None) -> PlantState:
+        x = np.zeros(5)
+        x[0] = self.cfg.sim.initial_angle if theta0 is None else theta0
+        return PlantState(x)
+
+    def step(self, state: PlantState, u: float) -> PlantState:
+        """Advance one sampling period with u held (returns a new state)."""
+        x = state.x.copy()
+        f, relay = plant_tick(x, float(u), state.relay, self.cfg.sim.substeps, self.h,
+                              self._pp, self._fkind, self._fp)
+        return PlantState(x, relay, f)
+
+    def push(self, state: PlantState, theta_dot_kick: float) -> PlantState:
+        """Disturb the pendulum: add ``theta_dot_kick`` rad/s to its velocity."""
+        x = state.x.copy()
+        x[1] += theta_dot_kick
+        return PlantState(x, state.relay, state.friction)
 
 
 def _pack_plant(cfg: Config) -> np.ndarray:
