@@ -51,6 +51,7 @@ __all__ = [
     "LOGGED",
     "SimulatedPlant",
     "Trajectory",
+    "run_features",
     "simulate",
     "simulate_config",
 ]
@@ -364,6 +365,23 @@ def simulate_config(
             progress(done / n)
     data = out[:done] if record else out[:0]
     return Trajectory(np.arange(len(data)), h, data, STATUS[status], cfg)
+
+
+def run_features(cfg: Config, duration: float | None = None, window: float | None = None):
+    """Simulate ``cfg`` and reduce the run to its limit-cycle features.
+
+    The unit of work of sweeps, identification and tuning.
+
+    Returns
+    -------
+    LimitCycleFeatures
+        ``status`` is ``"fell"`` if the pendulum fell, else the features'
+        status (``"limit_cycle"`` or ``"settled"``).
+    """
+    from .limit_cycles import trajectory_features
+
+    traj = simulate_config(cfg, duration)
+    return trajectory_features(traj, window)
 
 
 def simulate(
