@@ -15,6 +15,7 @@ Inverted Pendulum" (Lund, 1996).  The public API:
 * rig conversions: :class:`RigScaling`
 """
 
+from . import _numba_cache  # noqa: F401  (must precede every numba import)
 from .config import Config, ConfigError, SimParams, build_config
 from .controller import Controller
 from .design import Design, DesignSpec, design, preset

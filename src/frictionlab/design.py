@@ -23,6 +23,7 @@ state :math:`x_2 = \dot\theta/\omega_0`), and the discrete arm observer's
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -285,7 +286,7 @@ def design(
     plant: PlantParams | None = None,
     method: str = "closed_form",
 ) -> Design:
-    """Design the state feedback and the observers.
+    """Design the state feedback and the observers (cached; see :func:`_design`).
 
     Parameters
     ----------
@@ -300,11 +301,17 @@ def design(
     Returns
     -------
     Design
+        Frozen; its arrays are read-only.
     """
     if isinstance(spec, str):
         spec = preset(spec)
     plant = plant or PlantParams()
-    g, L1 = plant.g, plant.arm_length
+    return _design(spec, plant.g, plant.arm_length, method)
+
+
+@functools.lru_cache(maxsize=256)
+def _design(spec: DesignSpec, g: float, arm_length: float, method: str) -> Design:
+    L1 = arm_length
     Phi, Gamma = _design_matrices(spec, g, L1)
     if method == "closed_form":
         L = feedback_closed_form(spec, g, L1)
@@ -332,4 +339,6 @@ def design(
         _match(np.linalg.eigvals(AK2), z_req[2:]),
     ])
     obs = ObserverDesign(K, s_req, s_ach, z_req, z_ach)
+    for arr in (L, req, ach, Phi, Gamma, K, s_req, s_ach, z_req, z_ach):
+        arr.flags.writeable = False
     return Design(spec, g, L1, fb, obs)

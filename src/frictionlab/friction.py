@@ -82,6 +82,8 @@ __all__ = [
 KINDS = ("none", "viscous", "coulomb", "classical", "stribeck", "lugre")
 NONE, VISCOUS, COULOMB, CLASSICAL, STRIBECK, LUGRE = range(6)
 
+_TINY = 1e-12  # floor of the Stribeck level in divisions (F_S = F_C = 0: no friction)
+
 # packed parameter layout
 P_FS, P_FC, P_FV, P_VS, P_S0, P_S1, P_K, P_BAND, P_EPS, P_FSN, P_FCN, P_FVN, P_VD = range(13)
 NP = 13
@@ -296,7 +298,7 @@ def _sigma1(v, p):
 @njit(cache=True)
 def lugre_dz(v, z, e, p):
     """Bristle rate :math:`\\dot z` of eq. (18)/(19) (``e`` enters with gain k)."""
-    return v - abs(v) * p[P_S0] / stribeck_level(v, p) * z - p[P_K] * e
+    return v - abs(v) * p[P_S0] / max(stribeck_level(v, p), _TINY) * z - p[P_K] * e
 
 
 @njit(cache=True)
@@ -323,7 +325,7 @@ def lugre_step_exact(v, z, e, dt, p):
         ``(z_new - z)/dt``; ``lugre_force(v, z_mean, dz_mean, p)`` is then the
         mean friction over the interval.
     """
-    a = abs(v) * p[P_S0] / stribeck_level(v, p)
+    a = abs(v) * p[P_S0] / max(stribeck_level(v, p), _TINY)
     b = v - p[P_K] * e
     x = a * dt
     if x < 1e-9:

@@ -17,8 +17,8 @@ measured angle.  The same figures for the negative half-cycles (of
 ``-theta``) are returned as ``neg_peak1``/``neg_peak2``/``neg_valley``, a
 symmetry check.
 
-Local maxima are found with :func:`scipy.signal.find_peaks` with a
-prominence threshold (by default 2% of the half-cycle's height, at least
+Local maxima are found with a prominence threshold (the definitions of
+:func:`scipy.signal.find_peaks`, compiled) (by default 2% of the half-cycle's height, at least
 3 noise standard deviations), so that measurement noise and quantisation
 steps do not count as peaks.  Zero crossings use a small hysteresis for the
 same reason.
@@ -34,7 +34,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.signal import find_peaks
+from numba import njit
 
 __all__ = ["FEATURES", "LimitCycleFeatures", "features", "trajectory_features"]
 
@@ -71,55 +71,119 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def _crossings(t: np.ndarray, y: np.ndarray, hyst: float) -> tuple[np.ndarray, np.ndarray]:
-    """Interpolated times and sample indices of upward / downward zero crossings.
-
-    A crossing counts once the signal has moved from beyond ``-hyst`` to beyond
-    ``+hyst`` (Schmitt trigger); its time is the last sign change in between.
-    """
-    up_t, up_i, dn_t, dn_i = [], [], [], []
+@njit(cache=True)
+def _crossings_kernel(t, y, hyst):
+    n = len(y)
+    up_t = np.empty(n)
+    up_i = np.empty(n, dtype=np.int64)
+    dn_t = np.empty(n)
+    dn_i = np.empty(n, dtype=np.int64)
+    nu = 0
+    nd = 0
     state = 0  # -1 below, +1 above
     last_change = -1
-    for i in range(1, len(y)):
+    for i in range(1, n):
         if (y[i - 1] < 0.0) != (y[i] < 0.0):
             last_change = i
         if y[i] > hyst and state <= 0:
             if state < 0 and last_change > 0:
                 j = last_change
-                tc = t[j - 1] + (t[j] - t[j - 1]) * (-y[j - 1]) / (y[j] - y[j - 1])
-                up_t.append(tc)
-                up_i.append(j)
+                up_t[nu] = t[j - 1] + (t[j] - t[j - 1]) * (-y[j - 1]) / (y[j] - y[j - 1])
+                up_i[nu] = j
+                nu += 1
             state = 1
         elif y[i] < -hyst and state >= 0:
             if state > 0 and last_change > 0:
                 j = last_change
-                tc = t[j - 1] + (t[j] - t[j - 1]) * (-y[j - 1]) / (y[j] - y[j - 1])
-                dn_t.append(tc)
-                dn_i.append(j)
+                dn_t[nd] = t[j - 1] + (t[j] - t[j - 1]) * (-y[j - 1]) / (y[j] - y[j - 1])
+                dn_i[nd] = j
+                nd += 1
             state = -1
-    return (np.array(up_t), np.array(up_i, dtype=int), np.array(dn_t), np.array(dn_i, dtype=int))
+    return up_t[:nu], up_i[:nu], dn_t[:nd], dn_i[:nd]
 
 
-def _half_cycle_peaks(y: np.ndarray, starts: np.ndarray, ends: np.ndarray, noise: float,
-                      rel_prominence: float):
-    p1, p2, va = [], [], []
-    for a, b in zip(starts, ends, strict=False):
-        seg = y[a:b]
-        if len(seg) < 3:
+def _crossings(t: np.ndarray, y: np.ndarray, hyst: float):
+    """Interpolated times and sample indices of upward / downward zero crossings.
+
+    A crossing counts once the signal has moved from beyond ``-hyst`` to beyond
+    ``+hyst`` (Schmitt trigger); its time is the last sign change in between.
+    """
+    return _crossings_kernel(np.ascontiguousarray(t, dtype=float),
+                             np.ascontiguousarray(y, dtype=float), float(hyst))
+
+
+@njit(cache=True)
+def _segment_peaks(seg, min_prominence):
+    """Indices of local maxima of ``seg`` with prominence >= ``min_prominence``.
+
+    Same definitions as :func:`scipy.signal.find_peaks` (plateaus give their
+    middle sample; prominence = height above the higher of the two bases), with
+    the segment padded by zeros so that maxima at its edges count.
+    """
+    n = len(seg)
+    y = np.zeros(n + 2)
+    y[1:n + 1] = seg
+    peaks = np.empty(n, dtype=np.int64)
+    npk = 0
+    i = 1
+    while i < n + 1:
+        if y[i - 1] < y[i]:
+            j = i + 1
+            while j < n + 1 and y[j] == y[i]:
+                j += 1
+            if y[j] < y[i]:
+                p = (i + j - 1) // 2
+                hp = y[p]
+                k = p - 1
+                left_min = hp
+                while k >= 0 and y[k] <= hp:
+                    if y[k] < left_min:
+                        left_min = y[k]
+                    k -= 1
+                k = p + 1
+                right_min = hp
+                while k <= n + 1 and y[k] <= hp:
+                    if y[k] < right_min:
+                        right_min = y[k]
+                    k += 1
+                if hp - max(left_min, right_min) >= min_prominence:
+                    peaks[npk] = p - 1
+                    npk += 1
+            i = j
+        else:
+            i += 1
+    return peaks[:npk]
+
+
+@njit(cache=True)
+def _half_cycle_kernel(y, starts, ends, noise, rel_prominence):
+    m = len(starts)
+    p1 = np.full(m, np.nan)
+    p2 = np.full(m, np.nan)
+    va = np.full(m, np.nan)
+    for c in range(m):
+        a, b = starts[c], ends[c]
+        if b - a < 3:
             continue
-        height = float(seg.max())
+        seg = y[a:b]
+        height = seg.max()
         prom = max(rel_prominence * height, 3.0 * noise, 1e-12)
-        # pad with the crossing level so that maxima at the edges still count
-        padded = np.concatenate([[0.0], seg, [0.0]])
-        idx, _ = find_peaks(padded, prominence=prom)
-        idx = idx - 1
+        idx = _segment_peaks(seg, prom)
         if len(idx) == 0:
             continue
-        p1.append(float(seg[idx[0]]))
+        p1[c] = seg[idx[0]]
         if len(idx) >= 2:
-            p2.append(float(seg[idx[-1]]))
-            va.append(float(seg[idx[0]:idx[-1] + 1].min()))
+            p2[c] = seg[idx[-1]]
+            va[c] = seg[idx[0]:idx[-1] + 1].min()
     return p1, p2, va
+
+
+def _half_cycle_peaks(y: np.ndarray, starts, ends, noise: float, rel_prominence: float):
+    p1, p2, va = _half_cycle_kernel(np.ascontiguousarray(y, dtype=float),
+                                    np.asarray(starts, dtype=np.int64),
+                                    np.asarray(ends, dtype=np.int64), float(noise),
+                                    float(rel_prominence))
+    return [list(v[np.isfinite(v)]) for v in (p1, p2, va)]
 
 
 def features(
@@ -197,6 +261,9 @@ def features(
     n1, n2, nv = _half_cycle_peaks(-yw, np.array(neg_s), np.array(neg_e), noise,
                                    rel_prominence)
     if fell:
+        # a falling run has no cycle shape: only the extremes are meaningful
+        p1 = p2 = va = n1 = n2 = nv = []
+        period = None
         status = "fell"
     elif ptp < settle_tol or len(up_t) < 2:
         status = "settled"

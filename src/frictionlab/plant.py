@@ -54,6 +54,7 @@ __all__ = [
     "PlantParams",
     "Z",
     "accelerations",
+    "accelerations_sc",
     "linearize",
     "linearized_model",
     "rhs",
@@ -86,7 +87,20 @@ class PlantParams(Validated):
         return self.g / self.omega0**2
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True)
+def accelerations_sc(sin_theta, cos_theta, theta_dot, arm_dot, a, omega0, zeta, g, arm_length):
+    r""":func:`accelerations` with :math:`\sin\theta, \cos\theta` supplied (the
+    integrator reuses them between evaluations)."""
+    theta_ddot = (
+        -2.0 * zeta * omega0 * theta_dot
+        + omega0 * omega0 * sin_theta
+        + arm_dot * arm_dot * sin_theta * cos_theta
+        - omega0 * omega0 / g * a * cos_theta
+    )
+    return theta_ddot, a / arm_length
+
+
+@njit(cache=True)
 def accelerations(theta, theta_dot, arm_dot, a, omega0, zeta, g, arm_length):
     r"""Pendulum and arm angular accelerations of eq. (6).
 
@@ -103,15 +117,8 @@ def accelerations(theta, theta_dot, arm_dot, a, omega0, zeta, g, arm_length):
     -------
     (theta_ddot, arm_ddot) : tuple of float
     """
-    s = np.sin(theta)
-    c = np.cos(theta)
-    theta_ddot = (
-        -2.0 * zeta * omega0 * theta_dot
-        + omega0 * omega0 * s
-        + arm_dot * arm_dot * s * c
-        - omega0 * omega0 / g * a * c
-    )
-    return theta_ddot, a / arm_length
+    return accelerations_sc(np.sin(theta), np.cos(theta), theta_dot, arm_dot, a, omega0, zeta,
+                            g, arm_length)
 
 
 def rhs(t: float, x, u, params: PlantParams) -> np.ndarray:

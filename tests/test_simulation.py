@@ -1,0 +1,198 @@
+"""Closed-loop simulator: thesis tables, observations, robustness, determinism, files."""
+
+import io
+import json
+from contextlib import redirect_stdout
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from frictionlab.cli import main
+from frictionlab.config import build_config
+from frictionlab.limit_cycles import FEATURES
+from frictionlab.simulation import COLUMNS, SimulatedPlant, run_features, simulate_config
+
+TABLE_COLS = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity")
+# Table 2 (F_S = 2.3, F_C varied) and Table 3 (F_C = 1.5, F_S varied), fast design
+TABLE2 = {
+    1.1: (0.143, 0.142, 0.135, 0.888, 6.0, 2.70),
+    1.3: (0.157, 0.154, 0.146, 0.901, 6.5, 3.05),
+    1.5: (0.172, 0.168, 0.159, 0.911, 7.0, 3.35),
+    1.7: (0.187, 0.182, 0.172, 0.916, 7.6, 3.70),
+    1.9: (0.199, 0.192, 0.182, 0.921, 8.2, 4.00),
+}
+TABLE3 = {
+    1.9: (0.169, 0.164, 0.157, 0.920, 6.7, 3.23),
+    2.1: (0.171, 0.165, 0.157, 0.916, 6.8, 3.31),
+    2.3: (0.173, 0.167, 0.159, 0.910, 7.0, 3.35),
+    2.5: (0.176, 0.172, 0.164, 0.900, 7.3, 3.45),
+    2.7: (0.178, 0.174, 0.165, 0.897, 7.5, 3.50),
+}
+ROWS = [("friction.coulomb", v, r) for v, r in TABLE2.items()] + [
+    ("friction.stiction", v, r) for v, r in TABLE3.items()]
+
+
+def cli_json(*args):
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        rc = main(list(args))
+    assert rc == 0
+    lines = buf.getvalue().strip().splitlines()
+    assert len(lines) == 1
+    return json.loads(lines[0])
+
+
+@pytest.mark.parametrize("key,value,ref", ROWS, ids=[f"{k}={v}" for k, v, _ in ROWS])
+def test_tables_2_and_3_reproduced(key, value, ref):
+    out = cli_json("simulate", "--design", "fast", "--friction", "classical", "--duration", "40",
+                   "--set", "friction.zero_velocity_band=0.03", "--set", f"{key}={value}",
+                   "--json")
+    assert out["status"] == "limit_cycle"
+    for name, expected in zip(TABLE_COLS, ref, strict=True):
+        got = out["features"][name]
+        assert got == pytest.approx(expected, rel=0.05), (name, got, expected)
+
+
+def test_sec52_omega0_observation_fast():
+    """Plant omega0 = 7.5 (design and observers at 6.8), F_C = 1.3 as in Figs. 21-22:
+    the fast-design cycle resembles Table 1's fast row."""
+    out = cli_json("simulate", "--design", "fast", "--friction", "classical", "--duration", "40",
+                   "--set", "friction.zero_velocity_band=0.03", "--set", "plant.omega0=7.5",
+                   "--set", "friction.coulomb=1.3", "--json")
+    f = out["features"]
+    assert f["period"] == pytest.approx(1.1, rel=0.10)
+    for name, ref in (("peak1", 0.080), ("peak2", 0.095), ("valley", 0.074)):
+        assert f[name] == pytest.approx(ref, rel=0.15), name
+    # and the same omega0 in the observers as in the plant does not resemble it
+    same = run_features(build_config("fast", "classical", sets=[
+        "friction.zero_velocity_band=0.03", "plant.omega0=7.5", "design.omega0=7.5",
+        "friction.coulomb=1.3"]), 40)
+    assert not same.peak2 == pytest.approx(0.095, rel=0.15)
+
+
+def test_substep_convergence_classical_and_stiff_lugre():
+    for kind, sets in (("classical", ["friction.zero_velocity_band=0.03"]),
+                       ("lugre", ["friction.sigma0=1000"])):
+        base = build_config("fast", kind, sets=sets)
+        a = run_features(base, 30)
+        b = run_features(base.with_values({"sim.substeps": 20 * base.sim.substeps}), 30)
+        assert a.status == b.status == "limit_cycle"
+        for name in FEATURES:
+            va, vb = getattr(a, name), getattr(b, name)
+            assert va == pytest.approx(vb, rel=0.01), (kind, name)
+
+
+def test_every_friction_model_runs_in_the_plant():
+    for kind in ("none", "viscous", "coulomb", "classical", "stribeck", "lugre"):
+        traj = simulate_config(build_config("fast", kind), 5.0)
+        assert traj.status == "ok", kind
+        assert np.all(np.isfinite(traj.data))
+    # without friction the loop settles
+    assert run_features(build_config("fast", "none"), 20).status == "settled"
+
+
+def test_falling_pendulum_stops_early_with_status_fell():
+    traj = simulate_config(build_config("fast", "classical", sets=["plant.omega0=14"]), 40)
+    assert traj.status == "fell"
+    assert len(traj) < 40 / 0.005
+    f = run_features(build_config("fast", "classical", sets=["sim.initial_angle=0.6"]), 40)
+    assert f.status == "fell" and f.peak1 is None
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    kind=st.sampled_from(["none", "viscous", "coulomb", "classical", "stribeck", "lugre"]),
+    design=st.sampled_from(["fast", "slow"]),
+    omega0=st.floats(3.0, 15.0),
+    fc=st.floats(0.0, 5.0),
+    fs=st.floats(0.0, 6.0),
+    sigma0=st.floats(1.0, 1e4),
+    sigma1=st.floats(0.0, 50.0),
+    k=st.floats(0.0, 20.0),
+    noise=st.floats(0.0, 0.05),
+    theta0=st.floats(-0.9, 0.9),
+    substeps=st.integers(1, 12),
+)
+def test_random_valid_parameters_never_raise_or_hang(kind, design, omega0, fc, fs, sigma0,
+                                                     sigma1, k, noise, theta0, substeps):
+    cfg = build_config(design, kind, sets=[
+        f"plant.omega0={omega0}", f"friction.coulomb={fc}", f"friction.stiction={fs}",
+        f"friction.sigma0={sigma0}", f"friction.sigma1={sigma1}",
+        f"friction.observer_gain={k}", f"sim.noise={noise}", f"sim.initial_angle={theta0}",
+        f"sim.substeps={substeps}"])
+    traj = simulate_config(cfg, 3.0)
+    assert traj.status in ("ok", "fell")
+    if traj.status == "ok":
+        assert len(traj) == 600 and np.all(np.isfinite(traj.data))
+
+
+def test_same_seed_same_trajectory_bit_for_bit():
+    cfg = build_config("fast", "lugre", sets=["sim.noise=0.002", "sim.seed=7"])
+    a = simulate_config(cfg, 5.0)
+    b = simulate_config(cfg, 5.0)
+    assert np.array_equal(a.data, b.data)
+    c = simulate_config(cfg.with_values({"sim.seed": 8}), 5.0)
+    assert not np.array_equal(a.data, c.data)
+
+
+def test_noise_and_quantization_enter_only_measurements():
+    cfg = build_config("fast", "classical", sets=["sim.noise=0.01", "sim.seed=1"])
+    traj = simulate_config(cfg, 2.0)
+    err = traj["theta_m"] - traj["theta"]
+    assert 0.007 < np.std(err) < 0.013
+    q = simulate_config(build_config("fast", "classical", sets=["sim.quantization=1"]), 2.0)
+    step = np.pi * 2 / 4096
+    ratio = q["theta_m"] / step
+    assert np.allclose(ratio, np.round(ratio), atol=1e-6)
+    assert np.all(np.abs(q["theta_m"] - q["theta"]) <= step / 2 + 1e-12)
+
+
+def test_time_is_integer_ticks():
+    traj = simulate_config(build_config(), 1.0)
+    assert traj.k.dtype.kind == "i"
+    assert np.array_equal(traj.t, traj.k * 0.005)
+
+
+def test_save_dat_and_csv(tmp_path):
+    traj = simulate_config(build_config(), 2.0)
+    traj.save(tmp_path / "run.dat")
+    dat = np.loadtxt(tmp_path / "run.dat")
+    assert dat.shape == (400, 10)
+    np.testing.assert_allclose(dat, traj.data[:, :10], rtol=1e-8, atol=1e-12)
+    traj.save(tmp_path / "run.csv")
+    header = (tmp_path / "run.csv").read_text().splitlines()[0]
+    assert header == "t," + ",".join(COLUMNS)
+    csv = np.loadtxt(tmp_path / "run.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(csv[:, 0], traj.t)
+    with pytest.raises(ValueError, match="extension"):
+        traj.save(tmp_path / "run.txt")
+
+
+def test_simulate_cli_save_plot_and_progress(tmp_path, capsys):
+    png, dat = tmp_path / "c.png", tmp_path / "c.dat"
+    rc = main(["simulate", "--duration", "10", "--plot", str(png), "--save", str(dat),
+               "--progress", "--json"])
+    assert rc == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["status"] in ("limit_cycle", "settled")
+    assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+    assert np.loadtxt(dat).shape == (2000, 10)
+
+
+def test_simulate_cli_bad_input_exit_2(capsys):
+    assert main(["simulate", "--set", "friction.sigma0=-5"]) == 2
+    assert "friction.sigma0" in capsys.readouterr().err
+    assert main(["simulate", "--duration", "-1"]) == 2
+    assert main(["simulate", "--save", "x.txt"]) == 2
+
+
+def test_simulated_plant_steps_like_the_simulator():
+    cfg = build_config("fast", "lugre")
+    plant = SimulatedPlant(cfg)
+    st0 = plant.init()
+    st1 = plant.step(st0, 3.0)
+    assert st0.x[3] == 0.0 and st1.x[3] != 0.0  # the state is explicit, not mutated
+    kicked = plant.push(st1, 0.5)
+    assert kicked.x[1] == pytest.approx(st1.x[1] + 0.5)
