@@ -8,11 +8,9 @@ import numpy as np
 import pytest
 
 from frictionlab.design import design, observer_gains, preset
+from frictionlab.reference import APPENDIX_D
 
-APP_D = {
-    "fast": ([-86.6267, -11.8530, -19.7987, -6.89851], [28, 65.6235, 0.07002, 0.48280]),
-    "slow": ([-31.3510, -4.13566, -1.82609, -1.23275], [28, 65.6235, 0.05251, 0.27396]),
-}
+APP_D = APPENDIX_D
 
 
 def run_cli(*args):

@@ -12,24 +12,10 @@ from hypothesis import strategies as st
 from frictionlab.cli import main
 from frictionlab.config import build_config
 from frictionlab.limit_cycles import FEATURES
+from frictionlab.reference import TABLE1, TABLE2, TABLE3, TABLE_COLUMNS
 from frictionlab.simulation import COLUMNS, SimulatedPlant, run_features, simulate_config
 
-TABLE_COLS = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity")
-# Table 2 (F_S = 2.3, F_C varied) and Table 3 (F_C = 1.5, F_S varied), fast design
-TABLE2 = {
-    1.1: (0.143, 0.142, 0.135, 0.888, 6.0, 2.70),
-    1.3: (0.157, 0.154, 0.146, 0.901, 6.5, 3.05),
-    1.5: (0.172, 0.168, 0.159, 0.911, 7.0, 3.35),
-    1.7: (0.187, 0.182, 0.172, 0.916, 7.6, 3.70),
-    1.9: (0.199, 0.192, 0.182, 0.921, 8.2, 4.00),
-}
-TABLE3 = {
-    1.9: (0.169, 0.164, 0.157, 0.920, 6.7, 3.23),
-    2.1: (0.171, 0.165, 0.157, 0.916, 6.8, 3.31),
-    2.3: (0.173, 0.167, 0.159, 0.910, 7.0, 3.35),
-    2.5: (0.176, 0.172, 0.164, 0.900, 7.3, 3.45),
-    2.7: (0.178, 0.174, 0.165, 0.897, 7.5, 3.50),
-}
+TABLE_COLS = TABLE_COLUMNS
 ROWS = [("friction.coulomb", v, r) for v, r in TABLE2.items()] + [
     ("friction.stiction", v, r) for v, r in TABLE3.items()]
 
@@ -62,14 +48,15 @@ def test_sec52_omega0_observation_fast():
                    "--set", "friction.zero_velocity_band=0.03", "--set", "plant.omega0=7.5",
                    "--set", "friction.coulomb=1.3", "--json")
     f = out["features"]
-    assert f["period"] == pytest.approx(1.1, rel=0.10)
-    for name, ref in (("peak1", 0.080), ("peak2", 0.095), ("valley", 0.074)):
-        assert f[name] == pytest.approx(ref, rel=0.15), name
+    fast = dict(zip(TABLE_COLUMNS, TABLE1["fast"], strict=True))
+    assert f["period"] == pytest.approx(fast["period"], rel=0.10)
+    for name in ("peak1", "peak2", "valley"):
+        assert f[name] == pytest.approx(fast[name], rel=0.15), name
     # and the same omega0 in the observers as in the plant does not resemble it
     same = run_features(build_config("fast", "classical", sets=[
         "friction.zero_velocity_band=0.03", "plant.omega0=7.5", "design.omega0=7.5",
         "friction.coulomb=1.3"]), 40)
-    assert not same.peak2 == pytest.approx(0.095, rel=0.15)
+    assert not same.peak2 == pytest.approx(fast["peak2"], rel=0.15)
 
 
 def test_substep_convergence_classical_and_stiff_lugre():

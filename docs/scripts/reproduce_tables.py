@@ -4,16 +4,10 @@ Run: .venv/bin/python docs/scripts/reproduce_tables.py
 """
 
 from frictionlab.config import build_config
+from frictionlab.reference import TABLE1, TABLE2, TABLE3, TABLE_COLUMNS
 from frictionlab.simulation import run_features
 
-COLS = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity")
-TABLE2 = {1.1: (0.143, 0.142, 0.135, 0.888, 6.0, 2.70), 1.3: (0.157, 0.154, 0.146, 0.901, 6.5, 3.05),
-          1.5: (0.172, 0.168, 0.159, 0.911, 7.0, 3.35), 1.7: (0.187, 0.182, 0.172, 0.916, 7.6, 3.70),
-          1.9: (0.199, 0.192, 0.182, 0.921, 8.2, 4.00)}
-TABLE3 = {1.9: (0.169, 0.164, 0.157, 0.920, 6.7, 3.23), 2.1: (0.171, 0.165, 0.157, 0.916, 6.8, 3.31),
-          2.3: (0.173, 0.167, 0.159, 0.910, 7.0, 3.35), 2.5: (0.176, 0.172, 0.164, 0.900, 7.3, 3.45),
-          2.7: (0.178, 0.174, 0.165, 0.897, 7.5, 3.50)}
-TABLE1 = {"fast": (0.080, 0.095, 0.074, 1.1, 4.4, 2.0), "slow": (0.18, 0.22, 0.15, 2.1, 6.4, 5.2)}
+COLS = TABLE_COLUMNS
 
 
 def fmt(v):
