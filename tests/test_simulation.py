@@ -183,3 +183,25 @@ def test_simulated_plant_steps_like_the_simulator():
     assert st0.x[3] == 0.0 and st1.x[3] != 0.0  # the state is explicit, not mutated
     kicked = plant.push(st1, 0.5)
     assert kicked.x[1] == pytest.approx(st1.x[1] + 0.5)
+
+
+def test_plant_observer_gain_has_no_effect_and_sigma0_100_is_extremal():
+    """docs/model.md, "The observer gain k in the plant": the plant's eq. (19) error
+    is zero, and (App. F) sigma0 = 100 is extremal for the period."""
+    base = build_config("fast", "lugre")
+    a = simulate_config(base, 10.0)
+    b = simulate_config(base.with_values({"friction.observer_gain": 5.0}), 10.0)
+    assert np.array_equal(a.data, b.data)
+    period = {s0: run_features(base.with_values({"friction.sigma0": s0}), 40).period
+              for s0 in (50.0, 100.0, 200.0)}
+    assert period[100.0] > period[50.0] and period[100.0] > period[200.0]
+
+
+def test_inert_key_note_on_stderr(capsys):
+    rc = main(["simulate", "--friction", "lugre", "--duration", "2", "--set",
+               "friction.observer_gain=1", "--set", "friction.zero_velocity_band=0.03",
+               "--json"])
+    assert rc == 0
+    err = capsys.readouterr().err
+    assert "friction.observer_gain has no effect on the simulated plant" in err
+    assert "friction.zero_velocity_band has no effect with the 'lugre'" in err

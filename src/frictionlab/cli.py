@@ -54,13 +54,32 @@ def _add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
 
 
 def config_from_args(args) -> Config:
-    return build_config(
+    """Build the run's configuration; note on stderr any given key the chosen
+    friction model or compensator ignores."""
+    from .config import inert_keys, load_toml, parse_assignment
+
+    cfg = build_config(
         design=args.design,
         friction=getattr(args, "friction", "classical"),
         compensation=getattr(args, "compensation", "none"),
         config_file=args.config,
         sets=args.sets,
     )
+    given = [parse_assignment(s)[0] for s in args.sets]
+    if args.config:
+        given += [k for k, _ in load_toml(args.config)]
+    if hasattr(args, "friction"):
+        for key in dict.fromkeys(inert_keys(cfg, given)):
+            if key == "friction.observer_gain":
+                why = ("on the simulated plant: eq. (19)'s error term is zero inside the true "
+                       "plant (docs/model.md); the compensator's gain is "
+                       "compensation.observer_gain")
+            elif key.startswith("friction."):
+                why = f"with the {cfg.friction_kind!r} plant friction"
+            else:
+                why = f"with the {cfg.compensation_kind!r} compensator"
+            print(f"frictionlab: note: {key} has no effect {why}", file=sys.stderr)
+    return cfg
 
 
 @contextmanager

@@ -25,12 +25,15 @@ from .friction import KINDS, FrictionParams
 from .plant import PlantParams
 
 __all__ = [
+    "COMPENSATOR_FIELDS",
     "COMPENSATOR_KINDS",
+    "PLANT_FIELDS",
     "PLANT_FRICTION_KINDS",
     "Config",
     "ConfigError",
     "SimParams",
     "build_config",
+    "inert_keys",
     "parse_assignment",
     "valid_keys",
 ]
@@ -110,6 +113,44 @@ class Config:
 _SECTIONS = ("plant", "design", "friction", "compensation", "sim")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
             "compensation": FrictionParams, "sim": SimParams}
+
+
+_NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
+#: Friction fields each *plant* model reads.  ``observer_gain`` is read by no
+#: plant model: eq. (19)'s error is an estimation error, identically zero
+#: inside the true plant (see docs/model.md, "The observer gain k").
+PLANT_FIELDS = {
+    "none": set(),
+    "viscous": {"viscous", "viscous_negative"},
+    "coulomb": {"coulomb", "coulomb_negative", "hysteresis"},
+    "classical": {"stiction", "coulomb", "zero_velocity_band"} | _NEG - {"viscous_negative"},
+    "stribeck": {"stiction", "coulomb", "stribeck_velocity", "hysteresis",
+                 "zero_velocity_band"} | _NEG - {"viscous_negative"},
+    "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+              "sigma1_velocity"} | _NEG,
+}
+#: Friction fields each compensator reads.
+COMPENSATOR_FIELDS = {
+    "none": set(),
+    "coulomb": {"coulomb", "coulomb_negative", "hysteresis"},
+    "classical": {"stiction", "coulomb", "stribeck_velocity", "hysteresis"}
+    | _NEG - {"viscous_negative"},
+    "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+              "sigma1_velocity", "observer_gain"} | _NEG,
+}
+
+
+def inert_keys(cfg: Config, keys: Iterable[str]) -> list[str]:
+    """Those of ``keys`` that the configured plant friction / compensator ignore."""
+    out = []
+    for key in keys:
+        section, _, field = key.partition(".")
+        if section == "friction" and field not in PLANT_FIELDS[cfg.friction_kind]:
+            out.append(key)
+        elif section == "compensation" and field not in COMPENSATOR_FIELDS[
+                cfg.compensation_kind]:
+            out.append(key)
+    return out
 
 
 def valid_keys() -> list[str]:

@@ -40,7 +40,12 @@ Models
         g(v) = \frac{F_C + (F_S - F_C) e^{-(v/v_S)^2}}{\sigma_0},\quad
         F = \sigma_0 z + \sigma_1(v)\dot z + F_v v
 
-    ``observer_gain`` is :math:`k` (0 gives the plain eq. 18).  Optional
+    ``observer_gain`` is :math:`k` (0 gives the plain eq. 18).  The error
+    :math:`e` is an *estimation* error (the observer's correction): the
+    compensator feeds it (see :mod:`frictionlab.controller`), while inside the
+    simulated plant there is nothing to estimate and :math:`e \equiv 0`, so
+    the plant's k has no effect.  That is also what the thesis's own Sec. 5.3
+    simulations show (docs/model.md, "The observer gain k").  Optional
     variants: direction-dependent :math:`F_S, F_C, F_v` (``*_negative``
     fields, used for :math:`v < 0`) and the velocity-dependent damping
     :math:`\sigma_1(v) = \sigma_1 e^{-(v/v_d)^2}` of Sec. 3.3 (``sigma1_velocity``
