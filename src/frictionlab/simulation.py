@@ -74,7 +74,9 @@ def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
 
     Per substep: friction from the substep's initial state, held; the arm
     moves with the resulting constant acceleration (exact); the pendulum is
-    advanced with velocity Verlet (second order, one sin/cos per substep).
+    advanced with velocity Verlet (second order); its sin/cos are updated by
+    the rotation through the small angle increment (exact to rounding) and
+    recomputed from the angle at the start of every sample.
 
     Returns
     -------
@@ -99,11 +101,20 @@ def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
         f_sum += f
         a = fe - f
         acc0, arm_acc = accelerations_sc(sn, cs, thd, ad, a, omega0, zeta, g, arm_len)
-        th = th + dt * (thd + 0.5 * dt * acc0)
+        dth = dt * (thd + 0.5 * dt * acc0)
+        th = th + dth
         arm = arm + dt * (ad + 0.5 * dt * arm_acc)
         ad = ad + dt * arm_acc
-        sn = np.sin(th)
-        cs = np.cos(th)
+        if abs(dth) < 1e-3:
+            # rotate (sin, cos) by the small increment: the truncated series are
+            # exact to rounding for |dth| < 1e-3 (next terms < 1e-18)
+            d2 = dth * dth
+            sd = dth * (1.0 - d2 / 6.0)
+            cd = 1.0 - 0.5 * d2 + d2 * d2 / 24.0
+            sn, cs = sn * cd + cs * sd, cs * cd - sn * sd
+        else:
+            sn = np.sin(th)
+            cs = np.cos(th)
         acc1, _ = accelerations_sc(sn, cs, thd + dt * acc0, ad, a, omega0, zeta, g, arm_len)
         thd = thd + 0.5 * dt * (acc0 + acc1)
     x[0], x[1], x[2], x[3], x[4] = th, thd, arm, ad, z

@@ -1,0 +1,1023 @@
+r"""Parameter sweeps: many closed-loop runs, each reduced to its limit-cycle features.
+
+Sections 5.2-5.3 of the thesis vary one friction parameter at a time (Tables
+2-3: F_C, then F_S, for the fast design and the classical model; Appendix F:
+the seven LuGre parameters around the defaults of eq. (21)) and note the
+limit cycle's peaks, period, max(u) and max arm velocity for each setting.
+This module does that for any parameter keys, on one core, all local cores,
+or a Dask cluster.
+
+Engine
+------
+:func:`evaluate` maps a list of points (``{key: value}`` dicts applied to a
+base :class:`~frictionlab.config.Config`) to result rows, in order.  The unit
+of work is :func:`frictionlab.simulation.run_features`.  Points are shipped in
+chunks (by default up to 50 points, at least 4 chunks per worker) so that the
+compiled simulator, not task scheduling, dominates.  A point whose
+configuration is invalid or whose simulation raises becomes a row with status
+``"error"`` and an ``error`` message; a worker that dies turns its chunk into
+such rows.  A sweep never crashes because of one point.
+
+Backends (chosen by :func:`evaluate`'s ``workers`` and ``dask``):
+
+* in-process (``workers=1``, or ``workers=None`` for a sweep of under about
+  half a second of serial work);
+* a local process pool (``workers=N``; ``None``: all cores).  Workers start
+  from a ``forkserver`` that has already imported the simulator, and load the
+  numba-compiled code from its on-disk cache once; the pool is kept for the
+  life of the process so repeated calls (identification, tuning) pay the
+  start-up once.  :func:`shutdown` closes it (also at exit);
+* Dask distributed: ``dask="local"`` starts a ``LocalCluster`` (one
+  single-threaded worker process per core, or ``workers``), ``dask="tcp://
+  HOST:PORT"`` connects to a running scheduler whose workers have
+  ``frictionlab`` installed.  Clients are kept like the pool.
+
+Output files
+------------
+:class:`SweepFile` writes rows as chunks complete (CSV, flushed and fsynced per
+chunk), reads them back for ``--resume``, and at the end rewrites the file in
+sweep order (atomically).  Columns: the varied keys, ``status``, the seven
+features of :data:`frictionlab.limit_cycles.FEATURES`, ``error``.  A
+``.parquet`` output is written at the end from all rows; while the sweep runs
+the rows go to the crash-safe CSV journal ``FILE.parquet.partial.csv``.
+A sidecar ``FILE.meta.json`` records the base configuration, duration and
+window, so that ``--resume`` refuses to mix results of different set-ups.
+"""
+
+from __future__ import annotations
+
+import atexit
+import csv
+import io
+import json
+import math
+import os
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import closing
+from pathlib import Path
+from typing import Any
+
+from .config import Config, ConfigError, valid_keys
+from .limit_cycles import FEATURES
+
+__all__ = [
+    "MODES",
+    "STATUSES",
+    "SweepFile",
+    "evaluate",
+    "iter_evaluate",
+    "make_points",
+    "markdown_table",
+    "parse_vary",
+    "plot_sweep",
+    "register_cli",
+    "shutdown",
+]
+
+#: Sweep modes: Cartesian product of the value lists, or one key at a time.
+MODES = ("grid", "oat")
+#: Row statuses: the three of ``frictionlab simulate`` plus ``error``.
+STATUSES = ("limit_cycle", "settled", "fell", "error")
+
+#: Largest number of points per task.
+MAX_CHUNK = 50
+#: ``workers=None`` runs a sweep in-process when its serial work (points x ticks
+#: x substeps) is below this (about half a second of simulation).
+TINY_WORK = 5_000_000
+
+
+# ---------------------------------------------------------------------------
+# sweep specification
+# ---------------------------------------------------------------------------
+
+
+def _number(key: str, text: str) -> float:
+    t = text.strip()
+    if not t:
+        raise ConfigError(f"--vary {key}: empty value in the list")
+    try:
+        v = float(t)
+    except ValueError:
+        raise ConfigError(f"--vary {key}: {t!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ConfigError(f"--vary {key}: {t!r} is not a finite number")
+    return v
+
+
+def _tidy(v: float) -> float:
+    """Round a computed grid value to 12 significant digits (1.7, not 1.7000000000000002)."""
+    return float(f"{v:.12g}")
+
+
+def parse_vary(text: str) -> tuple[str, list[float]]:
+    """Parse ``KEY=V1,V2,...`` or ``KEY=START:STOP:N`` (N evenly spaced values).
+
+    ``START:STOP:N`` includes both ends (``N = 1`` gives ``START``); its
+    values are rounded to 12 significant digits.
+
+    Raises
+    ------
+    ConfigError
+        Unknown key, empty list, non-numeric value, bad N, duplicate value.
+    """
+    if "=" not in text:
+        raise ConfigError(f"--vary expects KEY=V1,V2,... or KEY=START:STOP:N, got {text!r}")
+    key, spec = (s.strip() for s in text.split("=", 1))
+    if key not in valid_keys():
+        raise ConfigError(f"--vary: unknown key {key!r}; valid keys: {', '.join(valid_keys())}")
+    if not spec:
+        raise ConfigError(f"--vary {key}: empty list of values")
+    if ":" in spec:
+        parts = spec.split(":")
+        if len(parts) != 3:
+            raise ConfigError(f"--vary {key}: a range is START:STOP:N, got {spec!r}")
+        start, stop = _number(key, parts[0]), _number(key, parts[1])
+        try:
+            n = int(parts[2].strip())
+        except ValueError:
+            raise ConfigError(
+                f"--vary {key}: N in START:STOP:N must be an integer >= 1, got {parts[2]!r}"
+            ) from None
+        if n < 1:
+            raise ConfigError(f"--vary {key}: N in START:STOP:N must be >= 1, got {n}")
+        if n == 1:
+            values = [start]
+        else:
+            values = [_tidy(start + (stop - start) * i / (n - 1)) for i in range(n)]
+    else:
+        values = [_number(key, t) for t in spec.split(",")]
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise ConfigError(f"--vary {key}: value {v:g} appears twice")
+        seen.add(v)
+    return key, values
+
+
+def _as_key_type(base: Config, key: str, value: Any) -> Any:
+    """Integer-valued keys (``sim.seed``, ``sim.substeps``) keep integer values."""
+    if isinstance(value, float) and value.is_integer():
+        current = base.get(key)
+        if isinstance(current, int) and not isinstance(current, bool):
+            return int(value)
+    return value
+
+
+def make_points(base: Config, varies: Sequence[tuple[str, Sequence[float]]],
+                mode: str = "grid") -> list[dict[str, Any]]:
+    """The parameter sets of a sweep.
+
+    Parameters
+    ----------
+    base : Config
+        The configuration every point modifies.
+    varies : sequence of (key, values)
+        As returned by :func:`parse_vary`, in the order given.
+    mode : {"grid", "oat"}
+        ``grid``: the Cartesian product (the last key varies fastest).
+        ``oat``: one key at a time, the others at their base values, as in
+        the thesis's Tables 2-3 and Appendix F; a point that occurs for two
+        keys (both at their base values) is run once.
+
+    Returns
+    -------
+    list of dict
+        Each point gives a value for every varied key.
+    """
+    if mode not in MODES:
+        raise ConfigError(f"--mode must be one of {', '.join(MODES)}; got {mode!r}")
+    if not varies:
+        raise ConfigError("a sweep needs at least one --vary KEY=VALUES")
+    keys = [k for k, _ in varies]
+    for k in keys:
+        if keys.count(k) > 1:
+            raise ConfigError(f"--vary {k} given more than once")
+    for k, values in varies:
+        if not values:
+            raise ConfigError(f"--vary {k}: empty list of values")
+    if mode == "grid":
+        points: list[dict[str, Any]] = [{}]
+        for k, values in varies:
+            points = [{**p, k: _as_key_type(base, k, v)} for p in points for v in values]
+        return points
+    base_vals = {k: base.get(k) for k in keys}
+    out, seen = [], set()
+    for k, values in varies:
+        for v in values:
+            p = {**base_vals, k: _as_key_type(base, k, v)}
+            ident = _ident(p, keys)
+            if ident not in seen:
+                seen.add(ident)
+                out.append(p)
+    return out
+
+
+def validate_points(base: Config, points: Sequence[Mapping[str, Any]]) -> None:
+    """Build every point's configuration; raise :class:`ConfigError` at the first bad one."""
+    for p in points:
+        try:
+            base.with_values(p)
+        except ValueError as exc:
+            raise ConfigError(f"sweep point {_describe(p)}: {exc}") from None
+
+
+def _describe(p: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k}={v!r}" for k, v in p.items())
+
+
+def _ident(p: Mapping[str, Any], keys: Sequence[str]) -> tuple:
+    """Identity of a point for resume: its varied values as floats (None kept)."""
+    return tuple(None if p.get(k) is None else float(p[k]) for k in keys)
+
+
+# ---------------------------------------------------------------------------
+# the unit of work (runs in workers)
+# ---------------------------------------------------------------------------
+
+
+def _clean(v: Any) -> float | None:
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _error_row(point: Mapping[str, Any], message: str) -> dict[str, Any]:
+    row: dict[str, Any] = dict(point)
+    row["status"] = "error"
+    row.update({name: None for name in FEATURES})
+    row["error"] = message
+    return row
+
+
+def _run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
+               window: float | None) -> list[dict[str, Any]]:
+    """Evaluate a chunk of points (executed in a worker process, or in-process)."""
+    from .simulation import run_features
+
+    rows = []
+    for p in points:
+        try:
+            feats = run_features(base.with_values(p), duration, window)
+        except Exception as exc:
+            rows.append(_error_row(p, f"{type(exc).__name__}: {exc}"))
+            continue
+        row: dict[str, Any] = dict(p)
+        row["status"] = feats.status
+        row.update({name: _clean(getattr(feats, name)) for name in FEATURES})
+        row["error"] = None
+        rows.append(row)
+    return rows
+
+
+def _warm_up() -> None:
+    """Load the compiled simulator once (from numba's on-disk cache)."""
+    from .config import build_config
+    from .simulation import run_features
+
+    run_features(build_config(), 2.0)
+
+
+def _watch_parent(ppid: int) -> None:
+    while True:
+        time.sleep(1.0)
+        if os.getppid() != ppid:
+            os._exit(1)
+
+
+def _pool_worker_init() -> None:
+    """Pool worker start-up: warm the simulator, and exit if orphaned.
+
+    A pool worker whose parent (the forkserver, which exits with the main
+    process) disappears - e.g. the sweep was killed with SIGKILL - exits
+    within a second instead of lingering.
+    """
+    _warm_up()
+    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+
+
+# ---------------------------------------------------------------------------
+# backends
+# ---------------------------------------------------------------------------
+
+_lock = threading.Lock()
+_pools: dict[int, Any] = {}
+_dask: dict[tuple, tuple[Any, Any]] = {}
+
+
+def _get_pool(workers: int):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with _lock:
+        ex = _pools.get(workers)
+        if ex is None:
+            ctx = multiprocessing.get_context("forkserver")
+            # the forkserver imports the simulator once; workers fork from it
+            ctx.set_forkserver_preload(["frictionlab.sweep", "frictionlab.simulation"])
+            ex = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pool_worker_init)
+            _pools[workers] = ex
+        return ex
+
+
+def _drop_pool(workers: int, ex) -> None:
+    with _lock:
+        if _pools.get(workers) is ex:
+            del _pools[workers]
+    ex.shutdown(wait=False, cancel_futures=True)
+
+
+def _get_dask(address: str, workers: int | None):
+    """A cached ``distributed.Client`` for ``"local"`` or ``"tcp://HOST:PORT"``."""
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    n = workers or os.cpu_count() or 1
+    key = ("local", n) if address == "local" else (address,)
+    with _lock:
+        hit = _dask.get(key)
+        if hit is not None and hit[0].status == "running":
+            return hit[0]
+        if address == "local":
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, host="127.0.0.1",
+                                   silence_logs=logging.ERROR)
+            try:
+                client = Client(cluster, timeout="60s")
+            except BaseException:
+                cluster.close()
+                raise
+        else:
+            cluster = None
+            try:
+                client = Client(address, timeout="30s")
+            except OSError as exc:
+                raise ConfigError(f"--dask {address}: cannot connect to the scheduler "
+                                  f"({exc})") from None
+        try:
+            client.run(_warm_up)
+        except BaseException:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+            raise
+        _dask[key] = (client, cluster)
+        return client
+
+
+def shutdown() -> None:
+    """Close the cached process pools and Dask clients/clusters (also run at exit)."""
+    with _lock:
+        pools, clients = list(_pools.values()), list(_dask.values())
+        _pools.clear()
+        _dask.clear()
+    for ex in pools:
+        ex.shutdown(wait=True, cancel_futures=True)
+    for client, cluster in clients:
+        try:
+            client.close(timeout=10)
+        finally:
+            if cluster is not None:
+                cluster.close(timeout=10)
+
+
+atexit.register(shutdown)
+
+
+def _check_dask_address(dask: str) -> None:
+    if dask != "local" and not (dask.startswith("tcp://") and ":" in dask[len("tcp://"):]):
+        raise ConfigError(f"--dask must be 'local' or tcp://HOST:PORT, got {dask!r}")
+
+
+def _serial_work(base: Config, n_points: int, duration: float | None) -> float:
+    d = base.sim.duration if duration is None else duration
+    return n_points * (d / base.design.h) * base.sim.substeps
+
+
+def _chunks(n: int, size: int) -> list[range]:
+    return [range(i, min(i + size, n)) for i in range(0, n, size)]
+
+
+def iter_evaluate(
+    base: Config,
+    points: Sequence[Mapping[str, Any]],
+    *,
+    duration: float | None = None,
+    window: float | None = None,
+    workers: int | None = None,
+    dask: str | None = None,
+    chunk_size: int | None = None,
+) -> Iterator[tuple[list[int], list[dict[str, Any]]]]:
+    """Evaluate ``points`` chunk by chunk, yielding ``(indices, rows)`` as chunks complete.
+
+    Arguments as :func:`evaluate`.  Chunks arrive in completion order; closing
+    the generator early cancels the chunks not yet started.
+    """
+    n = len(points)
+    if workers is not None and (isinstance(workers, bool) or int(workers) != workers
+                                or workers < 1):
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if chunk_size is not None and (int(chunk_size) != chunk_size or chunk_size < 1):
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    if dask is not None:
+        _check_dask_address(dask)
+    if n == 0:
+        return
+    pts = [dict(p) for p in points]
+    if dask is not None:
+        backend, n_workers = "dask", workers or os.cpu_count() or 1
+    else:
+        n_workers = workers or os.cpu_count() or 1
+        serial = n_workers == 1 or (
+            workers is None and _serial_work(base, n, duration) < TINY_WORK)
+        backend = "serial" if serial else "pool"
+    size = chunk_size or max(1, min(MAX_CHUNK, math.ceil(n / (4 * n_workers))))
+    chunks = _chunks(n, size)
+
+    if backend == "serial":
+        for idx in chunks:
+            yield list(idx), _run_chunk(base, [pts[i] for i in idx], duration, window)
+        return
+
+    if backend == "pool":
+        from concurrent.futures import as_completed
+        from concurrent.futures.process import BrokenProcessPool
+
+        ex = _get_pool(n_workers)
+        futs = {ex.submit(_run_chunk, base, [pts[i] for i in idx], duration, window): idx
+                for idx in chunks}
+        try:
+            for fut in as_completed(futs):
+                idx = futs[fut]
+                exc = fut.exception()
+                if exc is None:
+                    yield list(idx), fut.result()
+                    continue
+                if isinstance(exc, BrokenProcessPool):
+                    _drop_pool(n_workers, ex)
+                msg = f"worker failed: {type(exc).__name__}: {exc}"
+                yield list(idx), [_error_row(pts[i], msg) for i in idx]
+        finally:
+            for fut in futs:
+                fut.cancel()
+        return
+
+    from distributed import as_completed as dask_completed
+
+    client = _get_dask(dask, workers)
+    dfuts = [client.submit(_run_chunk, base, [pts[i] for i in idx], duration, window,
+                           pure=False) for idx in chunks]
+    index = {f.key: idx for f, idx in zip(dfuts, chunks, strict=True)}
+    try:
+        for fut in dask_completed(dfuts):
+            idx = index[fut.key]
+            if fut.status == "finished":
+                yield list(idx), fut.result()
+                continue
+            try:
+                exc = fut.exception(timeout=30)
+            except Exception as e:
+                exc = e
+            msg = f"worker failed: {type(exc).__name__}: {exc}"
+            yield list(idx), [_error_row(pts[i], msg) for i in idx]
+    finally:
+        pending = [f for f in dfuts if not f.done()]
+        if pending:
+            client.cancel(pending)
+
+
+def evaluate(
+    base: Config,
+    points: Sequence[Mapping[str, float]],
+    *,
+    duration: float | None = None,
+    window: float | None = None,
+    workers: int | None = None,
+    dask: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    chunk_size: int | None = None,
+) -> list[dict]:
+    """Run the closed loop for every point and reduce each run to its features.
+
+    Parameters
+    ----------
+    base : Config
+        Configuration every point modifies.
+    points : sequence of mappings ``{key: value}``
+        Parameter sets, applied with :meth:`Config.with_values`.
+    duration, window : float, optional
+        As for :func:`frictionlab.simulation.run_features` (defaults:
+        ``sim.duration``; the last half of the run).
+    workers : int, optional
+        ``1``: in-process.  ``N``: a local pool of N processes (or N Dask
+        workers with ``dask="local"``).  ``None``: all cores, except that a
+        sweep of under about half a second of serial work runs in-process.
+    dask : {"local", "tcp://HOST:PORT"}, optional
+        Run on Dask distributed instead of the local pool.
+    progress : callable, optional
+        Called as ``progress(done, total)`` (points) after every chunk.
+    chunk_size : int, optional
+        Points per task (default: up to 50, at least 4 tasks per worker).
+
+    Returns
+    -------
+    list of dict
+        One row per point, in the order of ``points``: the point's keys and
+        values, ``status`` (``limit_cycle``/``settled``/``fell``/``error``),
+        the seven features of :data:`~frictionlab.limit_cycles.FEATURES`
+        (``None`` where undefined) and ``error`` (a message, or ``None``).
+    """
+    n = len(points)
+    rows: list[dict | None] = [None] * n
+    done = 0
+    with closing(iter_evaluate(base, points, duration=duration, window=window,
+                               workers=workers, dask=dask, chunk_size=chunk_size)) as chunks:
+        for idx, chunk_rows in chunks:
+            for i, row in zip(idx, chunk_rows, strict=True):
+                rows[i] = row
+            done += len(idx)
+            if progress is not None:
+                progress(done, n)
+    return rows  # type: ignore[return-value]
+
+
+# ---------------------------------------------------------------------------
+# output files
+# ---------------------------------------------------------------------------
+
+
+def columns(keys: Sequence[str]) -> list[str]:
+    """CSV columns: the varied keys, ``status``, the features, ``error``."""
+    return [*keys, "status", *FEATURES, "error"]
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return repr(v)
+    return str(v)
+
+
+def _parse_cell(col: str, text: str) -> Any:
+    if col in ("status", "error"):
+        return text if text != "" else None
+    if text == "":
+        return None
+    v = float(text)
+    return int(v) if v.is_integer() and "." not in text and "e" not in text.lower() else v
+
+
+def _parse_csv(text: str, path: str, cols: list[str]) -> list[dict[str, Any]]:
+    reader = csv.reader(io.StringIO(text))
+    header = next(reader, None)
+    if header is None:
+        return []
+    if header != cols:
+        raise ConfigError(
+            f"{path} has columns {','.join(header)}; this sweep writes {','.join(cols)} "
+            "(use another --out, or --force to overwrite)")
+    rows = []
+    for line_no, rec in enumerate(reader, start=2):
+        if not rec:
+            continue
+        if len(rec) != len(cols):
+            raise ConfigError(f"{path}:{line_no}: expected {len(cols)} fields, got {len(rec)}")
+        try:
+            rows.append({c: _parse_cell(c, t) for c, t in zip(cols, rec, strict=True)})
+        except ValueError:
+            raise ConfigError(f"{path}:{line_no}: not a number in a numeric column") from None
+    return rows
+
+
+class SweepFile:
+    """The output of a sweep: incremental crash-safe CSV, resume, final rewrite.
+
+    Parameters
+    ----------
+    path : str
+        ``FILE.csv`` or ``FILE.parquet``.
+    keys : sequence of str
+        The varied keys (the leading columns).
+    meta : dict
+        What produced the rows (base configuration, duration, window); stored
+        in ``FILE.meta.json`` and compared on resume.
+    """
+
+    def __init__(self, path: str, keys: Sequence[str], meta: dict):
+        if not path.endswith((".csv", ".parquet")):
+            raise ConfigError(f"--out {path}: the extension must be .csv or .parquet")
+        self.path = path
+        self.keys = list(keys)
+        self.cols = columns(keys)
+        self.meta = meta
+        self.parquet = path.endswith(".parquet")
+        self.journal = path + ".partial.csv" if self.parquet else path
+        self.meta_path = path + ".meta.json"
+        self._fh: io.TextIOBase | None = None
+
+    def _files(self) -> list[str]:
+        return [p for p in dict.fromkeys((self.path, self.journal, self.meta_path))
+                if os.path.exists(p)]
+
+    def exists(self) -> bool:
+        return bool([p for p in self._files() if p != self.meta_path])
+
+    def remove(self) -> None:
+        for p in self._files():
+            os.remove(p)
+
+    def load(self) -> list[dict[str, Any]]:
+        """Rows already present (for ``--resume``), after checking the set-up matches."""
+        if not self.exists():
+            return []
+        self._check_meta()
+        rows: list[dict[str, Any]] = []
+        if self.parquet and os.path.exists(self.path):
+            rows.extend(self._read_parquet())
+        if os.path.exists(self.journal):
+            rows.extend(self._read_journal())
+        return rows
+
+    def _check_meta(self) -> None:
+        if not os.path.exists(self.meta_path):
+            return
+        try:
+            with open(self.meta_path, encoding="utf-8") as fh:
+                old = json.load(fh)
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"cannot read {self.meta_path}: {exc}") from None
+        for field in ("keys", "duration", "window"):
+            if old.get(field) != self.meta.get(field):
+                raise ConfigError(
+                    f"--resume: {self.path} was produced with {field} = {old.get(field)!r}, "
+                    f"this sweep has {self.meta.get(field)!r} (use --force to start afresh)")
+        ob, nb = old.get("base", {}), self.meta.get("base", {})
+        for k in sorted(set(ob) | set(nb)):
+            if k in self.keys:
+                continue
+            if ob.get(k) != nb.get(k):
+                raise ConfigError(
+                    f"--resume: {self.path} was produced with {k} = {ob.get(k)!r}, "
+                    f"this sweep has {nb.get(k)!r} (use --force to start afresh)")
+
+    def _read_journal(self) -> list[dict[str, Any]]:
+        with open(self.journal, "rb") as fh:
+            data = fh.read()
+        end = data.rfind(b"\n") + 1
+        if end < len(data):
+            # a line cut short by a kill: drop it (its chunk is run again)
+            with open(self.journal, "r+b") as fh:
+                fh.truncate(end)
+            data = data[:end]
+        return _parse_csv(data.decode("utf-8"), self.journal, self.cols)
+
+    def _read_parquet(self) -> list[dict[str, Any]]:
+        import pyarrow.parquet as pq
+
+        try:
+            table = pq.read_table(self.path)
+        except Exception as exc:
+            raise ConfigError(f"cannot read {self.path}: {exc}") from None
+        if table.column_names != self.cols:
+            raise ConfigError(
+                f"{self.path} has columns {','.join(table.column_names)}; this sweep writes "
+                f"{','.join(self.cols)} (use another --out, or --force to overwrite)")
+        return table.to_pylist()
+
+    def open(self) -> None:
+        """Start appending (writing the header and the sidecar when new)."""
+        Path(self.path).parent.mkdir(parents=True, exist_ok=True)
+        with open(self.meta_path, "w", encoding="utf-8") as fh:
+            json.dump(self.meta, fh, indent=1)
+        new = not os.path.exists(self.journal) or os.path.getsize(self.journal) == 0
+        self._fh = open(self.journal, "a", encoding="utf-8", newline="")
+        if new:
+            self._write_lines([self.cols])
+
+    def _write_lines(self, records: list[list[Any]]) -> None:
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        for rec in records:
+            w.writerow(rec)
+        assert self._fh is not None
+        self._fh.write(buf.getvalue())
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def append(self, rows: Sequence[Mapping[str, Any]]) -> None:
+        """Append rows and make them durable (flush + fsync)."""
+        self._write_lines([[_fmt(r.get(c)) for c in self.cols] for r in rows])
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def finish(self, rows: Sequence[Mapping[str, Any]]) -> None:
+        """Replace the output with ``rows`` (sweep order), atomically."""
+        self.close()
+        tmp = self.path + ".tmp"
+        if self.parquet:
+            _write_parquet(tmp, rows, self.keys, self.cols)
+        else:
+            with open(tmp, "w", encoding="utf-8", newline="") as fh:
+                w = csv.writer(fh, lineterminator="\n")
+                w.writerow(self.cols)
+                for r in rows:
+                    w.writerow([_fmt(r.get(c)) for c in self.cols])
+                fh.flush()
+                os.fsync(fh.fileno())
+        os.replace(tmp, self.path)
+        if self.parquet and os.path.exists(self.journal):
+            os.remove(self.journal)
+
+
+def _write_parquet(path: str, rows: Sequence[Mapping[str, Any]], keys: Sequence[str],
+                   cols: Sequence[str]) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    fields = []
+    for c in cols:
+        if c in ("status", "error"):
+            t = pa.string()
+        elif c in keys and all(isinstance(r.get(c), int) or r.get(c) is None for r in rows):
+            t = pa.int64()
+        else:
+            t = pa.float64()
+        fields.append(pa.field(c, t))
+    schema = pa.schema(fields)
+    table = pa.Table.from_pylist([{c: r.get(c) for c in cols} for r in rows], schema=schema)
+    pq.write_table(table, path)
+
+
+# ---------------------------------------------------------------------------
+# tables and plots
+# ---------------------------------------------------------------------------
+
+#: Table 2's columns after the varied key, with their headers.
+TABLE_HEADERS = (("peak1", "peak1"), ("peak2", "peak2"), ("valley", "valley"),
+                 ("period", "T"), ("max_u", "max(u)"), ("max_arm_velocity", "max(Ω̇)"))
+
+
+def _cell(v: Any) -> str:
+    return "-" if v is None else f"{v:#.3g}"
+
+
+def _key_cell(v: Any) -> str:
+    return "-" if v is None else f"{v:g}"
+
+
+def _one_table(rows: Sequence[Mapping[str, Any]], keys: Sequence[str]) -> str:
+    with_status = any(r["status"] != "limit_cycle" for r in rows)
+    head = [*keys, *(h for _, h in TABLE_HEADERS)] + (["status"] if with_status else [])
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for r in rows:
+        cells = [_key_cell(r[k]) for k in keys] + [_cell(r[f]) for f, _ in TABLE_HEADERS]
+        if with_status:
+            cells.append(r["status"])
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _groups(rows: Sequence[Mapping[str, Any]], varies: Sequence[tuple[str, Sequence[float]]],
+            mode: str, base_vals: Mapping[str, Any]) -> list[tuple[str, list]]:
+    """(key, rows) per table/plot panel: one per key in ``oat`` mode, one in ``grid``."""
+    if mode == "grid" or len(varies) == 1:
+        return [(varies[0][0], list(rows))]
+    keys = [k for k, _ in varies]
+    by_ident = {_ident(r, keys): r for r in rows}
+    out = []
+    for k, values in varies:
+        grp = []
+        for v in values:
+            r = by_ident.get(_ident({**base_vals, k: v}, keys))
+            if r is not None:
+                grp.append(r)
+        out.append((k, grp))
+    return out
+
+
+def markdown_table(rows: Sequence[Mapping[str, Any]],
+                   varies: Sequence[tuple[str, Sequence[float]]], mode: str = "grid",
+                   base_vals: Mapping[str, Any] | None = None) -> str:
+    """Markdown table(s) shaped like the thesis's Tables 2-3.
+
+    Columns: the varied key(s), peak1, peak2, valley, T, max(u), max(Ω̇)
+    (three significant digits; ``-`` where undefined), plus ``status`` when
+    some row is not a limit cycle.  In ``oat`` mode with several keys, one
+    table per key (blank line between), each with its own key column only.
+    """
+    base_vals = base_vals or {}
+    if mode == "grid" or len(varies) == 1:
+        return _one_table(rows, [k for k, _ in varies])
+    return "\n\n".join(_one_table(grp, [k]) for k, grp in
+                       _groups(rows, varies, mode, base_vals))
+
+
+def plot_sweep(rows: Sequence[Mapping[str, Any]],
+               varies: Sequence[tuple[str, Sequence[float]]], path: str, mode: str = "grid",
+               base_vals: Mapping[str, Any] | None = None) -> str:
+    """Each feature against the varied parameter, one subplot per feature.
+
+    ``oat`` with several keys: one column of subplots per key.  ``grid`` with
+    several keys: x is the first key, one line per combination of the others.
+    Points whose status is not ``limit_cycle`` are drawn as crosses.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    base_vals = base_vals or {}
+    keys = [k for k, _ in varies]
+    groups = _groups(rows, varies, mode, base_vals)
+    ncol = len(groups)
+    fig, axes = plt.subplots(len(FEATURES), ncol, figsize=(4.2 * ncol + 1, 13), sharex="col",
+                             squeeze=False)
+    for col, (xkey, grp) in enumerate(groups):
+        others = [k for k in keys if k != xkey] if mode == "grid" else []
+        lines: dict[tuple, list] = {}
+        for r in grp:
+            lines.setdefault(tuple(r[k] for k in others), []).append(r)
+        for j, feat in enumerate(FEATURES):
+            ax = axes[j, col]
+            for combo, rs in lines.items():
+                rs = sorted(rs, key=lambda r: r[xkey])
+                x = [r[xkey] for r in rs]
+                y = [math.nan if r[feat] is None else r[feat] for r in rs]
+                label = ", ".join(f"{k}={v:g}" for k, v in zip(others, combo, strict=True))
+                ln, = ax.plot(x, y, "o-", ms=3, label=label or None)
+                bad = [(a, b) for a, b, r in zip(x, y, rs, strict=True)
+                       if r["status"] != "limit_cycle"]
+                if bad:
+                    ax.plot([a for a, _ in bad], [0.0 if math.isnan(b) else b for _, b in bad],
+                            "x", color=ln.get_color())
+            ax.set_ylabel(feat if col == 0 else "")
+            ax.grid(alpha=0.3)
+            if j == 0 and others and len(lines) <= 12:
+                ax.legend(fontsize=7)
+        axes[-1, col].set_xlabel(xkey)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------
+# command line
+# ---------------------------------------------------------------------------
+
+
+def register_cli(sub) -> None:
+    """Add ``frictionlab sweep`` to the CLI's subparsers."""
+    from .cli import _add_config_args
+
+    p = sub.add_parser(
+        "sweep", help="vary parameter keys; one limit-cycle feature row per parameter set",
+        description="Run the closed loop for every parameter set and reduce each run to its "
+                    "limit-cycle features (Tables 2-3).  Rows are written to --out as they "
+                    "complete; --resume continues an interrupted sweep.")
+    _add_config_args(p)
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
+                   help="values of a key: a list V1,V2,... or START:STOP:N (N evenly spaced "
+                        "values, both ends included); repeatable")
+    p.add_argument("--mode", choices=MODES, default="grid",
+                   help="grid: every combination (default); oat: one key at a time, the "
+                        "others at their base values (the thesis's tables)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="simulated time per run in s (default: sim.duration = 40)")
+    p.add_argument("--window", type=float, default=None,
+                   help="analyse the last S seconds of each run (default: the last half)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local processes (default: all cores; 1 = in-process); with "
+                        "--dask local, the number of Dask workers")
+    p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
+                   help="run on Dask: start a LocalCluster, or join a running scheduler")
+    p.add_argument("--chunk-size", type=int, default=None,
+                   help="parameter sets per task (default: up to 50, >= 4 tasks per worker)")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="results, FILE.csv (crash-safe, written as it goes) or FILE.parquet")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the rows already in --out and run only the missing points")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    p.add_argument("--table", action="store_true",
+                   help="print a markdown table like Tables 2-3 (in the JSON with --json)")
+    p.add_argument("--plot", metavar="FILE.png", help="plot each feature against the key")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_sweep)
+
+
+def _plan(args):
+    """Everything checked before any work: (base, varies, points, duration, file)."""
+    from .cli import UsageError, config_from_args
+
+    base = config_from_args(args)
+    if not args.vary:
+        raise UsageError("a sweep needs at least one --vary KEY=V1,V2,... (or START:STOP:N)")
+    varies = [parse_vary(v) for v in args.vary]
+    points = make_points(base, varies, args.mode)
+    validate_points(base, points)
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise UsageError(f"--duration must be > 0, got {args.duration}")
+    if args.window is not None and not (args.window > 0 and math.isfinite(args.window)):
+        raise UsageError(f"--window must be > 0, got {args.window}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise UsageError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    if args.dask is not None:
+        _check_dask_address(args.dask)
+    if args.plot and not args.plot.endswith((".png", ".pdf", ".svg")):
+        raise UsageError(f"--plot {args.plot}: extension must be .png, .pdf or .svg")
+    if args.resume and args.force:
+        raise UsageError("--resume and --force exclude each other")
+    duration = base.sim.duration if args.duration is None else args.duration
+    keys = [k for k, _ in varies]
+    base_flat = base.as_flat_dict()
+    meta = {"keys": keys, "mode": args.mode, "duration": duration, "window": args.window,
+            "base": base_flat, "vary": {k: v for k, v in varies}}
+    out = SweepFile(args.out, keys, meta)
+    if out.exists() and not args.resume:
+        if not args.force:
+            raise UsageError(f"--out {args.out} exists; use --resume to continue it or "
+                             "--force to overwrite it")
+    return base, varies, points, duration, out
+
+
+def cmd_sweep(args) -> int:
+    """``frictionlab sweep``."""
+    import signal
+    import sys
+
+    from .cli import emit_json, progress_bar
+
+    t0 = time.perf_counter()
+    base, varies, points, duration, out = _plan(args)
+    keys = [k for k, _ in varies]
+    if args.force:
+        out.remove()
+    old = out.load() if args.resume else []
+    have: dict[tuple, dict] = {}
+    for r in old:
+        have[_ident(r, keys)] = r  # a later row for the same point wins
+    todo = [i for i, p in enumerate(points)
+            if have.get(_ident(p, keys), {}).get("status", "error") == "error"]
+    results: dict[int, dict] = {}
+
+    def on_term(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, on_term)
+    out.open()
+    done = len(points) - len(todo)
+    try:
+        with progress_bar(f"sweep {len(points)} points", not args.no_progress) as upd:
+            upd(done / len(points))
+            with closing(iter_evaluate(base, [points[i] for i in todo], duration=duration,
+                                       window=args.window, workers=args.workers,
+                                       dask=args.dask, chunk_size=args.chunk_size)) as chunks:
+                for idx, rows in chunks:
+                    out.append(rows)
+                    for j, row in zip(idx, rows, strict=True):
+                        results[todo[j]] = row
+                    done += len(idx)
+                    upd(done / len(points))
+    except KeyboardInterrupt:
+        out.close()
+        print(f"frictionlab sweep: interrupted with {done} of {len(points)} points in "
+              f"{out.journal}; rerun with --resume to finish", file=sys.stderr)
+        raise
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    ordered = [results[i] if i in results else have[_ident(p, keys)]
+               for i, p in enumerate(points)]
+    wanted = {_ident(p, keys) for p in points}
+    extra = [r for ident, r in have.items() if ident not in wanted]
+    out.finish(ordered + extra)
+    base_vals = {k: base.get(k) for k in keys}
+    table = markdown_table(ordered, varies, args.mode, base_vals) if args.table else None
+    if args.plot:
+        plot_sweep(ordered, varies, args.plot, args.mode, base_vals)
+    counts = {s: sum(r["status"] == s for r in ordered + extra) for s in STATUSES}
+    result = {"rows": len(ordered) + len(extra), "out": args.out,
+              "seconds": round(time.perf_counter() - t0, 3), "computed": len(todo),
+              "resumed": len(points) - len(todo), "statuses": counts}
+    if table is not None:
+        result["table"] = table
+    if args.plot:
+        result["plot"] = args.plot
+    if args.json:
+        emit_json(result)
+    else:
+        if table is not None:
+            print(table)
+        print(f"{result['rows']} rows in {args.out} ({len(todo)} computed, "
+              f"{result['resumed']} resumed) in {result['seconds']:.1f} s; "
+              + ", ".join(f"{s}: {c}" for s, c in counts.items() if c))
+    return 0
