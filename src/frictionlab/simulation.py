@@ -12,8 +12,8 @@ substep the friction force is evaluated once from the state at its start and
 held (friction is discontinuous, so a higher-order integration *through* it
 gains nothing); the arm then moves with constant acceleration (exact) and
 the pendulum is advanced by velocity Verlet (second order, the arm velocity
-exact at both ends; the arm and its friction do not depend on the pendulum).  The LuGre bristle state is advanced with the exact exponential
-update for frozen velocity (:func:`frictionlab.friction.lugre_step_exact`),
+exact at both ends; the arm and its friction do not depend on the pendulum).
+The LuGre bristle state is advanced with the exact exponential update for frozen velocity (:func:`frictionlab.friction.lugre_step_exact`),
 so a stiff bristle (``sigma0`` = 1000) stays stable at any substep count, and
 the force uses the bristle's mean over the substep.
 
