@@ -7,15 +7,16 @@ the integer tick k, t = k h.
 
 Integration scheme
 ------------------
-Each sampling period is split into ``sim.substeps`` equal substeps.  In a
+Each sampling period is split into ``sim.substeps`` equal substeps. In a
 substep the friction force is evaluated once from the state at its start and
 held (friction is discontinuous, so a higher-order integration *through* it
 gains nothing); the arm then moves with constant acceleration (exact) and
 the pendulum is advanced by velocity Verlet (second order, the arm velocity
 exact at both ends; the arm and its friction do not depend on the pendulum).
-The LuGre bristle state is advanced with the exact exponential update for frozen velocity (:func:`frictionlab.friction.lugre_step_exact`),
-so a stiff bristle (``sigma0`` = 1000) stays stable at any substep count, and
-the force uses the bristle's mean over the substep.
+The LuGre bristle state is advanced with the exact exponential update for
+frozen velocity (:func:`frictionlab.friction.lugre_step_exact`), so a stiff
+bristle (``sigma0`` = 1000) stays stable at any substep count, and the force
+uses the bristle's mean over the substep.
 
 Zero-velocity band (classical model)
 ------------------------------------
