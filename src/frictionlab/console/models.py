@@ -1,0 +1,263 @@
+"""Request bodies of the operator console, validated with pydantic.
+
+Every number the page sends is checked twice: by the page itself (with the
+ranges :func:`schema` publishes) and here, whatever the page sent.  The
+ranges are not repeated: each field is checked by constructing the
+project's own validated parameter dataclass with that one value
+(:class:`~frictionlab.design.DesignSpec` for the State Feedback and Kalman
+Filter panels, :class:`~frictionlab.friction.FrictionParams` for the
+Friction Model panel), whose ``ValueError`` names the field and its allowed
+range.  :func:`field_errors` turns any validation failure into the
+console's error list ``[{"field": ..., "message": ...}]`` so that the page
+can show each message beside its field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from ..controller import ERROR_SIGNALS
+from ..design import PRESETS, DesignSpec
+from ..friction import FrictionParams
+
+__all__ = [
+    "COMPENSATOR_FIELDS",
+    "FEEDBACK_FIELDS",
+    "KICK_RANGE",
+    "NAME_PATTERN",
+    "OBSERVER_FIELDS",
+    "CompensationRequest",
+    "DesignRequest",
+    "PushRequest",
+    "RecordNameRequest",
+    "field_errors",
+    "message_field",
+    "schema",
+]
+
+#: State Feedback panel (Sec. 2.2): the design's own omega_0 and the two pole pairs.
+FEEDBACK_FIELDS = ("omega0", "omega1", "zeta1", "omega2", "zeta2")
+#: Kalman Filter panel (Sec. 2.3): the observer pole pairs.
+OBSERVER_FIELDS = ("observer_omega1", "observer_zeta1", "observer_omega2", "observer_zeta2")
+#: Parameters each compensator model reads (Sec. 6.1-6.3), in the panel's order.
+COMPENSATOR_FIELDS = {
+    "coulomb": ("coulomb", "hysteresis"),
+    "classical": ("stiction", "coulomb", "stribeck_velocity", "hysteresis"),
+    "lugre": ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+              "observer_gain"),
+}
+#: Allowed push (rad/s added to the pendulum's angular velocity).
+KICK_RANGE = (-3.0, 3.0)
+#: Recording names: no path, no extension (``.dat`` and ``.csv`` are added).
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
+
+_ALL_COMP_FIELDS = tuple(dict.fromkeys(f for fs in COMPENSATOR_FIELDS.values() for f in fs))
+
+Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+
+
+def _check(cls, name: str, value: float, prefix: str) -> float:
+    """Construct ``cls`` with one field set; re-raise its ValueError with ``prefix``."""
+    try:
+        cls(**{name: value})
+    except ValueError as exc:
+        msg = str(exc)
+        msg = re.sub(r"^(design|friction)\.", prefix, msg)
+        raise ValueError(msg) from None
+    return value
+
+
+class _Request(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class DesignRequest(_Request):
+    """State Feedback / Kalman Filter panels: a preset, or new values of some fields.
+
+    ``h`` is not here: the sampling period is fixed while the controller
+    exists.  Fields left out keep their current values.
+    """
+
+    preset: Literal["fast", "slow"] | None = None
+    omega0: Number | None = None
+    omega1: Number | None = None
+    zeta1: Number | None = None
+    omega2: Number | None = None
+    zeta2: Number | None = None
+    observer_omega1: Number | None = None
+    observer_zeta1: Number | None = None
+    observer_omega2: Number | None = None
+    observer_zeta2: Number | None = None
+
+    @field_validator(*FEEDBACK_FIELDS, *OBSERVER_FIELDS)
+    @classmethod
+    def _in_range(cls, v, info):
+        return v if v is None else _check(DesignSpec, info.field_name, v, "design.")
+
+    @model_validator(mode="after")
+    def _one_kind(self):
+        fields = self.fields()
+        if self.preset is not None and fields:
+            raise ValueError("give either a preset or field values, not both")
+        if self.preset is None and not fields:
+            raise ValueError("nothing to change: give a preset or at least one field")
+        return self
+
+    def fields(self) -> dict[str, float]:
+        return {k: v for k, v in self.model_dump(exclude={"preset"}).items() if v is not None}
+
+    def changes(self) -> dict:
+        """The controller's mailbox format (:mod:`frictionlab.realtime.params`)."""
+        return {"design": self.preset if self.preset is not None else self.fields()}
+
+
+class CompensationRequest(_Request):
+    """Compensation button, Friction Type and Friction Model panel (Sec. 7.1)."""
+
+    enabled: bool | None = Field(default=None, strict=True)
+    kind: Literal["coulomb", "classical", "lugre"] | None = None
+    params: dict[str, Number] | None = None
+    error_signal: Literal[ERROR_SIGNALS] | None = None  # type: ignore[valid-type]
+
+    @field_validator("params")
+    @classmethod
+    def _params_in_range(cls, v):
+        if v is None:
+            return v
+        for name, value in v.items():
+            if name not in _ALL_COMP_FIELDS:
+                raise ValueError(f"unknown friction parameter {name!r}; known: "
+                                 f"{', '.join(_ALL_COMP_FIELDS)}")
+            _check(FrictionParams, name, value, "compensation.")
+        return v
+
+    @model_validator(mode="after")
+    def _something(self):
+        if all(getattr(self, k) is None for k in ("enabled", "kind", "params", "error_signal")):
+            raise ValueError("nothing to change")
+        return self
+
+    def changes(self) -> dict:
+        """The controller's mailbox format: the kind first, then on/off, then values."""
+        out: dict[str, Any] = {}
+        if self.kind is not None:
+            out["compensation"] = self.kind
+            if self.enabled is None:
+                out["compensation_enabled"] = True
+        if self.enabled is not None:
+            out["compensation_enabled"] = self.enabled
+        if self.params:
+            out["compensation_params"] = dict(self.params)
+        if self.error_signal is not None:
+            out["error_signal"] = self.error_signal
+        return out
+
+
+class PushRequest(_Request):
+    """The push button: ``kick`` rad/s added to the pendulum's angular velocity."""
+
+    kick: Number = 0.3
+
+    @field_validator("kick")
+    @classmethod
+    def _kick_range(cls, v):
+        lo, hi = KICK_RANGE
+        if not lo <= v <= hi or v == 0.0:
+            raise ValueError(f"kick = {v:g} rad/s is out of range; allowed [{lo:g}, {hi:g}], "
+                             "not 0")
+        return v
+
+
+class RecordNameRequest(_Request):
+    """The ``out>`` prompt: the recording's file name, without extension."""
+
+    name: str = Field(max_length=200)
+
+    @field_validator("name")
+    @classmethod
+    def _clean_name(cls, v: str):
+        v = re.sub(r"\.(dat|csv)$", "", v.strip())
+        if not re.match(NAME_PATTERN, v):
+            raise ValueError("use 1-64 letters, digits, '_' or '-' (no extension: .dat and "
+                             ".csv are added)")
+        return v
+
+
+# --- errors -----------------------------------------------------------------------------
+
+_FIELD_IN_MESSAGE = re.compile(r"^(?:design|compensation|friction)\.([A-Za-z_0-9]+)")
+
+
+def message_field(message: str) -> str | None:
+    """The field a validation message of the parameter dataclasses names, if any."""
+    m = _FIELD_IN_MESSAGE.match(message)
+    return m.group(1) if m else None
+
+
+def field_errors(exc: ValidationError | Any) -> list[dict]:
+    """``[{"field", "message"}]`` from a pydantic error list (``exc.errors()``)."""
+    errors = exc.errors() if hasattr(exc, "errors") else exc
+    out = []
+    for err in errors:
+        loc = [str(p) for p in err.get("loc", ()) if p not in ("body",)]
+        field = ".".join(loc) if loc else None
+        kind = err.get("type", "")
+        name = loc[-1] if loc else "value"
+        if kind == "value_error":
+            ctx = err.get("ctx") or {}
+            message = str(ctx.get("error", err.get("msg", "")))
+        elif kind in ("float_type", "float_parsing", "int_type", "int_parsing"):
+            message = f"{name} must be a number"
+        elif kind == "finite_number":
+            message = f"{name} must be a finite number"
+        elif kind == "bool_type":
+            message = f"{name} must be true or false"
+        elif kind == "extra_forbidden":
+            message = f"unknown field {name!r}"
+        elif kind == "missing":
+            message = f"{name} is required"
+        elif kind in ("json_invalid", "model_attributes_type", "dict_type"):
+            message = "the request body must be a JSON object"
+            field = None
+        else:
+            message = f"{name}: {err.get('msg', 'invalid')}"
+        out.append({"field": field, "message": message})
+    return out
+
+
+# --- schema for the page ----------------------------------------------------------------
+
+
+def _field_info(cls, name: str) -> dict:
+    f = {fl.name: fl for fl in dataclasses.fields(cls)}[name]
+    m = f.metadata
+
+    def num(x):
+        return None if x is None or (isinstance(x, float) and math.isinf(x)) else x
+
+    return {"name": name, "doc": m["doc"], "unit": m["unit"], "lo": num(m["lo"]),
+            "hi": num(m["hi"]), "lo_open": m["lo_open"], "hi_open": m["hi_open"]}
+
+
+def schema() -> dict:
+    """Fields, units and allowed ranges the page validates against (``GET /api/schema``)."""
+    return {
+        "feedback": [_field_info(DesignSpec, n) for n in FEEDBACK_FIELDS],
+        "observer": [_field_info(DesignSpec, n) for n in OBSERVER_FIELDS],
+        "presets": {k: dataclasses.asdict(v) for k, v in PRESETS.items()},
+        "compensation": {
+            "kinds": list(COMPENSATOR_FIELDS),
+            "fields": {k: [_field_info(FrictionParams, n) for n in v]
+                       for k, v in COMPENSATOR_FIELDS.items()},
+            "defaults": {k: dataclasses.asdict(FrictionParams.defaults(k, "compensation"))
+                         for k in COMPENSATOR_FIELDS},
+            "error_signals": list(ERROR_SIGNALS),
+        },
+        "push": {"lo": KICK_RANGE[0], "hi": KICK_RANGE[1], "default": 0.3},
+        "record": {"pattern": NAME_PATTERN},
+    }

@@ -1,0 +1,143 @@
+"""Serving the operator console with uvicorn (``frictionlab run``).
+
+:func:`serve` checks the bind address against the token rule
+(:mod:`.security`), binds the socket itself (so a busy port is a clear
+error), prints the console's address, serves until Exit, Ctrl-C or SIGTERM,
+and leaves the loop stopped (u = 0 written) whichever way the server ended.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import socket
+import sys
+import threading
+
+import uvicorn
+import uvicorn.config
+
+from .app import create_app
+from .security import MAX_BODY, check_bind, is_loopback, resolve_token
+
+__all__ = ["console_url", "serve"]
+
+
+#: uvicorn's WebSocket implementation (the sans-I/O one where this uvicorn has it).
+_WS_IMPL = ("websockets-sansio" if "websockets-sansio" in uvicorn.config.WS_PROTOCOLS
+            else "websockets")
+
+
+class _Server(uvicorn.Server):
+    """uvicorn's server, ending on SIGINT/SIGTERM without re-raising the signal."""
+
+    @contextlib.contextmanager
+    def capture_signals(self):
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        handled = (signal.SIGINT, signal.SIGTERM)
+        previous = {sig: signal.signal(sig, self._on_signal) for sig in handled}
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+    def _on_signal(self, sig, frame) -> None:
+        self.signalled = True
+        if self.should_exit and sig == signal.SIGINT:
+            self.force_exit = True
+        self.should_exit = True
+
+
+def console_url(host: str, port: int, token: str | None = None) -> str:
+    """The address to open (with ``?token=`` when a token is needed)."""
+    shown = host
+    if host in ("0.0.0.0", "::", ""):
+        shown = "127.0.0.1" if host != "::" else "::1"
+    if ":" in shown:
+        shown = f"[{shown}]"
+    url = f"http://{shown}:{port}/"
+    return f"{url}?token={token}" if token else url
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise OSError(f"cannot serve the console on {host}:{port}: {exc.strerror or exc}") from None
+    sock.listen(64)
+    sock.set_inheritable(True)
+    return sock
+
+
+def serve(controller, host: str = "127.0.0.1", port: int = 8000, token: str | None = None, *,
+          log_dir=None, autostart: bool | None = None, out=None,
+          log_level: str = "warning") -> None:
+    """Serve the operator console for ``controller`` until Exit or a signal.
+
+    Parameters
+    ----------
+    controller
+        A :class:`frictionlab.realtime.RealtimeController`.
+    host, port
+        Address to bind (default 127.0.0.1:8000; port 0 picks a free port).
+    token : str, optional
+        Access token; default ``$FRICTIONLAB_TOKEN``.  Required for an
+        address that is not loopback.
+    log_dir : path, optional
+        Where recordings are written (default ``controller.log_dir``).
+    autostart : bool, optional
+        Start the loop as soon as the server is up.  Default: only for the
+        in-process simulated rig (``sim``), whose pendulum starts upright;
+        a real rig waits for Start (the pendulum must be balanced first).
+    out : file, optional
+        Where the address is printed (default stdout).
+
+    Raises
+    ------
+    frictionlab.cli.UsageError
+        A non-loopback address without a token, or a token that is too short.
+    OSError
+        The address cannot be bound.
+    """
+    from ..cli import UsageError
+
+    try:
+        token = resolve_token(token)
+        check_bind(host, token)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if autostart is None:
+        autostart = getattr(controller, "backend_name", None) == "sim"
+    sock = _bind(host, port)
+    actual_port = sock.getsockname()[1]
+    server: _Server | None = None
+
+    def on_exit() -> None:
+        if server is not None:
+            server.should_exit = True
+
+    app = create_app(controller, token, log_dir=log_dir, loopback_only=is_loopback(host),
+                     autostart=autostart, on_exit=on_exit)
+    config = uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="on",
+                            ws=_WS_IMPL, ws_max_size=MAX_BODY, limit_concurrency=64,
+                            timeout_graceful_shutdown=3, server_header=False)
+    server = _Server(config)
+    server.signalled = False
+    out = sys.stdout if out is None else out
+    print(f"frictionlab console: {console_url(host, actual_port, token)}  "
+          f"(Exit button or Ctrl-C to stop)", file=out, flush=True)
+    try:
+        server.run(sockets=[sock])
+    finally:
+        sock.close()
+        if controller.running:
+            controller.stop("signal" if server.signalled else "exit")
+            controller.wait(10.0)
+    print("frictionlab console: stopped", file=out, flush=True)

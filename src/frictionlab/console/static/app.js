@@ -1,0 +1,517 @@
+// frictionlab operator console (Sec. 7.1 of the thesis, in a browser).
+// Plain script, no build step; the plot is uPlot (static/vendor).
+"use strict";
+
+(() => {
+  const TOKEN = new URLSearchParams(location.search).get("token");
+  const KEEP_S = 30;          // seconds of samples kept for the plot (longest window)
+
+  // Signals of the plot: the four measured ones on by default, the estimates on demand.
+  const GROUPS = [
+    { id: "angles", unit: "rad", height: 170 },
+    { id: "velocities", unit: "rad/s", height: 150 },
+    { id: "control", unit: "m/s²", height: 150 },
+  ];
+  const SIGNALS = [
+    { key: "theta_m", label: "θ measured", group: "angles", color: "#1f6feb", on: true },
+    { key: "arm_m", label: "arm Ω measured", group: "angles", color: "#2e7d32", on: true },
+    { key: "theta_hat", label: "θ̂ estimate", group: "angles", color: "#7fb1ff", on: false },
+    { key: "arm_hat", label: "Ω̂ estimate", group: "angles", color: "#8bc48d", on: false },
+    { key: "arm_dot_m", label: "arm velocity measured", group: "velocities", color: "#8e24aa", on: true },
+    { key: "arm_dot_hat", label: "arm velocity estimate", group: "velocities", color: "#ce93d8", on: false },
+    { key: "theta_dot_hat", label: "θ̇ estimate", group: "velocities", color: "#00838f", on: false },
+    { key: "u", label: "control u", group: "control", color: "#d84315", on: true },
+    { key: "friction_hat", label: "friction estimate F̂", group: "control", color: "#6d4c41", on: false },
+  ];
+
+  const $ = (id) => document.getElementById(id);
+  // State shared with the browser tests (read-only for them).
+  const ui = (window.__console = {
+    frames: 0, renders: 0, lastT: null, status: null, schema: null, connected: false,
+    ended: false,
+  });
+
+  // --- HTTP -------------------------------------------------------------------------------
+  async function api(method, path, body) {
+    const headers = {};
+    if (TOKEN) headers.Authorization = "Bearer " + TOKEN;
+    const init = { method, headers, credentials: "same-origin" };
+    if (method !== "GET") {
+      headers["Content-Type"] = "application/json";
+      init.body = JSON.stringify(body || {});
+    }
+    let resp;
+    try {
+      resp = await fetch(path, init);
+    } catch (err) {
+      return { ok: false, status: 0, data: { detail: "no connection to the console", errors: [] } };
+    }
+    let data = null;
+    try { data = await resp.json(); } catch (err) { data = { detail: resp.statusText, errors: [] }; }
+    if (resp.ok && data && data.status && typeof data.status === "object") showStatus(data.status);
+    return { ok: resp.ok, status: resp.status, data };
+  }
+  const withToken = (url) => (TOKEN ? url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(TOKEN) : url);
+
+  // --- number fields --------------------------------------------------------------------
+  const NUMBER = /^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/;
+
+  function rangeText(f) {
+    const lo = f.lo === null ? "-inf" : f.lo;
+    const hi = f.hi === null ? "inf" : f.hi;
+    return (f.lo_open || f.lo === null ? "(" : "[") + lo + ", " + hi + (f.hi_open || f.hi === null ? ")" : "]");
+  }
+
+  // Parse and range-check one field; returns {value} or {error}.
+  function checkNumber(f, text) {
+    text = text.trim();
+    if (!NUMBER.test(text)) return { error: `${f.name} must be a number` };
+    const v = Number(text);
+    if (!Number.isFinite(v)) return { error: `${f.name} must be a finite number` };
+    const below = f.lo !== null && (v < f.lo || (f.lo_open && v === f.lo));
+    const above = f.hi !== null && (v > f.hi || (f.hi_open && v === f.hi));
+    if (below || above) return { error: `${f.name} = ${v} is out of range; allowed ${rangeText(f)}` };
+    return { value: v };
+  }
+
+  function fieldRow(container, f, prefix, onEdit) {
+    const row = document.createElement("div");
+    row.className = "field";
+    const id = `${prefix}-${f.name}`;
+    row.innerHTML = `<label for="${id}"></label><input id="${id}" type="text" inputmode="decimal" autocomplete="off"><span class="error" id="${id}-error"></span>`;
+    const label = row.querySelector("label");
+    label.textContent = f.name + (f.unit && f.unit !== "1" ? ` (${f.unit})` : "");
+    label.title = `${f.doc}; allowed ${rangeText(f)}`;
+    const input = row.querySelector("input");
+    input.dataset.field = f.name;
+    input.title = label.title;
+    input.addEventListener("input", () => { setError(input, ""); onEdit(); });
+    container.appendChild(row);
+    return input;
+  }
+
+  function setError(input, message) {
+    const span = $(input.id + "-error");
+    if (span) span.textContent = message || "";
+    input.classList.toggle("invalid", !!message);
+    if (message) input.setAttribute("aria-invalid", "true"); else input.removeAttribute("aria-invalid");
+  }
+
+  function setMsg(id, text, bad) {
+    const el = $(id);
+    el.textContent = text || "";
+    el.classList.toggle("bad", !!bad);
+  }
+
+  // Validate a panel's inputs; returns {values} or null after showing the errors.
+  function collect(panel) {
+    const values = {};
+    let bad = false;
+    for (const [name, input] of Object.entries(panel.inputs)) {
+      const r = checkNumber(panel.fields[name], input.value);
+      if (r.error) { setError(input, r.error); bad = true; } else { setError(input, ""); values[name] = r.value; }
+    }
+    return bad ? null : values;
+  }
+
+  // Show the server's refusal beside the fields it names.
+  function showServerErrors(panel, data, msgId) {
+    let shown = false;
+    for (const e of (data && data.errors) || []) {
+      const name = (e.field || "").replace(/^params\./, "");
+      const input = panel && panel.inputs[name];
+      if (input) { setError(input, e.message); shown = true; }
+    }
+    setMsg(msgId, "refused: " + ((data && data.detail) || "invalid input") + (shown ? "" : ""), true);
+  }
+
+  // --- panels ---------------------------------------------------------------------------
+  const panels = {
+    feedback: { inputs: {}, fields: {}, dirty: false },
+    observer: { inputs: {}, fields: {}, dirty: false },
+    friction: { inputs: {}, fields: {}, dirty: false, kind: null },
+  };
+
+  function buildDesignPanel(name, fields) {
+    const panel = panels[name];
+    const box = $(`${name}-fields`);
+    box.textContent = "";
+    for (const f of fields) {
+      panel.fields[f.name] = f;
+      panel.inputs[f.name] = fieldRow(box, f, name, () => { panel.dirty = true; });
+    }
+  }
+
+  function buildFrictionFields(kind) {
+    const panel = panels.friction;
+    if (panel.kind === kind) return;
+    panel.kind = kind;
+    panel.inputs = {};
+    panel.fields = {};
+    panel.dirty = false;
+    const box = $("friction-fields");
+    box.textContent = "";
+    for (const f of ui.schema.compensation.fields[kind]) {
+      panel.fields[f.name] = f;
+      panel.inputs[f.name] = fieldRow(box, f, "friction", () => { panel.dirty = true; });
+    }
+    $("error-signal-row").hidden = kind !== "lugre";
+  }
+
+  async function applyDesign(name) {
+    const panel = panels[name];
+    const values = collect(panel);
+    if (!values) { setMsg(`${name}-msg`, "not applied: correct the marked fields", true); return; }
+    const r = await api("POST", "/api/design", values);
+    if (r.ok) { panel.dirty = false; setMsg(`${name}-msg`, "applied"); }
+    else showServerErrors(panel, r.data, `${name}-msg`);
+  }
+
+  async function applyPreset(preset) {
+    const r = await api("POST", "/api/design", { preset });
+    if (r.ok) {
+      panels.feedback.dirty = panels.observer.dirty = false;
+      for (const p of [panels.feedback, panels.observer]) for (const i of Object.values(p.inputs)) setError(i, "");
+      setMsg("feedback-msg", `${preset} design applied`);
+      setMsg("observer-msg", "");
+      if (r.data && r.data.status) showStatus(r.data.status, true);
+    } else setMsg("feedback-msg", "refused: " + r.data.detail, true);
+  }
+
+  async function applyFriction() {
+    const panel = panels.friction;
+    const values = collect(panel);
+    if (!values) { setMsg("friction-msg", "not applied: correct the marked fields", true); return; }
+    const body = { params: values };
+    if (panel.kind === "lugre") body.error_signal = $("error-signal").value;
+    const r = await api("POST", "/api/compensation", body);
+    if (r.ok) { panel.dirty = false; setMsg("friction-msg", "applied"); }
+    else showServerErrors(panel, r.data, "friction-msg");
+  }
+
+  function fillInputs(panel, values, force) {
+    if (panel.dirty && !force) return;
+    for (const [name, input] of Object.entries(panel.inputs)) {
+      if (document.activeElement === input && !force) continue;
+      const v = values[name];
+      if (v !== undefined && v !== null) input.value = String(+v.toPrecision(6));
+    }
+  }
+
+  // --- status line --------------------------------------------------------------------------
+  const fmt = (v, d = 3) => (v === null || v === undefined || Number.isNaN(v) ? "-" : Number(v).toPrecision(d));
+  const gains = (arr) => (arr ? "[" + arr.map((v) => Number(v).toPrecision(4)).join(", ") + "]" : "-");
+
+  function showStatus(st, force) {
+    ui.status = st;
+    const running = !!st.running;
+    const state = $("run-state");
+    state.textContent = running ? "running" : (st.stop_reason ? `stopped: ${st.stop_reason}` : "stopped");
+    state.className = running ? "running" : "stopped";
+    const detail = !running && st.stop_detail ? ` (${st.stop_detail})` : "";
+    $("run-info").textContent = `${detail} t = ${fmt(st.t, 4)} s · ticks ${st.ticks ?? 0} · missed ${st.missed ?? 0} · overruns ${st.overruns ?? 0}` +
+      (st.recording ? " · recording" : "") + (st.run_id ? ` · run ${st.run_id}` : "");
+    const j = st.jitter_ms || {}, c = st.compute_us || {};
+    $("timing").textContent = `jitter p50 ${fmt(j.p50)} ms, p99 ${fmt(j.p99)} ms, max ${fmt(j.max)} ms · ` +
+      `compute p50 ${fmt(c.p50)} µs, p99 ${fmt(c.p99)} µs · dropped to console ${(st.console && st.console.samples_dropped) || 0}`;
+    const lc = (st.console && st.console.limit_cycle) || {};
+    $("lc-window").textContent = lc.window ?? 5;
+    $("lc-ptp").textContent = fmt(lc.peak_to_peak);
+    $("lc-ptp").dataset.value = lc.peak_to_peak ?? "";
+    $("lc-period").textContent = fmt(lc.period);
+    $("lc-period").dataset.value = lc.period ?? "";
+    $("lc-status").textContent = lc.status ? lc.status.replace("_", " ") : "-";
+
+    const comp = st.compensation || {};
+    const friction = st.friction ? `${st.friction} friction` : "real rig";
+    $("setup").textContent = `backend ${st.backend} (${friction}) · design ${(st.design && st.design.preset) || "custom"} · ` +
+      `compensation ${comp.enabled ? "on" : "off"} (${comp.kind || "-"})` + (st.pending_changes ? " · change pending" : "");
+
+    const start = $("start");
+    start.disabled = !!(st.console && st.console.exited);
+    start.textContent = running ? "Stop" : "Start";
+    start.classList.toggle("danger", running);
+    start.classList.toggle("primary", !running);
+
+    if (st.design) {
+      $("gains-L").textContent = gains(st.design.L);
+      $("gains-K").textContent = gains(st.design.K);
+      fillInputs(panels.feedback, st.design.spec, force);
+      fillInputs(panels.observer, st.design.spec, force);
+    }
+    if (ui.schema && comp.kind) {
+      const btn = $("compensation");
+      btn.setAttribute("aria-pressed", comp.enabled ? "true" : "false");
+      btn.textContent = comp.enabled ? "Compensating" : "Compensation";
+      const sel = $("friction-type");
+      if (document.activeElement !== sel) sel.value = comp.kind;
+      buildFrictionFields(comp.kind);
+      fillInputs(panels.friction, comp.params || {}, force);
+      const es = $("error-signal");
+      if (document.activeElement !== es && comp.error_signal && !panels.friction.dirty) es.value = comp.error_signal;
+    }
+    const save = $("save");
+    const recording = !!st.recording;
+    save.setAttribute("aria-pressed", recording ? "true" : "false");
+    save.textContent = recording ? "Stop saving" : "Save";
+    $("save-state").textContent = recording ? "recording…" : "";
+    const pending = st.console && st.console.pending_recording;
+    if (pending && $("save-prompt").hidden) { $("save-prompt").hidden = false; }
+    if (!pending && !$("save-prompt").hidden && !recording) { $("save-prompt").hidden = true; }
+    const emulated = st.backend === "sim" || String(st.backend || "").startsWith("udp://");
+    $("push").disabled = !running || !emulated;
+    $("push").title = emulated ? "disturb the pendulum" : "only on simulated rigs";
+  }
+
+  // --- plot ------------------------------------------------------------------------------------
+  const data = { t: [] };
+  for (const s of SIGNALS) data[s.key] = [];
+  const charts = {};
+  let dirty = false;
+  let windowS = 10;
+
+  function buildPlots() {
+    const box = $("plots");
+    const width = Math.max(320, box.clientWidth - 4);
+    for (const g of GROUPS) {
+      const sigs = SIGNALS.filter((s) => s.group === g.id);
+      const el = document.createElement("div");
+      el.className = "chart";
+      el.id = `plot-${g.id}`;
+      box.appendChild(el);
+      const opts = {
+        width, height: g.height,
+        legend: { show: false },
+        cursor: { drag: { x: false, y: false } },
+        scales: { x: { time: false } },
+        series: [{}, ...sigs.map((s) => ({ label: s.label, stroke: s.color, width: 1.5, show: s.on, points: { show: false } }))],
+        axes: [
+          { size: 28, values: (u, ticks) => ticks.map((v) => v.toFixed(1)) },
+          { label: g.unit, size: 64, values: (u, ticks) => ticks.map((v) => +v.toPrecision(3)) },
+        ],
+      };
+      charts[g.id] = { plot: new uPlot(opts, [[], ...sigs.map(() => [])], el), sigs };
+    }
+    window.addEventListener("resize", () => {
+      const w = Math.max(320, box.clientWidth - 4);
+      for (const c of Object.values(charts)) c.plot.setSize({ width: w, height: c.plot.height });
+    });
+  }
+
+  function buildToggles() {
+    const box = $("signal-toggles");
+    for (const s of SIGNALS) {
+      const b = document.createElement("button");
+      b.type = "button";
+      b.dataset.signal = s.key;
+      b.setAttribute("aria-pressed", s.on ? "true" : "false");
+      b.innerHTML = `<span class="swatch" style="background:${s.color}"></span>`;
+      b.appendChild(document.createTextNode(s.label));
+      b.addEventListener("click", () => {
+        s.on = !s.on;
+        b.setAttribute("aria-pressed", s.on ? "true" : "false");
+        const c = charts[s.group];
+        c.plot.setSeries(c.sigs.indexOf(s) + 1, { show: s.on });
+      });
+      box.appendChild(b);
+    }
+  }
+
+  function onFrame(f) {
+    if (f.reset) for (const k in data) data[k].length = 0;
+    const n = f.t.length;
+    if (n === 0) return;
+    if (data.t.length && f.t[0] < data.t[data.t.length - 1]) for (const k in data) data[k].length = 0;
+    for (let i = 0; i < n; i++) data.t.push(f.t[i]);
+    for (const s of SIGNALS) {
+      const src = f[s.key], dst = data[s.key];
+      for (let i = 0; i < n; i++) dst.push(src[i]);
+    }
+    const tEnd = data.t[data.t.length - 1];
+    let cut = 0;
+    while (cut < data.t.length && data.t[cut] < tEnd - KEEP_S) cut++;
+    if (cut) for (const k in data) data[k].splice(0, cut);
+    ui.frames++;
+    ui.lastT = tEnd;
+    dirty = true;
+  }
+
+  function render() {
+    if (dirty && data.t.length) {
+      dirty = false;
+      const tEnd = data.t[data.t.length - 1];
+      const min = Math.max(0, tEnd - windowS), max = Math.max(tEnd, windowS);
+      for (const c of Object.values(charts)) {
+        c.plot.batch(() => {
+          c.plot.setData([data.t, ...c.sigs.map((s) => data[s.key])], false);
+          c.plot.setScale("x", { min, max });
+        });
+      }
+      ui.renders++;
+    }
+    requestAnimationFrame(render);
+  }
+
+  // --- stream ------------------------------------------------------------------------------------
+  let ws = null, retry = 500;
+
+  function connect() {
+    if (ui.ended) return;
+    const proto = location.protocol === "https:" ? "wss:" : "ws:";
+    ws = new WebSocket(withToken(`${proto}//${location.host}/ws`));
+    ws.onopen = () => { ui.connected = true; retry = 500; $("conn").textContent = "live"; $("conn").className = "conn live"; };
+    ws.onmessage = (ev) => {
+      const msg = JSON.parse(ev.data);
+      if (msg.type === "samples") onFrame(msg);
+      else if (msg.type === "status") showStatus(msg.status);
+      else if (msg.type === "exit") ended(msg.status);
+    };
+    ws.onclose = () => {
+      ui.connected = false;
+      if (ui.ended) return;
+      $("conn").textContent = "reconnecting";
+      $("conn").className = "conn lost";
+      setTimeout(connect, retry);
+      retry = Math.min(retry * 2, 5000);
+    };
+  }
+
+  function ended(st) {
+    ui.ended = true;
+    if (st) showStatus(st);
+    $("conn").textContent = "ended";
+    $("conn").className = "conn lost";
+    $("ended").hidden = false;
+    for (const b of document.querySelectorAll("button")) b.disabled = true;
+    if (ws) ws.close();
+  }
+
+  // --- buttons ------------------------------------------------------------------------------------
+  function wire() {
+    $("start").addEventListener("click", async () => {
+      const running = ui.status && ui.status.running;
+      const r = await api("POST", running ? "/api/stop" : "/api/start");
+      if (!r.ok) setMsg("feedback-msg", "refused: " + r.data.detail, true);
+    });
+
+    let exitArmed = null;
+    $("exit").addEventListener("click", async () => {
+      if (!exitArmed) {   // two presses: a stray click must not drop the pendulum
+        $("exit").textContent = "Confirm exit";
+        exitArmed = setTimeout(() => { exitArmed = null; $("exit").textContent = "Exit"; }, 4000);
+        return;
+      }
+      clearTimeout(exitArmed);
+      const r = await api("POST", "/api/exit");
+      ended(r.ok ? r.data.status : null);
+    });
+
+    $("feedback-apply").addEventListener("click", () => applyDesign("feedback"));
+    $("observer-apply").addEventListener("click", () => applyDesign("observer"));
+    $("fast").addEventListener("click", () => applyPreset("fast"));
+    $("slow").addEventListener("click", () => applyPreset("slow"));
+
+    $("compensation").addEventListener("click", async () => {
+      const on = $("compensation").getAttribute("aria-pressed") === "true";
+      const r = await api("POST", "/api/compensation", { enabled: !on });
+      setMsg("friction-msg", r.ok ? (on ? "compensation off" : "compensation on") : "refused: " + r.data.detail, !r.ok);
+    });
+    $("friction-type").addEventListener("change", async () => {
+      const on = $("compensation").getAttribute("aria-pressed") === "true";
+      const kind = $("friction-type").value;
+      const r = await api("POST", "/api/compensation", { kind, enabled: on });
+      setMsg("friction-msg", r.ok ? `friction type ${kind}` : "refused: " + r.data.detail, !r.ok);
+      $("friction-type").blur();
+    });
+    $("friction-apply").addEventListener("click", applyFriction);
+    $("error-signal").addEventListener("change", () => { panels.friction.dirty = true; });
+
+    $("save").addEventListener("click", async () => {
+      const recording = $("save").getAttribute("aria-pressed") === "true";
+      if (!recording) {
+        const r = await api("POST", "/api/record/start");
+        setMsg("save-msg", r.ok ? "recording; press again to stop" : "refused: " + r.data.detail, !r.ok);
+        if (r.ok) { $("save-links").textContent = ""; $("save-prompt").hidden = true; }
+        return;
+      }
+      const r = await api("POST", "/api/record/stop");
+      if (!r.ok) { setMsg("save-msg", "refused: " + r.data.detail, true); return; }
+      setMsg("save-msg", `${r.data.rows} samples recorded; name the file (no extension, .dat is added)`);
+      $("save-prompt").hidden = false;
+      $("save-name").focus();
+    });
+    $("save-prompt").addEventListener("submit", async (ev) => {
+      ev.preventDefault();
+      const input = $("save-name");
+      const name = input.value.trim().replace(/\.(dat|csv)$/, "");
+      if (!new RegExp(ui.schema.record.pattern).test(name)) {
+        setError(input, "use 1-64 letters, digits, '_' or '-' (no extension: .dat and .csv are added)");
+        return;
+      }
+      const r = await api("POST", "/api/record/name", { name });
+      if (!r.ok) { setError(input, (r.data.errors[0] || {}).message || r.data.detail); return; }
+      setError(input, "");
+      $("save-prompt").hidden = true;
+      input.value = "";
+      setMsg("save-msg", `${r.data.rows} samples written to ${r.data.dat} and .csv`);
+      const links = $("save-links");
+      links.textContent = "download: ";
+      for (const ext of ["dat", "csv"]) {
+        const a = document.createElement("a");
+        a.href = withToken(r.data.urls[ext]);
+        a.download = `${r.data.name}.${ext}`;
+        a.textContent = `${r.data.name}.${ext}`;
+        a.id = `download-${ext}`;
+        links.appendChild(a);
+      }
+    });
+    $("save-name").addEventListener("input", () => setError($("save-name"), ""));
+
+    $("push").addEventListener("click", async () => {
+      const f = { name: "kick", lo: ui.schema.push.lo, hi: ui.schema.push.hi, lo_open: false, hi_open: false };
+      const r0 = checkNumber(f, $("kick").value);
+      if (r0.error || r0.value === 0) { setError($("kick"), r0.error || "kick must not be 0"); return; }
+      setError($("kick"), "");
+      const r = await api("POST", "/api/push", { kick: r0.value });
+      if (!r.ok) { setError($("kick"), (r.data.errors[0] || {}).message || r.data.detail); setMsg("push-msg", "refused", true); }
+      else setMsg("push-msg", `pushed ${r0.value} rad/s`);
+    });
+    $("kick").addEventListener("input", () => setError($("kick"), ""));
+
+    $("window").addEventListener("change", () => {
+      const f = { name: "window", lo: 2, hi: KEEP_S, lo_open: false, hi_open: false };
+      const r = checkNumber(f, $("window").value);
+      $("window-error").textContent = r.error || "";
+      $("window").classList.toggle("invalid", !!r.error);
+      if (!r.error) { windowS = r.value; dirty = true; }
+    });
+  }
+
+  async function init() {
+    const r = await api("GET", "/api/schema");
+    if (!r.ok) {
+      $("run-state").textContent = r.status === 401 ? "not authorised: open the address printed by frictionlab run (with ?token=...)" : "cannot reach the console";
+      return;
+    }
+    ui.schema = r.data;
+    buildDesignPanel("feedback", r.data.feedback);
+    buildDesignPanel("observer", r.data.observer);
+    const es = $("error-signal");
+    for (const name of r.data.compensation.error_signals) {
+      const o = document.createElement("option");
+      o.value = o.textContent = name;
+      es.appendChild(o);
+    }
+    $("kick").value = r.data.push.default;
+    buildPlots();
+    buildToggles();
+    wire();
+    const st = await api("GET", "/api/status");
+    if (st.ok) showStatus(st.data, true);
+    connect();
+    requestAnimationFrame(render);
+  }
+
+  if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", init);
+  else init();
+})();
