@@ -1,0 +1,445 @@
+"""RealtimeController: the loop thread, the log writer, the mailbox and the console API.
+
+See the package docstring (:mod:`frictionlab.realtime`) for the API summary.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import threading
+import time
+from concurrent.futures import Future
+from pathlib import Path
+
+from ..config import Config
+from ..rig import RigScaling
+from .clock import MonotonicClock
+from .datalog import LogWriter
+from .loop import STOP_REASONS, Loop, Safety
+from .osrt import try_realtime_priority
+from .params import ControlParams
+from .rigs import Rig, open_rig
+from .samples import Subscription
+
+__all__ = ["GC_POLICY", "RealtimeController"]
+
+GC_POLICY = ("gc.freeze() + gc.disable() during the run; the loop runs gc.collect(0) every "
+             "1 s, gc.collect(1) every 10 s, gc.collect(2) every 60 s, after a tick's output")
+_SWITCH_INTERVAL = 2e-4
+
+
+class RealtimeController:
+    """The real-time controller: owns the loop thread, the rig and the run's log.
+
+    Parameters
+    ----------
+    cfg : Config
+        Plant (``sim`` backend), design, compensation and ``sim.*`` settings.
+    backend : str or Rig
+        ``"sim"``, ``"udp://HOST:PORT"``, ``"serial://DEVICE"`` or a rig object.
+    log_dir : path
+        Where runs are logged (created).  ``None`` disables logging.
+    clock : clock, optional
+        Default :class:`~.clock.MonotonicClock` (tests pass a fake one).
+    safety : Safety, optional
+        Angle limit, start tolerance, silence limit.
+    duration : float, optional
+        Stop each run after this many seconds (reason ``duration``).
+    realtime : bool
+        Try SCHED_FIFO for the loop thread (and the log writer, at a lower
+        priority, so it cannot be preempted while holding the GIL).
+    manage_gc : bool
+        Freeze/disable the garbage collector during runs (see :mod:`.loop`).
+    fsync : bool
+        fsync the log after every write.
+    prewarm_us : float
+        Cache pre-warming before each deadline (see :mod:`.loop`); 0 = off.
+    cpu : int, optional
+        Pin the loop thread to this CPU (with ``realtime``; see :mod:`.osrt`).
+    """
+
+    def __init__(self, cfg: Config, backend: str | Rig = "sim", *, log_dir="runs",
+                 clock=None, safety: Safety | None = None, duration: float | None = None,
+                 realtime: bool = True, manage_gc: bool = True, fsync: bool = False,
+                 scaling: RigScaling | None = None, prewarm_us: float = 0.0,
+                 cpu: int | None = None):
+        self.cfg = cfg
+        self.backend = backend
+        self.backend_name = backend if isinstance(backend, str) else backend.name
+        self.log_dir = None if log_dir is None else Path(log_dir)
+        self.clock = clock or MonotonicClock()
+        self.safety = safety or Safety()
+        self.duration = duration
+        self.realtime = realtime
+        self.manage_gc = manage_gc
+        self.fsync = fsync
+        self.prewarm_us = prewarm_us
+        self.cpu = cpu
+        if not 0 <= prewarm_us < cfg.design.h * 1e6 / 2:
+            raise ValueError(f"prewarm_us must be in [0, h/2), got {prewarm_us}")
+        self.scaling = scaling or RigScaling()
+        if isinstance(backend, str) and backend != "sim":
+            _check_backend(backend)
+        self._params = ControlParams.from_config(cfg)
+        self._lock = threading.RLock()
+        self._accepting = False
+        self._subs: list[Subscription] = []
+        self._loop: Loop | None = None
+        self._rig: Rig | None = None
+        self._writer: LogWriter | None = None
+        self._thread: threading.Thread | None = None
+        self._done = threading.Event()
+        self._done.set()
+        self._closed = False
+        self._unnamed_recording: dict | None = None
+        self.run_id: str | None = None
+        self.started: str | None = None
+        self.events: list[dict] = []
+        self.last_stats: dict | None = None
+        self._initial_params: ControlParams | None = None
+        self._t_start = 0.0
+
+    # --- life cycle ---------------------------------------------------------------
+
+    def start(self) -> None:
+        """Start a run in the loop thread (open the rig, the log, go)."""
+        loop = self._prepare()
+        self._thread = threading.Thread(target=self._execute, args=(loop,),
+                                        name="frictionlab-rt", daemon=True)
+        self._thread.start()
+
+    def run(self) -> dict:
+        """Run in the calling thread until a stop; return the statistics."""
+        loop = self._prepare()
+        self._execute(loop)
+        return self.last_stats
+
+    def stop(self, reason: str = "user") -> None:
+        """Ask the loop to stop (u = 0 at the next tick); returns at once."""
+        if reason not in STOP_REASONS:
+            raise ValueError(f"reason must be one of {', '.join(STOP_REASONS)}; got {reason!r}")
+        loop = self._loop
+        if loop is not None:
+            loop.request_stop(reason)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait until the current run has ended; False on timeout."""
+        return self._done.wait(timeout)
+
+    @property
+    def running(self) -> bool:
+        return not self._done.is_set()
+
+    def close(self) -> None:
+        """Stop a run in progress (reason ``exit``) and wait for it."""
+        if self.running:
+            self.stop("exit")
+            self.wait(10.0)
+        self._closed = True
+
+    def __enter__(self) -> RealtimeController:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _prepare(self) -> Loop:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the controller is closed")
+            if self.running:
+                raise RuntimeError("the controller is already running")
+            rig = (open_rig(self.backend, self.cfg) if isinstance(self.backend, str)
+                   else self.backend)
+            rig.open()
+            try:
+                loop = Loop(rig, self.clock, self._params, safety=self.safety,
+                            scaling=self.scaling, duration=self.duration,
+                            realtime=self.realtime, manage_gc=self.manage_gc,
+                            prewarm_us=self.prewarm_us, cpu=self.cpu)
+                self.run_id = self._new_run_id()
+                self._writer = None
+                if self.log_dir is not None:
+                    self._writer = LogWriter(self.log_dir, self.run_id, fsync=self.fsync,
+                                             meta_fn=self._meta)
+            except BaseException:
+                rig.close()
+                raise
+            self._rig = rig
+            self._initial_params = self._params
+            self.started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+            self._t_start = time.monotonic()
+            self.events = []
+            self._loop = loop
+            self._update_sinks()
+            self._accepting = True
+            self._done.clear()
+            self.last_stats = None
+            if self._writer is not None:
+                self._writer.write_meta(self._meta())
+                prio = (lambda: try_realtime_priority(10)) if self.realtime else None
+                self._writer.start(prio)
+            self._event("start", backend=self.backend_name)
+            return loop
+
+    def _execute(self, loop: Loop) -> None:
+        old_switch = sys.getswitchinterval()
+        sys.setswitchinterval(_SWITCH_INTERVAL)
+        try:
+            loop.run()
+        finally:
+            sys.setswitchinterval(old_switch)
+            with self._lock:
+                self._accepting = False
+                while loop.mailbox:
+                    _p, fut = loop.mailbox.popleft()
+                    if fut is not None and not fut.done():
+                        fut.set_result(None)
+            self._event("stop", reason=loop.stop_reason, detail=loop.stop_detail)
+            try:
+                self._rig.close()
+            except Exception as exc:
+                self._event("rig_close_error", error=repr(exc))
+            self.last_stats = self._stats()
+            if self._writer is not None:
+                was_recording = self._writer.recording
+                self._writer.close(self._meta())
+                if was_recording:
+                    self._unnamed_recording = self._writer.last_recording
+                self.last_stats = self._stats()
+            self._done.set()
+
+    def _new_run_id(self) -> str:
+        base = time.strftime("run-%Y%m%d-%H%M%S") + f"-{os.getpid()}"
+        if self.log_dir is None:
+            return base
+        run_id, n = base, 1
+        while (self.log_dir / f"{run_id}.csv").exists():
+            n += 1
+            run_id = f"{base}-{n}"
+        return run_id
+
+    # --- mailbox ----------------------------------------------------------------------
+
+    def submit(self, changes: dict) -> Future:
+        """Validate ``changes`` now and apply them atomically between two ticks.
+
+        Raises
+        ------
+        ValueError
+            (:class:`~frictionlab.config.ConfigError`) if a change is invalid;
+            nothing is applied then.
+
+        Returns
+        -------
+        Future
+            Resolves to the tick number from which the change is in effect,
+            or None if no run is in progress (the change then applies to the
+            next run).
+        """
+        with self._lock:
+            new = self._params.apply(changes)
+            self._params = new
+            fut: Future = Future()
+            loop = self._loop
+            if self._accepting and loop is not None:
+                loop.mailbox.append((new, fut))
+            else:
+                fut.set_result(None)
+            self._event("change", changes=changes)
+        return fut
+
+    # --- console data -----------------------------------------------------------------
+
+    def subscribe(self, maxlen: int = 1000) -> Subscription:
+        """A new queue receiving every tick's sample (dropping when full)."""
+        sub = Subscription(maxlen)
+        with self._lock:
+            self._subs.append(sub)
+            self._update_sinks()
+        return sub
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        with self._lock:
+            if sub in self._subs:
+                self._subs.remove(sub)
+                sub.closed = True
+            self._update_sinks()
+
+    def _update_sinks(self) -> None:
+        loop = self._loop
+        if loop is None:
+            return
+        sinks = [s.put for s in self._subs]
+        if self._writer is not None:
+            sinks.insert(0, self._writer.put)
+        loop.sinks = tuple(sinks)
+
+    def push(self, kick: float) -> None:
+        """Disturb the pendulum by ``kick`` rad/s (emulated rigs only)."""
+        rig = self._rig
+        if not self.running or rig is None:
+            raise RuntimeError("push needs a running controller")
+        rig.push(float(kick))
+        self._event("push", kick=float(kick))
+
+    # --- Save Data ------------------------------------------------------------------
+
+    def record_start(self) -> None:
+        """Start saving the samples to a separate pair of files (the Save button)."""
+        w = self._writer
+        if not self.running or w is None:
+            raise RuntimeError("recording needs a running controller with a log directory")
+        w.record_start()
+        self._unnamed_recording = None
+        self._event("record_start")
+
+    def record_stop(self, name: str | None = None) -> dict:
+        """End the recording; save it as ``<log_dir>/<name>.dat`` and ``.csv``.
+
+        Returns ``{"dat": path, "csv": path, "rows": n}``.  If the run ended
+        while recording, the recording was closed under an automatic name and
+        this renames it.
+        """
+        w = self._writer
+        if w is not None and w.recording and self.running:
+            out = w.record_stop(name)
+        elif self._unnamed_recording is not None:
+            out = _rename_recording(self._unnamed_recording, name, self.log_dir)
+            self._unnamed_recording = None
+        else:
+            raise RuntimeError("no recording is running")
+        self._event("record_stop", **out)
+        return out
+
+    # --- status -----------------------------------------------------------------------
+
+    def _event(self, event: str, **info) -> None:
+        loop = self._loop
+        rec = {"t": round(time.monotonic() - self._t_start, 4), "event": event,
+               "tick": None if loop is None else loop.k, **info}
+        self.events.append(rec)
+
+    def _stats(self) -> dict:
+        loop = self._loop
+        out = loop.stats()
+        w = self._writer
+        out["dropped_log_samples"] = w.dropped if w is not None else 0
+        out["log_written"] = w.written if w is not None else 0
+        out["log_error"] = w.error if w is not None else None
+        out["dropped_console_samples"] = sum(s.dropped for s in self._subs)
+        out["log"] = w.paths["csv"] if w is not None else None
+        out["log_files"] = w.paths if w is not None else None
+        out["backend"] = self.backend_name
+        out["duration_s"] = loop.ticks * loop.h if loop.ticks else 0.0
+        return out
+
+    def status(self) -> dict:
+        """A JSON-ready snapshot for the console (see the package docstring)."""
+        loop = self._loop
+        applied = loop.params if (loop is not None and self.running) else self._params
+        out = {
+            "running": self.running,
+            "run_id": self.run_id,
+            "backend": self.backend_name,
+            "h": self.cfg.design.h,
+            "friction": self._plant_friction(),
+            **applied.describe(),
+            "pending_changes": len(loop.mailbox) if loop is not None else 0,
+            "recording": bool(self._writer is not None and self._writer.recording),
+            "safety": dataclasses.asdict(self.safety),
+        }
+        if loop is None:
+            out.update({"stop_reason": None, "ticks": 0, "missed": 0, "overruns": 0,
+                        "t": 0.0})
+            return out
+        st = self._stats()
+        out.update(st)
+        out["t"] = loop.k * loop.h
+        out["rt_note"] = loop.rt_note
+        out.pop("stall_list", None)
+        return out
+
+    def _plant_friction(self) -> str | None:
+        rig = self._rig
+        if rig is not None and rig.plant_friction is not None:
+            return rig.plant_friction
+        if self.backend_name == "sim":
+            return self.cfg.friction_kind
+        return None
+
+    def _meta(self) -> dict:
+        loop = self._loop
+        w = self._writer
+        initial = self._initial_params.describe() if self._initial_params else None
+        current = loop.params.describe() if loop is not None else None
+        return {
+            "run_id": self.run_id,
+            "started": self.started,
+            "running": self.running and loop is not None and loop.stop_reason is None,
+            "backend": self.backend_name,
+            "h": self.cfg.design.h,
+            "t0_monotonic_ns": None if loop is None else loop.t0_ns,
+            "x0": None if loop is None else loop.x0,
+            "config": self.cfg.as_flat_dict(),
+            "plant_friction": self._plant_friction(),
+            "scaling": dataclasses.asdict(self.scaling),
+            "safety": dataclasses.asdict(self.safety),
+            "initial": initial,
+            "current": current,
+            "stop_reason": None if loop is None else loop.stop_reason,
+            "stop_detail": None if loop is None else loop.stop_detail,
+            "stop_tick": None if loop is None else loop.stop_tick,
+            "traceback": None if loop is None else loop.traceback,
+            "stats": None if loop is None else self._stats(),
+            "dropped_log_samples": 0 if w is None else w.dropped,
+            "files": None if w is None else w.paths,
+            "realtime": {"sched_fifo": bool(loop and loop.sched_fifo),
+                         "note": None if loop is None else loop.rt_note,
+                         "gc_policy": GC_POLICY if self.manage_gc else "default",
+                         "switch_interval_s": _SWITCH_INTERVAL},
+            "events": list(self.events),
+        }
+
+
+def _check_backend(spec: str) -> None:
+    """Validate a backend string's syntax without connecting."""
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(spec)
+    if parts.scheme == "udp":
+        try:
+            port = parts.port
+        except ValueError:
+            port = None
+        if not parts.hostname or port is None:
+            raise ValueError(f"--backend {spec!r}: expected udp://HOST:PORT")
+    elif parts.scheme == "serial":
+        if not spec[len("serial://"):]:
+            raise ValueError(f"--backend {spec!r}: expected serial://DEVICE")
+    else:
+        raise ValueError(f"--backend {spec!r}: expected sim, udp://HOST:PORT or "
+                         "serial://DEVICE")
+
+
+def _rename_recording(rec: dict, name: str | None, log_dir) -> dict:
+    if name is None:
+        return rec
+    import re
+
+    name = re.sub(r"\.(dat|csv)$", "", name)
+    if not re.match(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$", name):
+        raise ValueError(f"recording name {name!r}: use letters, digits, '.', '_', '-'")
+    out = dict(rec)
+    for ext in ("dat", "csv"):
+        dst = Path(log_dir) / f"{name}.{ext}"
+        if dst.exists():
+            raise FileExistsError(f"{dst} exists")
+    for ext in ("dat", "csv"):
+        dst = Path(log_dir) / f"{name}.{ext}"
+        os.replace(rec[ext], dst)
+        out[ext] = str(dst)
+    return out
+

@@ -1,0 +1,500 @@
+r"""The periodic control loop: the thesis's *Regul* process (Sec. 7.3) at h = 5 ms.
+
+One tick k, against the absolute deadline :math:`t_0 + k h` (integer
+nanoseconds on the monotonic clock, so there is no drift):
+
+1. sleep until the deadline; *jitter* = wake-up time - deadline;
+2. if the wake-up is a whole period or more late, skip ahead to the
+   latest deadline that has passed (never a burst of catch-up ticks),
+   count the skipped ones as *missed* and record the stall;
+3. read the rig's raw (y, x, v), check them (finite, inside [-1, 1]),
+   convert them to SI with App. B (:class:`frictionlab.rig.RigScaling`;
+   the arm channel is unwrapped and its bias x_0 captured at the first tick,
+   so Omega = 0 at the start), check the angle limit;
+4. run the compiled controller step - the simulator's own code
+   (:func:`frictionlab.controller.controller_step`: u from the predicted
+   estimates, saturation, observer update);
+5. write u_DA = -0.022 u (saturated to [-1, 1]); *compute* = u written -
+   wake-up, less the time spent reading the rig (*rig*: request to reply
+   over UDP/serial, the plant's step for ``sim``), which is measured
+   separately; an *overrun* is a u written after the next deadline;
+6. hand the :class:`~frictionlab.realtime.samples.Sample` to the sinks
+   (log writer, console subscriptions) without blocking;
+7. between ticks: apply pending parameter changes atomically (the
+   mailbox), and the scheduled housekeeping (garbage collection, steal-time
+   sampling).
+
+Pre-warming (``prewarm_us`` > 0): on a virtual machine whose CPU sits idle
+between ticks, the first microseconds after a wake-up run from cold caches
+(on the project's VM a tick's code ran 2-20 times slower right after a
+5 ms sleep than back-to-back).  The loop can therefore wake ``prewarm_us``
+before the deadline, run the tick's code on scratch data (a copy of the
+controller state, the rig's :meth:`~.rigs.Rig.warm`), and busy-wait to the
+deadline.  Jitter and compute are still measured from the deadline and the
+real wake-up; the price is the CPU time of the dry pass and the spin.
+
+Safety (every stop writes u_DA = 0 in the tick that detects it and records
+its reason): ``angle_limit`` (|theta| above :attr:`Safety.angle_limit`),
+``bad_reading`` (NaN, out of range, corrupted frame, duplicated or
+out-of-order sequence number), ``rig_silent`` (nothing at all from the rig
+in :attr:`Safety.silent_periods` consecutive sample periods - a late reply
+to an earlier request counts as a sign of life - or no timely reading in
+:attr:`Safety.unread_limit` consecutive ticks), ``not_upright`` (the first
+reading is not within :attr:`Safety.start_tolerance` of upright: there is no
+swing-up), ``exception``, and the requested stops ``duration``, ``user``,
+``signal``, ``exit``.
+
+Garbage collection: the cyclic collector is frozen (``gc.freeze()``: every
+object alive at the start is exempt) and disabled while the loop runs, so it
+can never start inside a tick; the loop itself runs a young-generation
+collection once a second, a middle one every 10 s and a full one every
+60 s, right after a tick's output (outside the critical section), and
+times them.  The tick allocates no reference cycles.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import sys
+import traceback
+from collections import deque
+from dataclasses import dataclass
+
+from .._validation import Validated, param
+from ..controller import G_COMP, G_W0, S_ARM, S_ARMDOT, S_RELAY, S_X1, S_X2, S_ZHAT, controller_step
+from ..rig import RigScaling
+from .osrt import try_realtime_priority
+from .params import ControlParams
+from .rigs import BadReading, Rig
+from .samples import CHANGED, COMPENSATE, MISSED, NO_READING, OVERRUN, START, STOP, Sample
+from .stats import Histogram, StallLog
+
+__all__ = ["STOP_REASONS", "Loop", "Safety"]
+
+#: Every stop reason the loop records.
+STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_reading",
+                "rig_silent", "not_upright", "exception")
+_NAN = math.nan
+_rt_warned = False
+
+
+@dataclass(frozen=True)
+class Safety(Validated):
+    """Safety limits of the loop."""
+
+    _prefix = "safety."
+
+    angle_limit: float = param(0.35, "stop when |theta| exceeds this", "rad", lo=0.0,
+                               hi=math.pi, lo_open=True)
+    start_tolerance: float = param(0.15, "start only if |theta| <= this at the first "
+                                   "reading (no swing-up)", "rad", lo=0.0, hi=math.pi)
+    silent_periods: int = param(2, "stop after this many consecutive sample periods in "
+                                "which nothing arrived from the rig", "1", lo=1, hi=100,
+                                integer=True)
+    unread_limit: int = param(10, "stop after this many consecutive ticks without a timely "
+                              "reading (the rig answers, but too late)", "1", lo=1, hi=1000,
+                              integer=True)
+    reply_timeout: float = param(0.5, "how long after its deadline a tick waits for the "
+                                 "rig's reply, as a fraction of h", "1", lo=0.05, hi=0.9)
+    min_reply_wait: float = param(0.25, "the least time a tick waits for the reply after a "
+                                  "late wake-up, as a fraction of h", "1", lo=0.0, hi=0.9)
+
+
+class _Stop(Exception):
+    """Internal: leave the loop with a reason."""
+
+    def __init__(self, reason: str, detail: str = "", reading=None):
+        self.reason = reason
+        self.detail = detail
+        self.reading = reading
+
+
+class Loop:
+    """One run of the periodic loop (see the module docstring).
+
+    Parameters
+    ----------
+    rig : Rig
+        An opened rig backend.
+    clock : clock
+        ``now_ns()`` and ``sleep_until(t_ns)`` (see :mod:`.clock`).
+    params : ControlParams
+        Initial design and compensation.
+    safety : Safety
+    scaling : RigScaling
+        App. B conversion.
+    duration : float, optional
+        Stop with reason ``duration`` after this many seconds of ticks.
+    realtime : bool
+        Try SCHED_FIFO (and the timer slack, see :mod:`.osrt`) for the thread
+        that calls :meth:`run`.
+    cpu : int, optional
+        Pin that thread to this CPU (with ``realtime``).
+    manage_gc : bool
+        Freeze and disable the cyclic garbage collector during the run (see
+        the module docstring).
+
+    Attributes read by other threads (single-word updates, no locks): ``k``,
+    ``ticks``, ``missed``, ``overruns``, ``rig_timeouts``, ``jitter``,
+    ``compute`` (:class:`~.stats.Histogram`), ``stalls``, ``stop_reason``,
+    ``stop_detail``, ``running``.
+    """
+
+    def __init__(self, rig: Rig, clock, params: ControlParams, *,
+                 safety: Safety | None = None, scaling: RigScaling | None = None,
+                 duration: float | None = None, realtime: bool = True,
+                 manage_gc: bool = True, priority: int = 50, prewarm_us: float = 0.0,
+                 cpu: int | None = None):
+        self.rig = rig
+        self.clock = clock
+        self.params = params
+        self.safety = safety or Safety()
+        self.scaling = scaling or RigScaling()
+        h = params.cfg.design.h
+        self.h = h
+        self.h_ns = round(h * 1e9)
+        if duration is not None and not (duration > 0 and math.isfinite(duration)):
+            raise ValueError(f"duration must be > 0 s, got {duration}")
+        self.n_ticks = None if duration is None else round(duration / h)
+        if not 0 <= prewarm_us < h * 1e6 / 2:
+            raise ValueError(f"prewarm_us must be in [0, h/2), got {prewarm_us}")
+        self.prewarm_ns = int(prewarm_us * 1000)
+        self.realtime = realtime
+        self.manage_gc = manage_gc
+        self.priority = priority
+        self.cpu = cpu
+        # shared with other threads
+        self.sinks: tuple = ()
+        self.mailbox: deque = deque()
+        self.stop_request: str | None = None
+        self.k = 0
+        self.ticks = 0
+        self.missed = 0
+        self.overruns = 0
+        self.rig_timeouts = 0
+        self.jitter = Histogram()
+        self.compute = Histogram()
+        self.rig_io = Histogram()
+        self.stalls = StallLog()
+        self.gc_runs = 0
+        self.gc_max_us = 0.0
+        self.changes_applied = 0
+        self.stop_reason: str | None = None
+        self.stop_detail = ""
+        self.stop_tick: int | None = None
+        self.t0_ns: int | None = None
+        self.running = False
+        self.rt_note: str | None = None
+        self.sched_fifo = False
+        self.x0: float | None = None
+        self.traceback: str | None = None
+
+    # --- requests from other threads -------------------------------------------
+
+    def request_stop(self, reason: str) -> None:
+        if reason not in STOP_REASONS:
+            raise ValueError(f"stop reason must be one of {', '.join(STOP_REASONS)}")
+        if self.stop_request is None:
+            self.stop_request = reason
+
+    # --- the loop ------------------------------------------------------------------
+
+    def run(self) -> str:
+        """Run until a stop; return the stop reason."""
+        global _rt_warned
+        self.running = True
+        if self.realtime:
+            self.rt_note = try_realtime_priority(self.priority, self.cpu)
+            self.sched_fifo = self.rt_note is None or "SCHED_FIFO" not in self.rt_note
+            if self.rt_note and not _rt_warned:
+                _rt_warned = True
+                print(f"frictionlab: {self.rt_note}", file=sys.stderr)
+        # compile (or load from numba's cache) before the first deadline
+        p = self.params
+        controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
+        gc_was = gc.isenabled()
+        if self.manage_gc:
+            gc.collect()
+            gc.freeze()
+            gc.disable()
+        try:
+            self._ticks()
+        except _Stop as stop:
+            self._halt(stop)
+        except BaseException as exc:
+            reason = "signal" if isinstance(exc, KeyboardInterrupt) else "exception"
+            detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            self.traceback = traceback.format_exc()
+            self._halt(_Stop(reason, detail))
+        finally:
+            try:
+                self.rig.stop_motor()
+            finally:
+                if self.manage_gc:
+                    gc.unfreeze()
+                    if gc_was:
+                        gc.enable()
+                self.running = False
+        return self.stop_reason
+
+    def _halt(self, stop: _Stop) -> None:
+        """Zero the motor, record the reason, log the stop row."""
+        try:
+            self.rig.write(self.k, 0.0)
+        except Exception:
+            self.rig.stop_motor()
+        self.stop_reason = stop.reason
+        self.stop_detail = stop.detail
+        self.stop_tick = self.k
+        r = stop.reading
+        y, x, v = (r.y, r.x, r.v) if r is not None else (_NAN, _NAN, _NAN)
+        sample = Sample(self.k, self.k * self.h, STOP, _NAN, _NAN, _NAN, 0.0, _NAN, _NAN,
+                        _NAN, _NAN, _NAN, _NAN, y, x, v, 0.0, _NAN, _NAN, _NAN)
+        for sink in self.sinks:
+            try:
+                sink(sample)
+            except Exception:
+                pass
+
+    def _ticks(self) -> None:
+        clock, rig, safety = self.clock, self.rig, self.safety
+        now = clock.now_ns
+        sleep_until = clock.sleep_until
+        spin_until = clock.spin_until
+        prewarm_ns = self.prewarm_ns
+        rig_warm = rig.warm
+        sample_rig = rig.sample
+        write = rig.write
+        h_ns, h = self.h_ns, self.h
+        reply_ns = int(safety.reply_timeout * h_ns)
+        angle_limit = safety.angle_limit
+        silent_max = safety.silent_periods
+        unread_max = safety.unread_limit
+        min_reply_ns = int(safety.min_reply_wait * h_ns)
+        sc = self.scaling
+        ts, tb = sc.theta_scale, sc.theta_bias
+        as_ = sc.arm_scale
+        vs, vb = sc.velocity_scale, sc.velocity_bias
+        us = sc.u_scale
+        jit_add, comp_add, rig_add = self.jitter.add, self.compute.add, self.rig_io.add
+        n_ticks = self.n_ticks
+        mailbox = self.mailbox
+        params = self.params
+        gp, cp = params.gp, params.cp
+        w0 = gp[G_W0]
+        comp_flag = COMPENSATE if params.comp_enabled else 0
+        s = None
+        first = True
+        silent = unread = 0
+        rx_seen = rig.rx_frames
+        x_prev = 0.0
+        wraps = 0
+        x0 = 0.0
+        u_da_prev = 0.0
+        theta = arm = arm_dot = 0.0
+        pending_flags = 0
+        k = 0
+        t0 = now() + h_ns
+        self.t0_ns = t0
+        while True:
+            deadline = t0 + k * h_ns
+            if prewarm_ns:
+                sleep_until(deadline - prewarm_ns)
+                if now() < deadline:
+                    # bring the tick's code and data back into the caches (see docstring)
+                    if s is not None:
+                        controller_step(s.copy(), gp, cp, theta, arm, arm_dot)
+                    rig_warm()
+                    spin_until(deadline)
+            else:
+                sleep_until(deadline)
+            wake = now()
+            late = wake - deadline
+            flags = pending_flags | comp_flag
+            pending_flags = 0
+            if late >= h_ns:
+                m = late // h_ns
+                k += m
+                deadline += m * h_ns
+                self.missed += m
+                flags |= MISSED
+                self.stalls.add(k, k * h, late, m)
+                late -= m * h_ns
+            self.k = k
+            if self.stop_request is not None:
+                raise _Stop(self.stop_request, "requested")
+            if n_ticks is not None and k >= n_ticks:
+                raise _Stop("duration", f"{n_ticks} ticks")
+            # the rig gets reply_timeout h after the deadline, and at least min_reply_ns
+            # after a late wake-up (else a wake late in the period would leave it no time)
+            reply_by = deadline + reply_ns
+            if reply_by < wake + min_reply_ns:
+                reply_by = wake + min_reply_ns
+            t_r = now()
+            try:
+                r = sample_rig(k, reply_by)
+            except BadReading as exc:
+                raise _Stop("bad_reading", str(exc)) from None
+            rig_ns = now() - t_r
+            if r is None:
+                self.rig_timeouts += 1
+                rx = rig.rx_frames
+                # silence: ticks in which nothing at all came from the rig (a late
+                # reply to an earlier request is a sign of life, not a reading)
+                silent = silent + 1 if rx == rx_seen else 0
+                rx_seen = rx
+                unread += 1
+                if silent >= silent_max:
+                    raise _Stop("rig_silent", f"nothing from the rig for {silent} consecutive "
+                                "sample periods")
+                if unread >= unread_max:
+                    raise _Stop("rig_silent", f"no timely reading for {unread} consecutive "
+                                "ticks (the rig's replies come too late)")
+                write(k, u_da_prev)  # hold u, keep the rig's watchdog fed
+                t_w = now()
+                if t_w > deadline + h_ns:
+                    self.overruns += 1
+                    flags |= OVERRUN
+                jit_add(late)
+                comp_add(t_w - wake - rig_ns)
+                rig_add(rig_ns)
+                smp = Sample(k, k * h, flags | NO_READING, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
+                             _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, u_da_prev, late / 1e3,
+                             (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
+                for sink in self.sinks:
+                    sink(smp)
+                self.ticks += 1
+                k += 1
+                continue
+            silent = 0
+            unread = 0
+            rx_seen = rig.rx_frames
+            y, x, v = r.y, r.x, r.v
+            if not (-1.0 <= y <= 1.0 and -1.0 <= x <= 1.0 and -1.0 <= v <= 1.0):
+                raise _Stop("bad_reading", f"raw reading out of range or NaN: y={y!r}, "
+                            f"x={x!r}, v={v!r}", r)
+            if first:
+                x0 = x
+                self.x0 = x0
+            else:
+                d = x - x_prev
+                if d > 1.0:
+                    wraps -= 1
+                elif d < -1.0:
+                    wraps += 1
+            x_prev = x
+            theta = ts * (y + tb)
+            arm = as_ * (x + 2.0 * wraps - x0)
+            arm_dot = vs * (v + vb)
+            if first:
+                if not abs(theta) <= safety.start_tolerance:
+                    raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the start "
+                                f"(tolerance {safety.start_tolerance} rad; no swing-up)", r)
+                s = params.controller.init(theta)
+                flags |= START
+                first = False
+            if not abs(theta) <= angle_limit:
+                raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
+                            f"{angle_limit} rad", r)
+            th_hat = s[S_X1]
+            thd_hat = w0 * s[S_X2]
+            arm_hat = s[S_ARM]
+            armd_hat = s[S_ARMDOT]
+            z_hat = s[S_ZHAT]
+            u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
+            u_da = us * u
+            if u_da > 1.0:
+                u_da = 1.0
+            elif u_da < -1.0:
+                u_da = -1.0
+            elif u_da != u_da:
+                raise _Stop("exception", "the controller produced u = NaN", r)
+            write(k, u_da)
+            t_w = now()
+            u_da_prev = u_da
+            if t_w > deadline + h_ns:
+                self.overruns += 1
+                flags |= OVERRUN
+            jit_add(late)
+            comp_add(t_w - wake - rig_ns)
+            rig_add(rig_ns)
+            smp = Sample(k, k * h, flags, theta, th_hat, thd_hat, u, arm, arm_dot, arm_hat,
+                         armd_hat, f_hat, z_hat, y, x, v, u_da, late / 1e3,
+                         (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
+            for sink in self.sinks:
+                sink(smp)
+            self.ticks += 1
+            # ---- between ticks ----
+            if mailbox:
+                old_kind = gp[G_COMP]
+                applied = []
+                while mailbox:
+                    applied.append(mailbox.popleft())
+                params = applied[-1][0]
+                self.params = params
+                gp, cp = params.gp, params.cp
+                w0 = gp[G_W0]
+                comp_flag = COMPENSATE if params.comp_enabled else 0
+                if gp[G_COMP] != old_kind:
+                    s[S_RELAY] = 0.0
+                    s[S_ZHAT] = 0.0
+                pending_flags = CHANGED
+                self.changes_applied += len(applied)
+                for _p, fut in applied:
+                    if fut is not None and not fut.done():
+                        fut.set_result(k + 1)
+            if k % 200 == 100:
+                self._housekeeping(k)
+            k += 1
+
+    def _housekeeping(self, k: int) -> None:
+        """Scheduled garbage collection and steal-time sampling (outside the tick)."""
+        self.stalls.sample_steal()
+        if not self.manage_gc:
+            return
+        now = self.clock.now_ns
+        gen = 2 if k % 12000 == 100 else (1 if k % 2000 == 100 else 0)
+        t = now()
+        gc.collect(gen)
+        us = (now() - t) / 1e3
+        self.gc_runs += 1
+        if us > self.gc_max_us:
+            self.gc_max_us = us
+
+    # --- statistics ------------------------------------------------------------------
+
+    def stats(self) -> dict:
+        """The run's timing statistics (``frictionlab run --json`` fields and more)."""
+        j = self.jitter.summary_us()
+        c = self.compute.summary_us()
+        r = self.rig_io.summary_us()
+        scheduled = self.ticks + self.missed
+
+        def ms(v):
+            return None if v is None else v / 1000.0
+
+        return {
+            "ticks": self.ticks,
+            "missed": self.missed,
+            "overruns": self.overruns,
+            "jitter_ms": {"p50": ms(j["p50"]), "p99": ms(j["p99"]), "p999": ms(j["p999"]),
+                          "max": ms(j["max"]), "mean": ms(j["mean"])},
+            "compute_us": {"p50": c["p50"], "p99": c["p99"], "p999": c["p999"],
+                           "max": c["max"], "mean": c["mean"]},
+            "rig_us": {"p50": r["p50"], "p99": r["p99"], "p999": r["p999"],
+                       "max": r["max"], "mean": r["mean"]},
+            "missed_fraction": self.missed / scheduled if scheduled else 0.0,
+            "rig_timeouts": self.rig_timeouts,
+            "stalls": self.stalls.count,
+            "max_stall_ms": self.stalls.max_ms,
+            "stall_list": list(self.stalls.stalls),
+            "unaccounted_stalls_over_50ms": len(self.stalls.unaccounted(50.0)),
+            "gc": {"runs": self.gc_runs, "max_us": self.gc_max_us},
+            "changes_applied": self.changes_applied,
+            "sched_fifo": self.sched_fifo,
+            "stop_reason": self.stop_reason,
+            "stop_detail": self.stop_detail,
+            "stop_tick": self.stop_tick,
+            **self.rig.counters(),
+        }

@@ -1,0 +1,516 @@
+"""Rig backends: one small interface, three implementations.
+
+A rig is what the loop reads the raw signals (y, x, v of App. B) from and
+writes the DAC value u_DA to.  The interface (:class:`Rig`):
+
+``open() -> None``
+    Connect and start a session (protocol ``HELLO``); the motor is off.
+``sample(k, deadline_ns) -> SensorReading | None``
+    The raw reading for tick ``k``; ``None`` if the rig did not answer by
+    ``deadline_ns`` (monotonic clock); raises :class:`BadReading` for a
+    corrupted frame or a duplicated/out-of-order sequence number.
+``write(k, u_da) -> None``
+    Output the DAC value (already saturated to [-1, 1] by the loop).
+``stop_motor() -> None``
+    Best-effort ``u_DA = 0``; never raises.
+``close() -> None``
+    Stop the motor and release the connection.
+``push(kick) -> None``
+    Emulated rigs only: add ``kick`` rad/s to the pendulum's velocity.
+
+Backends (:func:`open_rig` parses the ``--backend`` string):
+
+``sim``
+    :class:`SimRig`: the simulated plant in-process
+    (:class:`frictionlab.simulation.SimulatedPlant`, the simulator's own
+    integrator).  Paced in real time by the loop: reading tick k first
+    advances the plant to step k with the last u held, so after missed
+    deadlines the plant has moved on as a real one would.  Readings go
+    through :class:`AdcModel` (App. B scaling, arm offset, wrap-around,
+    optional 12-bit quantisation and noise per ``sim.quantization`` and
+    ``sim.noise``), so the loop's raw-to-SI conversion is exercised.
+``udp://HOST:PORT``
+    :class:`FramedRig` over :class:`UdpTransport`: the protocol of
+    ``docs/protocol.md`` to ``frictionlab rig-sim`` or a real rig.
+``serial://DEVICE[?baud=N]``
+    :class:`FramedRig` over :class:`SerialTransport` (pyserial; DEVICE may
+    also be a pyserial URL such as ``loop://``).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import select
+import socket
+import time
+from abc import ABC, abstractmethod
+from collections import deque
+from urllib.parse import parse_qs, urlsplit
+
+from ..config import Config
+from ..rig import ADC_BITS, RigScaling
+from ..simulation import SimulatedPlant
+from . import protocol as P
+from .protocol import Frame, FrameError, SensorReading
+
+__all__ = [
+    "ARM_START",
+    "AdcModel",
+    "BadReading",
+    "FramedRig",
+    "Rig",
+    "RigError",
+    "SerialTransport",
+    "SimRig",
+    "UdpTransport",
+    "open_rig",
+]
+
+#: Raw arm reading at the start of an emulated session (App. B.2's measured x_0).
+ARM_START = -0.0699
+_MASK = 0xFFFFFFFF
+
+
+class RigError(RuntimeError):
+    """The rig cannot be opened or does not support an operation."""
+
+
+class BadReading(Exception):
+    """A reading that must stop the loop (corrupted frame, bad sequence number)."""
+
+
+class AdcModel:
+    """SI plant signals to raw ADC values as the rig's converters produce them.
+
+    Parameters
+    ----------
+    scaling : RigScaling
+        App. B factors.
+    arm_offset : float
+        Raw arm reading at Omega = 0 (the bias x_0 the loop captures).
+    quantize : bool
+        Round to the 12-bit grid (2/4096 per step over [-1, 1)).
+    noise : float
+        Standard deviation of Gaussian noise added to each signal in its SI
+        unit before conversion (``sim.noise``).
+    seed : int
+        Seed of the noise generator.
+    """
+
+    def __init__(self, scaling: RigScaling, arm_offset: float = ARM_START,
+                 quantize: bool = True, noise: float = 0.0, seed: int = 0):
+        self.ts, self.tb = scaling.theta_scale, scaling.theta_bias
+        self.as_ = scaling.arm_scale
+        self.vs, self.vb = scaling.velocity_scale, scaling.velocity_bias
+        self.arm_offset = float(arm_offset)
+        self.q = 2.0 / 2**ADC_BITS if quantize else 0.0
+        self.top = 1.0 - self.q if quantize else 1.0  # largest ADC code
+        self.noise = float(noise)
+        self._rng = random.Random(seed)
+
+    def _quant(self, r: float) -> float:
+        q = self.q
+        return math.floor(r / q + 0.5) * q if q else r
+
+    def read(self, theta: float, arm: float, arm_dot: float) -> tuple[float, float, float]:
+        """Raw ``(y, x, v)`` for the plant signals (wrapped, clipped, quantised)."""
+        if self.noise:
+            g = self._rng.gauss
+            theta += g(0.0, self.noise)
+            arm += g(0.0, self.noise)
+            arm_dot += g(0.0, self.noise)
+        y = (self._quant(theta / self.ts - self.tb) + 1.0) % 2.0 - 1.0
+        x = (self._quant(arm / self.as_ + self.arm_offset) + 1.0) % 2.0 - 1.0
+        v = min(max(self._quant(arm_dot / self.vs - self.vb), -1.0), self.top)
+        return y, x, v
+
+
+class Rig(ABC):
+    """Interface of a rig backend (see the module docstring)."""
+
+    name = "rig"
+    #: An emulator (push and plant friction available).
+    emulated = False
+    #: Friction model of the emulated plant (None if unknown, e.g. a real rig).
+    plant_friction: str | None = None
+    #: Valid frames received from the rig so far (the loop's sign of life).
+    rx_frames = 0
+
+    @abstractmethod
+    def open(self) -> None:
+        """Connect and start a session with the motor off."""
+
+    @abstractmethod
+    def sample(self, k: int, deadline_ns: int) -> SensorReading | None:
+        """The raw reading of tick k, or None if none arrived by ``deadline_ns``."""
+
+    @abstractmethod
+    def write(self, k: int, u_da: float) -> None:
+        """Output the DAC value of tick k."""
+
+    @abstractmethod
+    def stop_motor(self) -> None:
+        """Best-effort u_DA = 0; never raises."""
+
+    def close(self) -> None:
+        self.stop_motor()
+
+    def warm(self) -> None:  # noqa: B027 - optional hook, a no-op by default
+        """Run the code of :meth:`sample` on scratch data, without I/O (cache warming)."""
+
+    def push(self, kick: float) -> None:
+        raise RigError(f"push needs an emulated rig; {self.name} is not one")
+
+    def counters(self) -> dict:
+        """Backend-specific counters for the run's statistics."""
+        return {}
+
+
+class SimRig(Rig):
+    """The simulated plant in-process, stepped once per tick (``--backend sim``).
+
+    Parameters
+    ----------
+    cfg : Config
+        Plant, friction and ``sim.*`` settings (``sim.initial_angle`` is the
+        start; ``sim.noise``/``sim.quantization``/``sim.seed`` shape the readings).
+    """
+
+    name = "sim"
+    emulated = True
+
+    def __init__(self, cfg: Config, scaling: RigScaling | None = None,
+                 arm_offset: float = ARM_START):
+        self.cfg = cfg
+        self.scaling = scaling or RigScaling()
+        self.plant = SimulatedPlant(cfg)
+        self.plant_friction = cfg.friction_kind
+        self._arm_offset = arm_offset
+        self._kicks: deque[float] = deque()
+        self.state = None
+
+    def open(self) -> None:
+        cfg = self.cfg
+        self.adc = AdcModel(self.scaling, self._arm_offset, bool(cfg.sim.quantization),
+                            cfg.sim.noise, cfg.sim.seed)
+        self.state = self.plant.init()
+        self.plant.step(self.state, 0.0)  # compile before the loop starts
+        self._k: int | None = None
+        self.u_da = 0.0
+        self._u = 0.0
+
+    def sample(self, k: int, deadline_ns: int) -> SensorReading:
+        if self._k is None:
+            self._k = k
+        st = self.state
+        step = self.plant.step
+        u = self._u
+        while self._k < k:
+            st = step(st, u)
+            self._k += 1
+        while self._kicks:
+            st = self.plant.push(st, self._kicks.popleft())
+        self.state = st
+        self.rx_frames += 1
+        x = st.x
+        y, xr, v = self.adc.read(x[0], x[2], x[3])
+        return SensorReading(y, xr, v, self.u_da, P.STATUS_EMULATED)
+
+    def warm(self) -> None:
+        self.plant.step(self.state, self._u)
+        if not self.adc.noise:
+            x = self.state.x
+            self.adc.read(x[0], x[2], x[3])
+
+    def write(self, k: int, u_da: float) -> None:
+        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
+        self.u_da = u_da
+        self._u = u_da / self.scaling.u_scale
+
+    def stop_motor(self) -> None:
+        self.u_da = 0.0
+        self._u = 0.0
+
+    def push(self, kick: float) -> None:
+        if not math.isfinite(kick):
+            raise ValueError(f"kick must be finite, got {kick}")
+        self._kicks.append(float(kick))
+
+    @property
+    def theta(self) -> float:
+        """True pendulum angle of the simulated plant (rad)."""
+        return float(self.state.x[0])
+
+
+# --- transports -------------------------------------------------------------
+
+
+class UdpTransport:
+    """One frame per datagram to ``host:port`` (a connected UDP socket)."""
+
+    def __init__(self, host: str, port: int):
+        self.addr = (host, int(port))
+        infos = socket.getaddrinfo(host, int(port), type=socket.SOCK_DGRAM)
+        if not infos:
+            raise RigError(f"cannot resolve {host}")
+        family, _, _, _, sockaddr = infos[0]
+        self.sock = socket.socket(family, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.sock.connect(sockaddr)
+        self._poll = select.poll()
+        self._poll.register(self.sock, select.POLLIN)
+        self.refused = 0
+
+    def send(self, data: bytes) -> None:
+        try:
+            self.sock.send(data)
+        except (ConnectionRefusedError, BlockingIOError):
+            self.refused += 1
+
+    def recv(self, deadline_ns: int) -> Frame | FrameError | None:
+        poll = self._poll.poll
+        recv = self.sock.recv
+        while True:
+            rest = deadline_ns - time.monotonic_ns()
+            # poll's timeout is in ms (rounded up); a last look when the time is up, as
+            # the wait may have been cut short by a host pause
+            if poll(rest / 1e6 if rest > 0 else 0):
+                try:
+                    data = recv(4096)
+                except BlockingIOError:
+                    continue
+                except ConnectionRefusedError:
+                    # ICMP port unreachable from an earlier send: nobody is listening
+                    self.refused += 1
+                    continue
+                try:
+                    return P.decode(data)
+                except FrameError as exc:
+                    return exc
+            if rest <= 0:
+                return None
+
+    def drain(self) -> None:
+        """Discard anything queued (stale replies of an earlier session)."""
+        while True:
+            try:
+                self.sock.recv(4096)
+            except (BlockingIOError, ConnectionRefusedError):
+                return
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class SerialTransport:
+    """Frames on a byte stream (pyserial), resynchronised by :class:`FrameDecoder`.
+
+    Parameters
+    ----------
+    device : str
+        Device path (``/dev/ttyACM0``) or pyserial URL (``loop://``).
+    baudrate : int
+        Line speed.  A tick exchanges 14 + 31 + 18 = 63 bytes, so a UART needs
+        at least 230400 baud at h = 5 ms; USB CDC devices ignore the setting.
+    """
+
+    def __init__(self, device: str, baudrate: int = 1_000_000):
+        import serial  # pyserial
+
+        try:
+            self.port = serial.serial_for_url(device, baudrate=baudrate, timeout=0,
+                                               write_timeout=0.1)
+        except (serial.SerialException, ValueError) as exc:
+            raise RigError(f"cannot open serial device {device}: {exc}") from None
+        self.decoder = P.FrameDecoder()
+        self._pending: deque = deque()
+        try:
+            self._fd = self.port.fileno()
+        except (AttributeError, OSError, NotImplementedError, ValueError):
+            self._fd = None
+
+    def send(self, data: bytes) -> None:
+        self.port.write(data)
+
+    def recv(self, deadline_ns: int) -> Frame | FrameError | None:
+        while not self._pending:
+            n = self.port.in_waiting
+            if n:
+                self._pending.extend(self.decoder.feed(self.port.read(n)))
+                continue
+            rest = deadline_ns - time.monotonic_ns()
+            if rest <= 0:
+                n = self.port.in_waiting
+                if not n:
+                    return None
+                continue
+            if self._fd is not None:
+                select.select((self._fd,), (), (), rest / 1e9)
+            else:
+                time.sleep(min(rest / 1e9, 1e-4))
+        return self._pending.popleft()
+
+    def drain(self) -> None:
+        self.port.reset_input_buffer()
+        self._pending.clear()
+        self.decoder = P.FrameDecoder()
+
+    def close(self) -> None:
+        self.port.close()
+
+
+class FramedRig(Rig):
+    """A rig speaking the frame protocol over a transport (UDP or serial).
+
+    Sequence numbers: the SAMPLE request of tick k carries ``k mod 2**32``
+    and the SENSOR reply must echo it.  A reply to a request that already
+    timed out (it arrives late, after a host pause) is discarded and counted
+    in ``late_replies``; any other mismatch - a sequence number already
+    answered (duplicate, stale) or one never requested (out of order) - is a
+    :class:`BadReading`, as is a frame failing its CRC or length checks.
+    """
+
+    def __init__(self, transport, name: str, hello_timeout: float = 1.0):
+        self.tx = transport
+        self.name = name
+        self.hello_timeout = hello_timeout
+        self.late_replies = 0
+        self.ignored = 0
+        self._timed_out: deque[int] = deque(maxlen=64)
+        self._last_seq = 0
+        self.info: P.HelloInfo | None = None
+
+    def open(self) -> None:
+        self.tx.drain()
+        end = time.monotonic_ns() + int(self.hello_timeout * 1e9)
+        while time.monotonic_ns() < end:
+            self.tx.send(P.encode(P.MSG_HELLO, 0))
+            attempt_end = min(end, time.monotonic_ns() + 200_000_000)
+            while True:
+                msg = self.tx.recv(attempt_end)
+                if msg is None:
+                    break
+                if isinstance(msg, Frame) and msg.type == P.MSG_HELLO_ACK:
+                    try:
+                        self.info = P.parse_hello_ack(msg)
+                    except FrameError:
+                        continue
+                    self.emulated = bool(self.info.status & P.STATUS_EMULATED)
+                    self._warm_up()
+                    return
+        raise RigError(f"no answer from the rig at {self.name} (HELLO timed out after "
+                       f"{self.hello_timeout:g} s)")
+
+    _CANNED = P.encode(P.MSG_SENSOR, 0, P.sensor_payload(0.0, 0.0, 0.0, 0.0, 0))
+
+    def warm(self) -> None:
+        P.parse_sensor(P.decode(self._CANNED))
+        P.sample_frame(0)
+        P.command_frame(0, 0.0)
+
+    def _warm_up(self, n: int = 5) -> None:
+        """A few SAMPLE exchanges before the first tick (warms both ends' code paths)."""
+        for i in range(n):
+            seq = _MASK - n + 1 + i
+            deadline = time.monotonic_ns() + 50_000_000
+            self.tx.send(P.sample_frame(seq))
+            while True:
+                msg = self.tx.recv(deadline)
+                if msg is None:
+                    self._timed_out.append(seq)
+                    break
+                if isinstance(msg, Frame) and msg.seq == seq:
+                    break
+
+    def sample(self, k: int, deadline_ns: int) -> SensorReading | None:
+        seq = k & _MASK
+        self.tx.send(P.sample_frame(seq))
+        recv = self.tx.recv
+        while True:
+            msg = recv(deadline_ns)
+            if msg is None:
+                self._timed_out.append(seq)
+                return None
+            if isinstance(msg, FrameError):
+                raise BadReading(f"corrupted frame: {msg}")
+            self.rx_frames += 1
+            if msg.type != P.MSG_SENSOR:
+                if msg.type in (P.MSG_HELLO_ACK, P.MSG_CONTROL_ACK):
+                    self.ignored += 1
+                    continue
+                raise BadReading(f"unexpected {msg.name} frame from the rig")
+            s = msg.seq
+            if s == seq:
+                try:
+                    reading = P.parse_sensor(msg)
+                except FrameError as exc:
+                    raise BadReading(f"corrupted frame: {exc}") from None
+                self._last_seq = seq
+                return reading
+            if s in self._timed_out:
+                self._timed_out.remove(s)
+                self.late_replies += 1
+                continue
+            ahead = (s - seq) & _MASK
+            if 0 < ahead < 0x80000000:
+                raise BadReading(f"out-of-order sequence number {s} (expected {seq})")
+            raise BadReading(f"duplicated or stale sequence number {s} (expected {seq})")
+
+    def write(self, k: int, u_da: float) -> None:
+        self._last_seq = k & _MASK
+        self.tx.send(P.command_frame(self._last_seq, u_da))
+
+    def stop_motor(self) -> None:
+        try:
+            self.tx.send(P.command_frame(self._last_seq, 0.0))
+        except Exception:
+            pass
+
+    def close(self) -> None:
+        self.stop_motor()
+        self.tx.close()
+
+    def push(self, kick: float) -> None:
+        if not self.emulated or not isinstance(self.tx, UdpTransport):
+            raise RigError(f"push needs an emulated rig over UDP; {self.name} is not one")
+        from .rigsim import send_control
+
+        reply = send_control(self.tx.addr[0], self.tx.addr[1], {"cmd": "fault", "push": kick})
+        if not reply.get("ok"):
+            raise RigError(f"rig refused the push: {reply.get('error')}")
+
+    def counters(self) -> dict:
+        return {"late_replies": self.late_replies, "ignored_frames": self.ignored}
+
+
+def open_rig(spec: str, cfg: Config) -> Rig:
+    """The rig a ``--backend`` string names (not yet opened).
+
+    Raises
+    ------
+    ValueError
+        For an unknown scheme or a malformed address.
+    """
+    if spec == "sim":
+        return SimRig(cfg)
+    parts = urlsplit(spec)
+    if parts.scheme == "udp":
+        if not parts.hostname or parts.port is None:
+            raise ValueError(f"--backend {spec!r}: expected udp://HOST:PORT")
+        return FramedRig(UdpTransport(parts.hostname, parts.port), spec)
+    if parts.scheme == "serial":
+        rest = spec[len("serial://"):]
+        device, _, query = rest.partition("?")
+        if not device:
+            raise ValueError(f"--backend {spec!r}: expected serial://DEVICE[?baud=N]")
+        baud = 1_000_000
+        if query:
+            q = parse_qs(query)
+            try:
+                baud = int(q.get("baud", [baud])[0])
+            except ValueError:
+                raise ValueError(f"--backend {spec!r}: baud must be an integer") from None
+        return FramedRig(SerialTransport(device, baud), spec)
+    raise ValueError(f"--backend {spec!r}: expected sim, udp://HOST:PORT or serial://DEVICE")
+

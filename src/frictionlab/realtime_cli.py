@@ -1,0 +1,255 @@
+"""Subcommands ``frictionlab run`` (the real-time controller) and ``frictionlab rig-sim``.
+
+``run --headless --duration S --json`` runs the loop without the console and
+prints its statistics; without ``--headless`` it hands the controller to the
+operator console (``frictionlab.console.serve(controller, host, port,
+token)``) when that module is installed, else it says so and runs headless
+until Ctrl-C.  Exit status of ``run``: 0 when the run ended as asked
+(``duration``, ``signal``, ``user``, ``exit``), 1 after a safety stop or
+when the rig cannot be reached, 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import signal
+import sys
+
+from .cli import UsageError, _add_config_args, config_from_args, emit_json
+
+__all__ = ["interface_stats", "register_cli", "start_console"]
+
+DEFAULT_RIG_PORT = 9870
+PREWARM_US = 300.0
+_OK_STOPS = ("duration", "signal", "user", "exit")
+
+
+def _positive(name):
+    def conv(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise UsageError(f"{name} must be a number, got {text!r}") from None
+        if not (v > 0 and math.isfinite(v)):
+            raise UsageError(f"{name} must be > 0, got {text}")
+        return v
+
+    return conv
+
+
+def _cpu_arg(text: str):
+    if text in ("auto", "none"):
+        return text
+    try:
+        cpu = int(text)
+    except ValueError:
+        raise UsageError(f"--cpu must be auto, none or a CPU number, got {text!r}") from None
+    if cpu < 0:
+        raise UsageError(f"--cpu must be >= 0, got {cpu}")
+    return cpu
+
+
+def _resolve_cpu(value):
+    from .realtime.osrt import default_cpu
+
+    if value == "none":
+        return None
+    if value == "auto":
+        return default_cpu()
+    return value
+
+
+_CPU_HELP = ("pin the real-time thread to this CPU: auto (the last CPU; run and rig-sim then "
+             "share it), none, or a number (default auto; see docs/realtime.md)")
+
+
+def register_cli(sub) -> None:
+    p = sub.add_parser("run", help="the real-time controller (200 Hz loop, rig I/O, logging, "
+                                   "console)")
+    p.add_argument("--backend", default="sim", metavar="sim|udp://HOST:PORT|serial://DEVICE",
+                   help="rig backend (default: sim, the simulated plant in-process)")
+    p.add_argument("--host", default="127.0.0.1", help="console address (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=8000, help="console port (default 8000)")
+    p.add_argument("--token", default=None,
+                   help="console access token (default $FRICTIONLAB_TOKEN); required when "
+                        "--host is not a loopback address (docs/console.md)")
+    p.add_argument("--headless", action="store_true", help="run without the console")
+    p.add_argument("--duration", type=float, default=None,
+                   help="stop after S seconds (default: run until Ctrl-C)")
+    p.add_argument("--json", action="store_true",
+                   help="print the run's statistics as one JSON object")
+    p.add_argument("--log-dir", default="runs", help="where runs are logged (default ./runs)")
+    _add_config_args(p)
+    p.add_argument("--angle-limit", type=float, default=0.35, metavar="RAD",
+                   help="stop when |theta| exceeds this (default 0.35 rad)")
+    p.add_argument("--start-tolerance", type=float, default=0.15, metavar="RAD",
+                   help="start only if |theta| <= this (default 0.15 rad; no swing-up)")
+    p.add_argument("--no-realtime", action="store_true",
+                   help="do not ask for SCHED_FIFO priority")
+    p.add_argument("--prewarm-us", type=float, default=PREWARM_US, metavar="US",
+                   help="wake US microseconds before each deadline, run the tick's code on "
+                        f"scratch data and busy-wait to the deadline (default {PREWARM_US:g}; "
+                        "0 = off; see docs/realtime.md)")
+    p.add_argument("--cpu", type=_cpu_arg, default="auto", help=_CPU_HELP)
+    p.add_argument("--fsync", action="store_true", help="fsync the log after every write")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("rig-sim", help="the emulated rig speaking the UDP protocol "
+                                       "(docs/protocol.md)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=DEFAULT_RIG_PORT,
+                   help=f"UDP port (default {DEFAULT_RIG_PORT}; 0 picks a free one)")
+    p.add_argument("--serial", metavar="DEVICE", default=None,
+                   help="serve on a serial device instead of UDP")
+    _add_config_args(p, friction=False)
+    from .config import PLANT_FRICTION_KINDS
+
+    p.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
+                   help="friction model of the emulated plant (default: classical)")
+    p.add_argument("--watchdog", type=float, default=0.05, metavar="S",
+                   help="zero the motor when no command arrives for S seconds (default 0.05)")
+    p.add_argument("--fault", action="append", default=[], metavar="KEY=VALUE",
+                   help="inject a fault (test/teaching feature; see docs/protocol.md): "
+                        "nan, out_of_range, corrupt, duplicate, drop (counts), seq_offset, "
+                        "silent (s), push (rad/s)")
+    p.add_argument("--fault-after", type=float, default=0.0, metavar="S",
+                   help="apply the --fault settings S seconds after start-up")
+    p.add_argument("--no-realtime", action="store_true",
+                   help="do not ask for SCHED_FIFO priority")
+    p.add_argument("--cpu", type=_cpu_arg, default="auto", help=_CPU_HELP)
+    p.add_argument("--json", action="store_true",
+                   help="print {\"listening\", \"host\", \"port\"} as one JSON object when ready")
+    p.set_defaults(func=cmd_rig_sim)
+
+
+def cmd_run(args) -> int:
+    from .realtime import RealtimeController, Safety
+    from .realtime.clock import MonotonicClock
+
+    cfg = config_from_args(args)
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise UsageError(f"--duration must be > 0, got {args.duration}")
+    if not 0 <= args.prewarm_us < cfg.design.h * 1e6 / 2:
+        raise UsageError(f"--prewarm-us must be in [0, h/2), got {args.prewarm_us}")
+    if not 0 < args.port < 65536:
+        raise UsageError(f"--port must be in 1..65535, got {args.port}")
+    try:
+        safety = Safety(angle_limit=args.angle_limit, start_tolerance=args.start_tolerance)
+    except ValueError as exc:
+        raise UsageError(str(exc).replace("safety.angle_limit", "--angle-limit")
+                         .replace("safety.start_tolerance", "--start-tolerance")) from None
+    ctl = RealtimeController(cfg, args.backend, log_dir=args.log_dir,
+                             clock=MonotonicClock(), safety=safety, prewarm_us=args.prewarm_us,
+                             duration=args.duration, realtime=not args.no_realtime,
+                             fsync=args.fsync, cpu=_resolve_cpu(args.cpu))
+    if not args.headless:
+        if start_console(ctl, args.host, args.port, args.token):
+            return 0
+        print("frictionlab run: the operator console (frictionlab.console) is not installed; "
+              "running headless until Ctrl-C", file=sys.stderr)
+    return _run_headless(ctl, args)
+
+
+def start_console(ctl, host: str, port: int, token: str | None = None) -> bool:
+    """Hand ``ctl`` to the operator console and serve it until Exit or a signal.
+
+    The hook of ``frictionlab run`` without ``--headless``: imports
+    :mod:`frictionlab.console` and calls ``frictionlab.console.serve(ctl,
+    host, port, token)`` (``token`` None: the console's default, e.g.
+    ``$FRICTIONLAB_TOKEN``).  The controller is closed (motor zeroed, run
+    logged) when the console returns or raises.  Returns False, without
+    serving, when the console package is not installed.
+    """
+    try:
+        console = importlib.import_module("frictionlab.console")
+    except ModuleNotFoundError as exc:
+        if exc.name == "frictionlab.console":
+            return False
+        raise
+    try:
+        console.serve(ctl, host, port, token)
+    finally:
+        ctl.close()
+    return True
+
+
+def _run_headless(ctl, args) -> int:
+    from .realtime import RigError
+
+    previous = {}
+
+    def on_signal(signum, frame):
+        ctl.stop("signal")
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, on_signal)
+    try:
+        try:
+            ctl.start()
+        except (RigError, OSError) as exc:
+            print(f"frictionlab run: error: {exc}", file=sys.stderr)
+            return 1
+        while not ctl.wait(0.25):
+            pass
+    finally:
+        if ctl.running:
+            ctl.stop("signal")
+            ctl.wait(5.0)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    st = ctl.last_stats or {}
+    if args.json:
+        emit_json(interface_stats(st))
+    else:
+        j, c = st["jitter_ms"], st["compute_us"]
+        print(f"stopped: {st['stop_reason']} ({st.get('stop_detail') or ''})")
+        print(f"ticks {st['ticks']}, missed {st['missed']}, overruns {st['overruns']}, "
+              f"rig timeouts {st['rig_timeouts']}")
+        if j["p50"] is not None:
+            print(f"jitter p50 {j['p50']:.3f} ms, p99 {j['p99']:.3f} ms, max {j['max']:.3f} ms;"
+                  f" compute p50 {c['p50']:.0f} us, p99 {c['p99']:.0f} us")
+        print(f"log: {st['log']}")
+    return 0 if st.get("stop_reason") in _OK_STOPS else 1
+
+
+def interface_stats(st: dict) -> dict:
+    """The fields ``frictionlab run --headless --json`` prints (INTERFACE.md), from the
+    run's full statistics (all of which are in the run's JSON sidecar)."""
+    j, c = st["jitter_ms"], st["compute_us"]
+    return {"ticks": st["ticks"], "missed": st["missed"], "overruns": st["overruns"],
+            "jitter_ms": {"p50": j["p50"], "p99": j["p99"], "max": j["max"]},
+            "compute_us": {"p50": c["p50"], "p99": c["p99"]},
+            "stop_reason": st["stop_reason"], "log": st["log"]}
+
+
+def cmd_rig_sim(args) -> int:
+    from .realtime.rigsim import FAULTS, run_rig_sim
+
+    cfg = config_from_args(args)
+    if not 0 <= args.port < 65536:
+        raise UsageError(f"--port must be in 0..65535, got {args.port}")
+    if not (args.watchdog > 0 and math.isfinite(args.watchdog)):
+        raise UsageError(f"--watchdog must be > 0, got {args.watchdog}")
+    if args.fault_after < 0:
+        raise UsageError(f"--fault-after must be >= 0, got {args.fault_after}")
+    faults = {}
+    for text in args.fault:
+        key, sep, value = text.partition("=")
+        if not sep or key not in FAULTS:
+            raise UsageError(f"--fault expects KEY=VALUE with KEY one of {', '.join(FAULTS)}; "
+                             f"got {text!r}")
+        try:
+            faults[key] = float(value)
+        except ValueError:
+            raise UsageError(f"--fault {key}: {value!r} is not a number") from None
+
+    def announce(info):
+        print(f"frictionlab rig-sim: listening on {info['listening']}", file=sys.stderr)
+        if args.json:
+            emit_json(info)
+
+    run_rig_sim(cfg, args.host, args.port, watchdog=args.watchdog, serial_device=args.serial,
+                faults=faults, fault_after=args.fault_after, realtime=not args.no_realtime,
+                cpu=_resolve_cpu(args.cpu), announce=announce)
+    return 0

@@ -1,0 +1,246 @@
+"""The periodic loop on a fake clock: deadlines, skip-ahead, timing statistics, mailbox, gc.
+
+No test here sleeps: :class:`FakeClock` jumps to each deadline, and the
+in-process rig (``SimRig`` or the emulator behind :class:`DirectTransport`)
+steps the plant in fake time.
+"""
+
+import gc
+import random
+
+import numpy as np
+import pytest
+
+from frictionlab.config import ConfigError, build_config
+from frictionlab.controller import S_RELAY, S_ZHAT, controller_step
+from frictionlab.realtime import FakeClock, RealtimeController, Safety
+from frictionlab.realtime import loop as loop_mod
+from frictionlab.realtime.loop import Loop
+from frictionlab.realtime.params import ControlParams
+from frictionlab.realtime.rigs import FramedRig, SimRig
+from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
+from frictionlab.realtime.samples import CHANGED, MISSED, OVERRUN, START, STOP
+
+H_NS = 5_000_000
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return build_config("fast", "classical")
+
+
+def run_loop(cfg, clock, rig=None, duration=1.0, **kw):
+    rig = rig or SimRig(cfg)
+    rig.open()
+    loop = Loop(rig, clock, ControlParams.from_config(cfg), duration=duration,
+                realtime=False, manage_gc=kw.pop("manage_gc", False), **kw)
+    samples = []
+    loop.sinks = (samples.append,)
+    loop.run()
+    return loop, samples
+
+
+class TimedRig:
+    """Wraps a rig; lets fake time pass in ``sample``/``write`` at chosen ticks."""
+
+    def __init__(self, rig, clock, read_ns=lambda k: 0, write_ns=lambda k: 0):
+        self.rig, self.clock = rig, clock
+        self.read_ns, self.write_ns = read_ns, write_ns
+
+    def __getattr__(self, name):
+        return getattr(self.rig, name)
+
+    def sample(self, k, deadline_ns):
+        self.clock.advance(self.read_ns(k))
+        return self.rig.sample(k, deadline_ns)
+
+    def write(self, k, u_da):
+        self.clock.advance(self.write_ns(k))
+        self.rig.write(k, u_da)
+
+
+def test_deadlines_are_absolute_integer_ticks_despite_wakeup_latency(cfg):
+    rng = random.Random(3)
+    latencies = {}
+
+    def latency(deadline):
+        ns = rng.randrange(0, 2_000_000)
+        latencies[deadline] = ns
+        return ns
+
+    clock = FakeClock(wake_latency=latency)
+    loop, samples = run_loop(cfg, clock, duration=2.0)
+    t0 = loop.t0_ns
+    n = round(2.0 / 0.005)
+    # every sleep targets t0 + k h exactly: no drift however late the wake-ups were
+    assert clock.sleeps[:n] == [t0 + k * H_NS for k in range(n)]
+    assert loop.ticks == n and loop.missed == 0
+    assert [s.k for s in samples[:-1]] == list(range(n))
+    # the jitter statistics are the wake-up latencies (1 us bins)
+    lat = np.array([latencies[t0 + k * H_NS] for k in range(n)]) / 1e3
+    st = loop.stats()
+    assert st["jitter_ms"]["max"] == pytest.approx(lat.max() / 1e3, abs=1e-6)
+    assert abs(st["jitter_ms"]["p50"] * 1e3 - np.percentile(lat, 50, method="inverted_cdf")) <= 1.0
+    assert abs(st["jitter_ms"]["p99"] * 1e3 - np.percentile(lat, 99, method="inverted_cdf")) <= 1.0
+    assert [s.jitter_us for s in samples[:n]] == pytest.approx(list(lat), abs=1e-3)
+    assert samples[0].flags & START and samples[-1].flags & STOP
+    assert loop.stop_reason == "duration"
+
+
+def test_missed_deadline_skips_ahead_without_a_burst(cfg):
+    stall_ns = 23_000_000
+    t0_holder = {}
+
+    def latency(deadline):
+        t0 = t0_holder.setdefault("t0", deadline)
+        return stall_ns if deadline == t0 + 50 * H_NS else 0
+
+    clock = FakeClock(wake_latency=latency)
+    loop, samples = run_loop(cfg, clock, duration=1.0)
+    t0 = loop.t0_ns
+    skipped = stall_ns // H_NS  # 4 deadlines passed during the stall
+    assert loop.missed == skipped
+    assert loop.ticks + loop.missed == 200
+    # after the stall the loop sleeps to the next deadline on the grid: 50 -> 55
+    i = clock.sleeps.index(t0 + 50 * H_NS)
+    assert clock.sleeps[i + 1] == t0 + (50 + skipped + 1) * H_NS
+    assert np.all(np.diff(clock.sleeps) > 0)
+    ks = [s.k for s in samples[:-1]]
+    assert 51 not in ks and ks[50] == 50 + skipped
+    assert samples[50].flags & MISSED
+    assert samples[50].jitter_us == pytest.approx((stall_ns - skipped * H_NS) / 1e3)
+    st = loop.stats()
+    assert st["stalls"] == 1 and st["stall_list"][0]["missed"] == skipped
+    assert st["max_stall_ms"] == pytest.approx(stall_ns / 1e6)
+    assert st["missed_fraction"] == pytest.approx(skipped / 200)
+
+
+def test_compute_rig_time_and_overruns_are_measured(cfg):
+    clock = FakeClock()
+    rig = TimedRig(SimRig(cfg), clock, read_ns=lambda k: 200_000,
+                   write_ns=lambda k: 6_000_000 if k == 40 else 30_000)
+    loop, samples = run_loop(cfg, clock, rig=rig, duration=0.5)
+    st = loop.stats()
+    assert st["rig_us"]["p50"] == pytest.approx(200, abs=1)
+    assert st["compute_us"]["p50"] == pytest.approx(30, abs=1)
+    assert st["compute_us"]["max"] == pytest.approx(6000, abs=1)
+    assert st["overruns"] == 1
+    assert samples[40].flags & OVERRUN
+    assert not any(s.flags & OVERRUN for s in samples if s.k != 40)
+    # the overrun made the next wake-up late by (6 ms + 0.2 ms) - 5 ms, not a miss
+    assert samples[41].k == 41 and samples[41].jitter_us == pytest.approx(1200, abs=1)
+    assert loop.missed == 0
+
+
+def test_gc_is_kept_out_of_the_tick(cfg):
+    seen = []
+
+    class GcProbe(SimRig):
+        def sample(self, k, deadline_ns):
+            seen.append(gc.isenabled())
+            return super().sample(k, deadline_ns)
+
+    assert gc.isenabled()
+    loop, _ = run_loop(cfg, FakeClock(), rig=GcProbe(cfg), duration=2.5, manage_gc=True)
+    assert seen and not any(seen)
+    assert gc.isenabled()
+    assert loop.gc_runs >= 2  # the loop's own scheduled collections, between ticks
+
+
+def test_realtime_refusal_is_reported_once(cfg, monkeypatch, capsys):
+    note = "SCHED_FIFO is not permitted here (test); running at normal priority"
+    monkeypatch.setattr(loop_mod, "try_realtime_priority", lambda prio, cpu=None: note)
+    monkeypatch.setattr(loop_mod, "_rt_warned", False)
+    for _ in range(2):
+        loop = Loop(SimRig(cfg), FakeClock(), ControlParams.from_config(cfg), duration=0.05,
+                    realtime=True, manage_gc=False)
+        loop.rig.open()
+        assert loop.run() == "duration"
+        assert loop.rt_note == note and loop.sched_fifo is False
+    assert capsys.readouterr().err.count("SCHED_FIFO is not permitted") == 1
+
+
+def _replay_u(samples, params_at):
+    """Replay the controller on the logged measurements; params_at(k) -> ControlParams."""
+    first = samples[0]
+    p = params_at(first.k)
+    s = p.controller.init(first.theta_m)
+    out = []
+    for smp in samples:
+        q = params_at(smp.k)
+        if q.gp[:].tolist() != p.gp.tolist() and q.comp_kind != p.comp_kind:
+            s[S_RELAY] = 0.0
+            s[S_ZHAT] = 0.0
+        p = q
+        u, _, _ = controller_step(s, p.gp, p.cp, smp.theta_m, smp.arm_m, smp.arm_dot_m)
+        out.append(u)
+    return np.array(out)
+
+
+def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
+    clock = FakeClock()
+    ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=clock, duration=1.0,
+                             realtime=False, manage_gc=False)
+    sub = ctl.subscribe(maxlen=1000)
+    before = ControlParams.from_config(cfg)
+    futures = []
+    change = {"design": "slow", "compensation": "coulomb"}
+    # submitted from "another thread" while the loop sleeps between ticks 98 and 99; the
+    # loop takes it from the mailbox after tick 99's output: in effect from tick 100
+    clock.call_at(clock.now_ns() + H_NS + 98 * H_NS + H_NS // 2,
+                  lambda: futures.append(ctl.submit(change)))
+    stats = ctl.run()
+    assert stats["stop_reason"] == "duration" and stats["changes_applied"] == 1
+    samples = [s for s in sub.drain() if not s.flags & STOP]
+    k_new = futures[0].result(timeout=0)
+    assert k_new == 100
+    changed = [s.k for s in samples if s.flags & CHANGED]
+    assert changed == [k_new]
+    after = before.apply(change)
+    assert ctl.status()["design"]["preset"] == "slow"
+    assert ctl.status()["compensation"]["kind"] == "coulomb"
+    # every tick used either the old or the new parameters as a whole
+    u_log = np.array([s.u for s in samples])
+    u_rep = _replay_u(samples, lambda k: before if k < k_new else after)
+    np.testing.assert_allclose(u_log, u_rep, rtol=0, atol=1e-9)
+    # ... and not the new ones earlier or the old ones later
+    u_wrong = _replay_u(samples, lambda k: before)
+    assert np.max(np.abs(u_wrong[k_new:] - u_log[k_new:])) > 1e-3
+
+
+def test_invalid_change_is_refused_and_nothing_changes(cfg):
+    ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=FakeClock(),
+                             realtime=False, manage_gc=False)
+    before = ctl.status()
+    for bad in ({"set": {"design.omega1": -1.0}}, {"compensation": "magic"},
+                {"design.h": 0.01}, {"set": {"design.h": 0.01}},
+                {"compensation_params": {"sigma0": -3}}):
+        with pytest.raises(ConfigError):
+            ctl.submit(bad)
+    assert ctl.status()["design"] == before["design"]
+    assert ctl.status()["compensation"] == before["compensation"]
+    fut = ctl.submit({"compensation": "lugre", "compensation_params": {"sigma0": 250}})
+    assert fut.result(timeout=0) is None  # not running: applies to the next run
+    st = ctl.status()["compensation"]
+    assert st["kind"] == "lugre" and st["enabled"] and st["params"]["sigma0"] == 250
+
+
+def test_loop_with_emulated_rig_balances_and_logs_raw_values(cfg):
+    clock = FakeClock()
+    emu = RigEmulator(cfg, clock)
+    rig = FramedRig(DirectTransport(emu, clock), "direct")
+    loop, samples = run_loop(cfg, clock, rig=rig, duration=3.0, safety=Safety())
+    assert loop.stop_reason == "duration"
+    assert loop.rig_timeouts == 0 and loop.missed == 0
+    theta = np.array([s.theta_m for s in samples[:-1]])
+    assert np.all(np.abs(theta) < 0.35)
+    # raw readings on the 12-bit grid, converted with App. B
+    y = np.array([s.y for s in samples[:-1]])
+    q = 2.0 / 4096
+    np.testing.assert_allclose(y / q, np.round(y / q), atol=1e-3)
+    np.testing.assert_allclose(theta, np.pi * (y + 0.503), atol=1e-9)
+    # u_DA = -0.022 u, and the emulator received the last command (u = 0 at the stop)
+    u = np.array([s.u for s in samples[:-1]])
+    uda = np.array([s.u_da for s in samples[:-1]])
+    np.testing.assert_allclose(uda, np.clip(-0.022 * u, -1, 1), atol=1e-12)
+    assert emu.last_command_seq == loop.stop_tick and emu.u_da == 0.0
