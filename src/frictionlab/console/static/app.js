@@ -28,7 +28,7 @@
   // State shared with the browser tests (read-only for them).
   const ui = (window.__console = {
     frames: 0, renders: 0, lastT: null, status: null, schema: null, connected: false,
-    ended: false,
+    ended: false, frameEnds: [], xRange: null,
   });
 
   // --- HTTP -------------------------------------------------------------------------------
@@ -199,7 +199,7 @@
   }
 
   // --- status line --------------------------------------------------------------------------
-  const fmt = (v, d = 3) => (v === null || v === undefined || Number.isNaN(v) ? "-" : Number(v).toPrecision(d));
+  const fmt = (v, d = 3) => (v === null || v === undefined || Number.isNaN(v) ? "-" : String(+Number(v).toPrecision(d)));
   const gains = (arr) => (arr ? "[" + arr.map((v) => Number(v).toPrecision(4)).join(", ") + "]" : "-");
 
   function showStatus(st, force) {
@@ -292,6 +292,10 @@
       };
       charts[g.id] = { plot: new uPlot(opts, [[], ...sigs.map(() => [])], el), sigs };
     }
+    ui.shown = (key) => {   // whether a signal's curve is drawn (for tests)
+      const s = SIGNALS.find((x) => x.key === key), c = charts[s.group];
+      return c.plot.series[c.sigs.indexOf(s) + 1].show;
+    };
     window.addEventListener("resize", () => {
       const w = Math.max(320, box.clientWidth - 4);
       for (const c of Object.values(charts)) c.plot.setSize({ width: w, height: c.plot.height });
@@ -333,6 +337,8 @@
     if (cut) for (const k in data) data[k].splice(0, cut);
     ui.frames++;
     ui.lastT = tEnd;
+    ui.frameEnds.push(tEnd);
+    if (ui.frameEnds.length > 200) ui.frameEnds.shift();
     dirty = true;
   }
 
@@ -348,6 +354,7 @@
         });
       }
       ui.renders++;
+      ui.xRange = [min, max];
     }
     requestAnimationFrame(render);
   }

@@ -1,0 +1,255 @@
+"""The operator console in a real browser: ``frictionlab run`` on the sim backend, one page.
+
+The tests share one server and one page and run in file order (the last one presses Exit).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+from playwright.sync_api import expect
+
+from frictionlab.design import design
+
+from .conftest import ConsoleProcess, wait_until
+
+pytestmark = pytest.mark.timeout(120)
+
+
+@pytest.fixture(scope="module")
+def console(tmp_path_factory):
+    proc = ConsoleProcess(tmp_path_factory.mktemp("console-runs"))
+    try:
+        proc.wait_url()
+        proc.wait_running()
+        yield proc
+    finally:
+        proc.stop()
+
+
+@pytest.fixture(scope="module")
+def page(browser, console):
+    ctx = browser.new_context(viewport={"width": 1400, "height": 1000}, accept_downloads=True)
+    pg = ctx.new_page()
+    errors: list[str] = []
+    pg.on("pageerror", lambda exc: errors.append(str(exc)))
+    pg.goto(console.url)
+    expect(pg.locator("#conn")).to_have_text("live", timeout=30_000)
+    pg.errors = errors
+    yield pg
+    ctx.close()
+
+
+def ui(page, expr: str):
+    return page.evaluate(f"() => window.__console.{expr}")
+
+
+def status(page) -> dict:
+    return page.evaluate("() => window.__console.status")
+
+
+def gains(page, which: str) -> np.ndarray:
+    text = page.locator(f"#gains-{which}").inner_text()
+    return np.array([float(v) for v in re.findall(r"[-+]?\d[\d.]*(?:e[-+]?\d+)?", text)])
+
+
+def wait_sim_time(page, t_target: float, timeout: float = 60.0) -> dict:
+    """Wait until the loop's time (reported in the status) reaches ``t_target``."""
+    def reached():
+        st = status(page)
+        assert st["running"], f"the loop stopped: {st.get('stop_reason')} {st.get('stop_detail')}"
+        return st if st["t"] >= t_target else None
+
+    return wait_until(reached, timeout, what=f"loop time {t_target:.1f} s")
+
+
+def test_address_printed_and_status_line(console, page):
+    assert console.url == f"http://127.0.0.1:{console.port}/"
+    expect(page.locator("#run-state")).to_have_text("running")
+    expect(page.locator("#start")).to_have_text("Stop")
+    expect(page.locator("#timing")).to_contain_text(re.compile(r"jitter p50 [\d.e-]+ ms"))
+    expect(page.locator("#timing")).to_contain_text(re.compile(r"compute p50 [\d.e-]+ µs"))
+    expect(page.locator("#setup")).to_contain_text("backend sim")
+
+
+def test_plot_updates_at_least_10_times_a_second(page):
+    frames0, t0 = ui(page, "frames"), ui(page, "lastT")
+    wait_until(lambda: ui(page, "frames") >= frames0 + 25, what="25 plot frames")
+    assert ui(page, "lastT") > t0
+    assert ui(page, "renders") > 0
+    assert page.locator("#plots canvas").count() == 3
+    ends = np.array(ui(page, "frameEnds"))
+    steps = np.diff(ends)
+    assert (steps > 0).all()
+    # the page receives a frame for every 0.05 s of loop time (typically); at least every 0.1 s
+    assert np.median(steps) <= 0.1
+    assert not page.errors
+
+
+def test_signal_toggles_and_time_window(page):
+    button = page.locator('#signal-toggles button[data-signal="u"]')
+    expect(button).to_have_attribute("aria-pressed", "true")
+    assert ui(page, "shown('u')") is True
+    button.click()
+    expect(button).to_have_attribute("aria-pressed", "false")
+    assert ui(page, "shown('u')") is False
+    button.click()
+    assert ui(page, "shown('u')") is True
+    # estimates and the friction estimate are off until asked for
+    est = page.locator('#signal-toggles button[data-signal="friction_hat"]')
+    expect(est).to_have_attribute("aria-pressed", "false")
+    est.click()
+    assert ui(page, "shown('friction_hat')") is True
+
+    window = page.locator("#window")
+    window.fill("4")
+    window.press("Enter")
+    window.blur()
+    wait_until(lambda: (r := ui(page, "xRange")) and abs(r[1] - r[0] - 4) < 1e-6,
+               what="a 4 s plot window")
+    window.fill("1")
+    window.blur()
+    expect(page.locator("#window-error")).to_contain_text("out of range")
+    window.fill("10")
+    window.blur()
+    expect(page.locator("#window-error")).to_have_text("")
+    wait_until(lambda: (r := ui(page, "xRange")) and abs(r[1] - r[0] - 10) < 1e-6,
+               what="a 10 s plot window")
+
+
+def test_invalid_entries_refused_beside_the_field(console, page):
+    before = status(page)["design"]
+    l_before = gains(page, "L")
+    zeta1 = page.locator("#feedback-zeta1")
+    zeta1.fill("abc")
+    page.locator("#feedback-apply").click()
+    expect(page.locator("#feedback-zeta1-error")).to_contain_text("must be a number")
+    expect(page.locator("#feedback-msg")).to_contain_text("not applied")
+    zeta1.fill("2")
+    page.locator("#feedback-apply").click()
+    expect(page.locator("#feedback-zeta1-error")).to_contain_text("out of range")
+    sigma0 = page.locator("#friction-sigma0")
+    sigma0.fill("-300")
+    page.locator("#friction-apply").click()
+    expect(page.locator("#friction-sigma0-error")).to_contain_text("out of range")
+    # nothing was applied
+    st = console.get("/api/status")[1]
+    assert st["design"]["spec"] == before["spec"]
+    assert st["compensation"]["params"]["sigma0"] > 0
+    np.testing.assert_array_equal(gains(page, "L"), l_before)
+
+    # the server validates again whatever it is sent
+    code, body = console.post("/api/design", {"zeta1": 2})
+    assert code == 422 and body["errors"][0]["field"] == "zeta1"
+    assert "zeta1" in body["detail"]
+    code, body = console.post("/api/design", {"zeta1": "abc"})
+    assert code == 422 and body["errors"][0]["field"] == "zeta1"
+    code, body = console.post("/api/compensation", {"params": {"sigma0": -300}})
+    assert code == 422 and "sigma0" in body["detail"]
+    st = console.get("/api/status")[1]
+    assert st["design"]["spec"] == before["spec"]
+
+
+def test_fast_and_slow_change_the_gains(page):
+    fast, slow = design("fast"), design("slow")
+    np.testing.assert_allclose(gains(page, "L"), fast.L, rtol=1e-3)
+    page.locator("#slow").click()
+    expect(page.locator("#feedback-msg")).to_have_text("slow design applied")
+    wait_until(lambda: status(page)["design"]["preset"] == "slow", what="slow design")
+    np.testing.assert_allclose(gains(page, "L"), slow.L, rtol=1e-3)
+    np.testing.assert_allclose(gains(page, "K"), slow.K, rtol=1e-3)
+    assert page.locator("#feedback-omega2").input_value() == "3"
+    page.locator("#fast").click()
+    expect(page.locator("#feedback-msg")).to_have_text("fast design applied")
+    wait_until(lambda: status(page)["design"]["preset"] == "fast", what="fast design")
+    np.testing.assert_allclose(gains(page, "L"), fast.L, rtol=1e-3)
+    np.testing.assert_allclose(gains(page, "K"), fast.K, rtol=1e-3)
+    assert not np.allclose(fast.L, slow.L, rtol=1e-2)
+
+
+def test_compensation_shrinks_the_limit_cycle(page):
+    window = status(page)["console"]["limit_cycle"]["window"]
+    # a full window of the fast design without compensation (after the Fast press above)
+    wait_sim_time(page, status(page)["t"] + window + 0.5)
+    lc = status(page)["console"]["limit_cycle"]
+    assert lc["status"] == "limit_cycle"
+    off = lc["peak_to_peak"]
+    shown = float(page.locator("#lc-ptp").get_attribute("data-value"))
+    assert shown > 0.05 and off > 0.05
+
+    button = page.locator("#compensation")
+    expect(button).to_have_text("Compensation")
+    button.click()
+    expect(button).to_have_text("Compensating")
+    st = status(page)
+    assert st["compensation"]["enabled"] and st["compensation"]["kind"] == "lugre"
+    wait_sim_time(page, st["t"] + window + 1.0)
+    on = float(page.locator("#lc-ptp").get_attribute("data-value") or "nan")
+    assert on < 0.5 * off, (off, on)
+    button.click()
+    expect(button).to_have_text("Compensation")
+
+
+def test_push_disturbs_the_simulated_pendulum(page):
+    kick = page.locator("#kick")
+    kick.fill("lots")
+    page.locator("#push").click()
+    expect(page.locator("#kick-error")).to_contain_text("must be a number")
+    kick.fill("0.2")
+    page.locator("#push").click()
+    expect(page.locator("#push-msg")).to_have_text("pushed 0.2 rad/s")
+
+
+def test_save_data_records_names_and_downloads(console, page):
+    save = page.locator("#save")
+    save.click()
+    expect(save).to_have_text("Stop saving")
+    t0 = status(page)["t"]
+    wait_sim_time(page, t0 + 1.0)
+    save.click()
+    prompt = page.locator("#save-prompt")
+    expect(prompt).to_be_visible()
+    name = page.locator("#save-name")
+    name.fill("no spaces please")
+    page.locator("#save-write").click()
+    expect(page.locator("#save-name-error")).to_contain_text("letters")
+    name.fill("console_test")
+    page.locator("#save-write").click()
+    link = page.locator("#download-dat")
+    expect(link).to_be_visible()
+    with page.expect_download() as info:
+        link.click()
+    download = info.value
+    assert download.suggested_filename == "console_test.dat"
+    data = np.loadtxt(download.path())
+    on_disk = console.log_dir / "console_test.dat"
+    assert on_disk.is_file()
+    np.testing.assert_array_equal(data, np.loadtxt(on_disk))
+    assert data.ndim == 2 and data.shape[1] == 10
+    assert data.shape[0] >= 100
+    assert np.isfinite(data[:, 0]).all() and np.abs(data[:, 0]).max() < 0.35
+    # measured and estimated pendulum angle agree (columns 1 and 2 of Sec. 7.1)
+    assert np.abs(data[:, 0] - data[:, 1]).max() < 0.05
+    with page.expect_download() as info:
+        page.locator("#download-csv").click()
+    csv_text = open(info.value.path()).read()
+    header = csv_text.splitlines()[0].split(",")
+    assert "theta_m" in header and "u" in header
+    assert len(csv_text.splitlines()) == data.shape[0] + 1
+
+
+def test_exit_stops_the_loop_and_ends_the_server(console, page):
+    exit_button = page.locator("#exit")
+    exit_button.click()
+    expect(exit_button).to_have_text("Confirm exit")
+    exit_button.click()
+    expect(page.locator("#ended")).to_be_visible()
+    assert console.proc.wait(30) == 0
+    assert any("stopped" in line for line in console.stdout)
+    metas = [json.loads(p.read_text()) for p in console.log_dir.glob("run-*.json")]
+    assert metas and all(not m["running"] for m in metas)
+    assert any(m["stop_reason"] == "exit" for m in metas)
+    assert not page.errors
