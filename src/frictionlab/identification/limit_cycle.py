@@ -1,0 +1,807 @@
+r"""Friction and process identification from limit-cycle features (Sec. 5).
+
+The thesis compared limit cycles of the real rig (Table 1) with simulated
+ones while varying the friction parameters one at a time, and found no
+setting that matched (Sec. 5.2-5.4); it suspected the process parameters
+:math:`\omega_0` and :math:`k_u` (``plant.omega0``, ``plant.input_gain``).
+This module fits any chosen parameter keys to the measured features of one or
+more experiments (fast and slow designs, each with its own settings) at once.
+
+Cost
+----
+For every experiment e and every measured feature f (Table 1's columns and
+``peak_to_peak``; a feature may be unknown) the residual is the weighted
+relative error
+
+.. math::
+
+    r_{e,f} = w_f \, \frac{f^{sim}_{e}(p) - f^{meas}_{e}}{f^{meas}_{e}},
+
+and the cost is :math:`C(p) = \sum r_{e,f}^2`.  A run that falls or does not
+settle into a limit cycle, or lacks a measured feature, gets the finite
+residual :data:`PENALTY` (times the weight) for each such feature, larger than
+any plausible relative error, so the global search is steered away from it.
+A half-cycle with a single maximum has no separate second peak or valley;
+its ``peak2`` and ``valley`` are then taken equal to ``peak1``, which is the
+continuous limit of a double peak whose valley has filled in.
+
+Search
+------
+1. Global: :func:`scipy.optimize.differential_evolution` over the bounds
+   (in coordinates normalised to [0, 1]); each generation's population is
+   evaluated in one batch through :func:`frictionlab.sweep.evaluate` (all
+   experiments of all members in one call, so a process pool or a Dask
+   cluster works on the whole generation).
+2. Local: :func:`scipy.optimize.least_squares` (trust region reflective,
+   within the bounds) from the best point, with a central-difference
+   Jacobian whose relative step (default 1 %) lies well above the
+   simulator's feature noise: features are only piecewise smooth in the
+   parameters because the loop is sampled (the period of a limit cycle
+   locked to the 5 ms sampling moves in steps of a few ms).  The 2n
+   perturbed points of one Jacobian are again one batch.
+
+Uncertainty and identifiability
+-------------------------------
+With J the Jacobian of the residuals at the optimum (m residuals, n keys),
+the covariance is estimated as :math:`s^2 (J^T J)^{-1}`, with the residual
+variance :math:`s^2 = C/(m - n)`.  With m <= n, or a singular :math:`J^T J`,
+no standard error is reported (``None``) and a warning says why.
+
+The identifiability check takes the singular value decomposition of the
+Jacobian scaled to relative parameter changes, :math:`J\,\mathrm{diag}(|p|)`:
+a relative change :math:`\delta` of the parameters along the singular vector
+:math:`v_i` moves the (weighted, relative) features by :math:`\sigma_i\delta`
+in Euclidean norm.  A direction with :math:`\sigma_i <` :data:`FLAT_SENSITIVITY`
+(a 20 % parameter change moving the features by less than 1 % in all), or
+below :data:`FLAT_RATIO` times the largest singular value (numerically flat),
+is flat: the parameters dominating its singular vector are named in a warning
+(the features cannot determine them, or only a combination of them).  The
+criterion is absolute, not relative to the best-determined direction, because
+a very sensitive parameter such as ``plant.omega0`` must not make a merely
+less sensitive one look unidentifiable.  A parameter whose
+relative standard error exceeds 50 % is reported as poorly determined.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import differential_evolution, least_squares
+
+from ..config import _CLASSES, Config, ConfigError, build_config, valid_keys
+from ..limit_cycles import FEATURES
+
+__all__ = [
+    "DEFAULT_BOUNDS",
+    "FLAT_RATIO",
+    "FLAT_SENSITIVITY",
+    "PENALTY",
+    "Experiment",
+    "FitResult",
+    "LimitCycleProblem",
+    "default_bounds",
+    "fit_limit_cycle",
+    "parse_experiments",
+]
+
+#: Residual given to a feature of a run that fell, settled, or lacks the feature.
+PENALTY = 10.0
+#: Singular value of the relatively scaled Jacobian below which a direction
+#: counts as flat (not identifiable): a 20 % parameter change along it moves
+#: the weighted relative features by under 1 % (Euclidean norm over all).
+FLAT_SENSITIVITY = 0.05
+#: Singular-value ratio (to the largest) below which a direction is
+#: numerically flat whatever its absolute size.
+FLAT_RATIO = 1e-4
+#: Relative standard error above which a parameter is reported as poorly determined.
+POOR_RELATIVE_STDERR = 0.5
+
+#: Default search bounds of the usual keys (the thesis's values lie well inside).
+DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
+    "friction.coulomb": (0.2, 4.0),
+    "friction.stiction": (0.2, 6.0),
+    "friction.coulomb_negative": (0.2, 4.0),
+    "friction.stiction_negative": (0.2, 6.0),
+    "friction.viscous": (0.0, 0.5),
+    "friction.stribeck_velocity": (0.05, 5.0),
+    "friction.sigma0": (10.0, 3000.0),
+    "friction.sigma1": (0.0, 50.0),
+    "friction.observer_gain": (0.0, 20.0),
+    "friction.zero_velocity_band": (0.001, 0.1),
+    "friction.hysteresis": (0.0, 0.2),
+    "plant.omega0": (5.0, 9.0),
+    "plant.input_gain": (0.5, 2.0),
+    "plant.zeta": (0.0, 0.2),
+}
+
+_FITTABLE_SECTIONS = ("plant", "design", "friction", "compensation")
+
+
+# ---------------------------------------------------------------------------
+# problem specification
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One measured limit cycle.
+
+    Attributes
+    ----------
+    design : {"fast", "slow"}
+        Design preset the rig ran (Sec. 2.4).
+    sets : dict
+        Further parameter keys of this experiment (``{key: value}``).
+    features : dict
+        Measured features (names of :data:`frictionlab.limit_cycles.FEATURES`);
+        unknown features are left out.
+    label : str
+        Name used in the residual report.
+    """
+
+    design: str
+    sets: Mapping[str, float]
+    features: Mapping[str, float]
+    label: str
+
+    def __post_init__(self) -> None:
+        if self.design not in ("fast", "slow"):
+            raise ConfigError(f"experiment {self.label!r}: design must be 'fast' or 'slow', "
+                              f"got {self.design!r}")
+        for name, value in self.features.items():
+            if name not in FEATURES:
+                raise ConfigError(f"experiment {self.label!r}: unknown feature {name!r}; "
+                                  f"known features: {', '.join(FEATURES)}")
+            if not (isinstance(value, float) and math.isfinite(value) and value > 0):
+                raise ConfigError(f"experiment {self.label!r}: feature {name} must be a "
+                                  f"positive number (relative errors need it), got {value!r}")
+        if not self.features:
+            raise ConfigError(f"experiment {self.label!r} has no known feature")
+
+
+def _number(where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{where}: {value!r} is not a number")
+    return float(value)
+
+
+def parse_experiments(obj: Any) -> list[Experiment]:
+    """Validate the ``--measured`` JSON object and return its experiments.
+
+    The object is ``{"experiments": [{"design": "fast"|"slow", "set": {KEY:
+    VALUE}, "features": {"peak1": ..., ...}}, ...]}``; an optional ``"name"``
+    labels an experiment (default: its design, numbered when repeated).  A
+    feature given as ``null`` is unknown.
+
+    Raises
+    ------
+    ConfigError
+        Empty list, unknown feature, non-positive value, bad design.
+    """
+    if not isinstance(obj, Mapping) or "experiments" not in obj:
+        raise ConfigError('measured features must be a JSON object {"experiments": [...]}')
+    items = obj["experiments"]
+    if not isinstance(items, list) or not items:
+        raise ConfigError("measured features: 'experiments' must be a non-empty list")
+    labels: list[str] = []
+    out = []
+    for i, item in enumerate(items):
+        where = f"experiment {i + 1}"
+        if not isinstance(item, Mapping):
+            raise ConfigError(f"{where}: must be a JSON object")
+        unknown = set(item) - {"design", "set", "features", "name"}
+        if unknown:
+            raise ConfigError(f"{where}: unknown field(s) {', '.join(sorted(unknown))}; "
+                              "allowed: design, set, features, name")
+        design = item.get("design", "fast")
+        sets = item.get("set") or {}
+        feats = item.get("features")
+        if not isinstance(sets, Mapping):
+            raise ConfigError(f"{where}: 'set' must be an object {{KEY: VALUE}}")
+        if not isinstance(feats, Mapping):
+            raise ConfigError(f"{where}: 'features' must be an object {{FEATURE: VALUE}}")
+        known = {}
+        for name, value in feats.items():
+            if name not in FEATURES:
+                raise ConfigError(f"{where}: unknown feature {name!r}; known features: "
+                                  f"{', '.join(FEATURES)}")
+            if value is not None:
+                known[name] = _number(f"{where}: feature {name}", value)
+        for key in sets:
+            if key not in valid_keys():
+                raise ConfigError(f"{where}: unknown key {key!r} in 'set'")
+        label = str(item.get("name") or design)
+        if label in labels:
+            label = f"{label}#{labels.count(label) + 1}" if item.get("name") is None else label
+        if label in labels:
+            raise ConfigError(f"{where}: duplicate experiment name {label!r}")
+        labels.append(label)
+        out.append(Experiment(str(design), dict(sets), known, label))
+    return out
+
+
+def _key_meta(key: str) -> dict:
+    section, name = key.split(".")
+    for f in dataclasses.fields(_CLASSES[section]):
+        if f.name == name:
+            return dict(f.metadata)
+    raise ConfigError(f"unknown key {key!r}")  # pragma: no cover - guarded by caller
+
+
+def check_fit_keys(keys: Sequence[str]) -> list[str]:
+    """Validate the keys to fit: known, real-valued parameters, no repeats."""
+    if not keys:
+        raise ConfigError("--fit needs at least one key")
+    out: list[str] = []
+    for key in keys:
+        if key not in valid_keys():
+            raise ConfigError(f"--fit: {key!r} is not a parameter key; "
+                              "see 'frictionlab keys'")
+        section = key.split(".")[0]
+        if section not in _FITTABLE_SECTIONS or _key_meta(key)["integer"]:
+            raise ConfigError(f"--fit: {key!r} is not a real-valued model parameter "
+                              f"(fittable sections: {', '.join(_FITTABLE_SECTIONS)})")
+        if key in out:
+            raise ConfigError(f"--fit: {key!r} given twice")
+        out.append(key)
+    return out
+
+
+def default_bounds(key: str, current: float | None) -> tuple[float, float]:
+    """Search bounds of ``key``: :data:`DEFAULT_BOUNDS`, else [v/2, 2v] around the
+    current value v, clipped to the key's allowed range."""
+    if key in DEFAULT_BOUNDS:
+        return DEFAULT_BOUNDS[key]
+    if current is None or current <= 0:
+        raise ConfigError(f"no default bounds for {key} (current value {current}); "
+                          f"give --bounds {key}=LO:HI")
+    meta = _key_meta(key)
+    lo, hi = 0.5 * current, 2.0 * current
+    if meta["lo"] is not None:
+        lo = max(lo, meta["lo"])
+    if meta["hi"] is not None:
+        hi = min(hi, meta["hi"])
+    return lo, hi
+
+
+def _check_bounds(key: str, lo: float, hi: float) -> None:
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ConfigError(f"bounds of {key}: {lo}:{hi} must be finite")
+    if not lo < hi:
+        raise ConfigError(f"bounds of {key}: lower {lo:g} must be below upper {hi:g}")
+    meta = _key_meta(key)
+    if meta["lo"] is not None and (lo < meta["lo"] or (meta["lo_open"] and lo == meta["lo"])):
+        raise ConfigError(f"bounds of {key}: lower {lo:g} is outside the key's allowed "
+                          f"range (minimum {meta['lo']:g})")
+    if meta["hi"] is not None and (hi > meta["hi"] or (meta["hi_open"] and hi == meta["hi"])):
+        raise ConfigError(f"bounds of {key}: upper {hi:g} is outside the key's allowed "
+                          f"range (maximum {meta['hi']:g})")
+
+
+# ---------------------------------------------------------------------------
+# the problem: parameters -> residuals
+# ---------------------------------------------------------------------------
+
+
+Evaluator = Callable[..., list[dict]]
+
+
+def _sweep_evaluate(base, points, **kw) -> list[dict]:
+    from ..sweep import evaluate
+
+    return evaluate(base, points, **kw)
+
+
+class LimitCycleProblem:
+    """Residuals of a parameter vector against the measured experiments.
+
+    Parameters
+    ----------
+    experiments : sequence of Experiment
+    keys : sequence of str
+        Keys to fit.
+    friction : str
+        Plant friction model of the simulations.
+    sets : sequence of ``"KEY=VALUE"`` or ``(key, value)``
+        Settings common to all experiments (applied before each
+        experiment's own ``sets``).
+    bounds : mapping ``{key: (lo, hi)}``, optional
+        Overrides of :func:`default_bounds`.
+    weights : mapping ``{feature: w}``, optional
+        Feature weights (default 1).
+    duration, window : float
+        Simulated time per run and the analysed final window (s).
+    evaluate : callable, optional
+        ``evaluate(base, points, duration=, window=, workers=, dask=)`` with
+        the contract of :func:`frictionlab.sweep.evaluate` (the default).
+    workers, dask
+        Passed to ``evaluate``.
+    """
+
+    def __init__(
+        self,
+        experiments: Sequence[Experiment],
+        keys: Sequence[str],
+        *,
+        friction: str = "classical",
+        sets: Sequence[Any] = (),
+        bounds: Mapping[str, tuple[float, float]] | None = None,
+        weights: Mapping[str, float] | None = None,
+        duration: float = 30.0,
+        window: float | None = 20.0,
+        evaluate: Evaluator | None = None,
+        workers: int | None = None,
+        dask: str | None = None,
+    ):
+        if not experiments:
+            raise ConfigError("no experiments to fit")
+        self.experiments = list(experiments)
+        self.keys = check_fit_keys(keys)
+        if not (duration > 0 and math.isfinite(duration)):
+            raise ConfigError(f"duration must be > 0 s, got {duration}")
+        if window is not None and not (0 < window <= duration):
+            raise ConfigError(f"window must be in (0, duration], got {window}")
+        self.duration, self.window = float(duration), window
+        self.friction = friction
+        self.workers, self.dask = workers, dask
+        self._evaluate = evaluate or _sweep_evaluate
+        weights = dict(weights or {})
+        for name, w in weights.items():
+            if name not in FEATURES:
+                raise ConfigError(f"--weights: unknown feature {name!r}; known features: "
+                                  f"{', '.join(FEATURES)}")
+            if not (math.isfinite(w) and w >= 0):
+                raise ConfigError(f"--weights: weight of {name} must be >= 0, got {w}")
+        self.weights = weights
+        # one configuration per experiment; all are expressed as points on the
+        # first one, so a whole population is a single batch
+        configs = []
+        for exp in self.experiments:
+            for key in exp.sets:
+                if key in self.keys:
+                    raise ConfigError(f"experiment {exp.label!r} sets {key}, which is being "
+                                      "fitted")
+            configs.append(build_config(design=exp.design, friction=friction,
+                                        sets=[*sets, *exp.sets.items()]))
+        self.configs = configs
+        self.base = configs[0]
+        base_flat = self.base.as_flat_dict()
+        self.diffs: list[dict[str, Any]] = []
+        for exp, cfg in zip(self.experiments, configs, strict=True):
+            diff = {}
+            for k, v in cfg.as_flat_dict().items():
+                if k in ("friction_kind", "compensation_kind") or k in self.keys:
+                    continue
+                if v != base_flat[k]:
+                    if v is None:
+                        raise ConfigError(f"experiment {exp.label!r}: {k} cannot be unset "
+                                          "relative to the first experiment")
+                    diff[k] = v
+            self.diffs.append(diff)
+        # bounds
+        given = dict(bounds or {})
+        for k in given:
+            if k not in self.keys:
+                raise ConfigError(f"--bounds given for {k}, which is not fitted")
+        lo, hi = [], []
+        for k in self.keys:
+            b = given.get(k) or default_bounds(k, self.base.get(k))
+            _check_bounds(k, float(b[0]), float(b[1]))
+            lo.append(float(b[0]))
+            hi.append(float(b[1]))
+        self.lo, self.hi = np.array(lo), np.array(hi)
+        # residual layout: (experiment index, feature) pairs
+        self.layout: list[tuple[int, str]] = []
+        meas, w = [], []
+        for i, exp in enumerate(self.experiments):
+            for name in FEATURES:
+                if name in exp.features:
+                    self.layout.append((i, name))
+                    meas.append(exp.features[name])
+                    w.append(self.weights.get(name, 1.0))
+        self.measured = np.array(meas)
+        self.w = np.array(w)
+        self.nfev = 0
+        self._cache: dict[tuple, tuple[np.ndarray, list[dict]]] = {}
+
+    # -- coordinates ------------------------------------------------------
+
+    @property
+    def n(self) -> int:
+        return len(self.keys)
+
+    @property
+    def m(self) -> int:
+        return len(self.layout)
+
+    def to_params(self, x: np.ndarray) -> np.ndarray:
+        """Normalised coordinates [0, 1] -> parameter values."""
+        return self.lo + np.clip(x, 0.0, 1.0) * (self.hi - self.lo)
+
+    def to_unit(self, p: np.ndarray) -> np.ndarray:
+        return (np.asarray(p, dtype=float) - self.lo) / (self.hi - self.lo)
+
+    def current(self) -> np.ndarray:
+        """The keys' values in the base configuration (clipped to the bounds)."""
+        vals = [self.base.get(k) for k in self.keys]
+        v = np.array([np.nan if x is None else float(x) for x in vals])
+        mid = 0.5 * (self.lo + self.hi)
+        v = np.where(np.isfinite(v), v, mid)
+        return np.clip(v, self.lo, self.hi)
+
+    # -- evaluation -------------------------------------------------------
+
+    def points(self, params: np.ndarray) -> list[dict[str, Any]]:
+        """Sweep points (all experiments of every parameter row of ``params``)."""
+        pts = []
+        for p in np.atleast_2d(params):
+            values = {k: float(v) for k, v in zip(self.keys, p, strict=True)}
+            for diff in self.diffs:
+                pts.append({**diff, **values})
+        return pts
+
+    def residuals_from_rows(self, rows: Sequence[Mapping[str, Any]]) -> np.ndarray:
+        """Residual vector of one parameter set from its experiments' rows."""
+        r = np.empty(self.m)
+        for j, (i, name) in enumerate(self.layout):
+            row = rows[i]
+            sim = _sim_feature(row, name)
+            if sim is None:
+                r[j] = PENALTY
+            else:
+                r[j] = float(np.clip((sim - self.measured[j]) / self.measured[j],
+                                     -PENALTY, PENALTY))
+        return r * self.w
+
+    def evaluate_batch(self, params: np.ndarray,
+                       progress: Callable[[int, int], None] | None = None,
+                       ) -> tuple[np.ndarray, list[list[dict]]]:
+        """Residuals (S, m) and the rows per parameter set, for S parameter sets.
+
+        Parameter sets already evaluated come from a cache.
+        """
+        params = np.atleast_2d(np.asarray(params, dtype=float))
+        keys = [tuple(np.round(p, 12)) for p in params]
+        todo = [i for i, k in enumerate(keys) if k not in self._cache]
+        todo_unique = list(dict.fromkeys(keys[i] for i in todo))
+        if todo_unique:
+            pts = self.points(np.array(todo_unique))
+            kw = {"duration": self.duration, "window": self.window,
+                  "workers": self.workers, "dask": self.dask}
+            if progress is not None:
+                kw["progress"] = progress
+            rows = self._evaluate(self.base, pts, **kw)
+            self.nfev += len(todo_unique)
+            ne = len(self.experiments)
+            for j, k in enumerate(todo_unique):
+                chunk = list(rows[j * ne:(j + 1) * ne])
+                self._cache[k] = (self.residuals_from_rows(chunk), chunk)
+        res = np.array([self._cache[k][0] for k in keys])
+        return res, [self._cache[k][1] for k in keys]
+
+    def residuals(self, params: np.ndarray) -> np.ndarray:
+        return self.evaluate_batch(params)[0][0]
+
+    def jacobian(self, params: np.ndarray, rel_step: float) -> np.ndarray:
+        """Central-difference Jacobian dr/dp (m, n) in parameter units.
+
+        The step of key j is ``rel_step * |p_j|`` (at least ``rel_step`` times
+        1 % of its bound width); a step leaving the bounds becomes one-sided.
+        """
+        p = np.asarray(params, dtype=float)
+        width = self.hi - self.lo
+        step = rel_step * np.maximum(np.abs(p), 0.01 * width)
+        rows, pairs = [], []
+        for j in range(self.n):
+            up = min(p[j] + step[j], self.hi[j])
+            dn = max(p[j] - step[j], self.lo[j])
+            a, b = p.copy(), p.copy()
+            a[j], b[j] = up, dn
+            rows += [a, b]
+            pairs.append(up - dn)
+        res, _ = self.evaluate_batch(np.array(rows))
+        J = np.empty((self.m, self.n))
+        for j in range(self.n):
+            J[:, j] = (res[2 * j] - res[2 * j + 1]) / pairs[j]
+        return J
+
+
+def _sim_feature(row: Mapping[str, Any], name: str) -> float | None:
+    if row.get("status") != "limit_cycle":
+        return None
+
+    def get(n):
+        v = row.get(n)
+        return None if v is None or not math.isfinite(float(v)) else float(v)
+
+    v = get(name)
+    if v is None and name in ("peak2", "valley"):
+        v = get("peak1")
+    return v
+
+
+# ---------------------------------------------------------------------------
+# the fit
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class FitResult:
+    """Result of :func:`fit_limit_cycle`.
+
+    ``residuals``/``simulated``/``measured`` are keyed by experiment label
+    then feature; residuals are relative errors (unweighted).
+    """
+
+    keys: list[str]
+    estimate: dict[str, float]
+    stderr: dict[str, float | None]
+    residuals: dict[str, dict[str, float | None]]
+    simulated: dict[str, dict[str, float | None]]
+    measured: dict[str, dict[str, float]]
+    status: dict[str, str]
+    cost: float
+    warnings: list[str]
+    bounds: dict[str, tuple[float, float]]
+    singular_values: list[float]
+    correlation: list[list[float | None]] | None
+    global_cost: float
+    generations: int
+    evaluations: int
+    seconds: float
+    extra: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {
+            "estimate": self.estimate,
+            "stderr": self.stderr,
+            "residuals": self.residuals,
+            "cost": self.cost,
+            "warnings": self.warnings,
+            "simulated": self.simulated,
+            "measured": self.measured,
+            "status": self.status,
+            "bounds": {k: list(v) for k, v in self.bounds.items()},
+            "singular_values": self.singular_values,
+            "correlation": self.correlation,
+            "global_search": {"cost": self.global_cost, "generations": self.generations},
+            "evaluations": self.evaluations,
+            "seconds": self.seconds,
+        }
+
+
+def _covariance(J: np.ndarray, cost: float, m: int, n: int):
+    """s^2 (J^T J)^-1 via the SVD of J; None when not estimable."""
+    if m <= n:
+        return None, f"{m} known feature(s) for {n} fitted key(s): no residual degrees " \
+                     "of freedom, standard errors not estimated"
+    _, s, vt = np.linalg.svd(J, full_matrices=False)
+    if s[0] <= 0 or s[-1] <= 1e-10 * s[0]:
+        return None, "J^T J is singular at the optimum: standard errors not estimated"
+    s2 = cost / (m - n)
+    cov = s2 * (vt.T / s**2) @ vt
+    return cov, None
+
+
+def identifiability(J: np.ndarray, p: np.ndarray, keys: Sequence[str],
+                    sensitivity: float = FLAT_SENSITIVITY,
+                    ratio: float = FLAT_RATIO) -> tuple[list[float], list[str]]:
+    """Singular values of the relatively scaled Jacobian and flat-direction warnings.
+
+    Parameters
+    ----------
+    J : ndarray (m, n)
+        Residual Jacobian in parameter units.
+    p : ndarray (n,)
+        Parameter values (the scale of each column).
+    keys : names of the parameters.
+    sensitivity : singular value below which a direction is flat.
+    ratio : singular-value ratio (to the largest) below which a direction is flat.
+
+    Returns
+    -------
+    (singular values, warnings)
+    """
+    scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
+    Js = J * scale
+    warnings = []
+    col = np.linalg.norm(Js, axis=0)
+    for k, c in zip(keys, col, strict=True):
+        if c == 0.0:
+            warnings.append(f"{k} does not affect the given features: not identifiable")
+    if Js.shape[0] == 0:
+        return [], warnings
+    _, s, vt = np.linalg.svd(Js, full_matrices=True)
+    sv = [float(x) for x in s]
+    smax = s[0] if len(s) else 0.0
+    n = len(keys)
+    # directions beyond the number of residuals are flat too (m < n)
+    svals = np.concatenate([s, np.zeros(max(0, n - len(s)))])
+    for i in range(n):
+        if smax > 0 and svals[i] >= max(ratio * smax, sensitivity):
+            continue
+        v = vt[i]
+        big = [k for k, c in sorted(zip(keys, v, strict=True), key=lambda t: -abs(t[1]))
+               if abs(c) >= 0.5 * np.max(np.abs(v))]
+        if len(big) == 1 and any(big[0] in w for w in warnings):
+            continue
+        warnings.append(
+            "not identifiable from the given features: flat direction dominated by "
+            f"{', '.join(big)} (a 20 % change along it moves the features by "
+            f"{20.0 * svals[i]:.2g} %)"
+            + ("" if len(big) == 1 else "; only a combination of them is determined"))
+    return sv, warnings
+
+
+def fit_limit_cycle(
+    experiments: Sequence[Experiment],
+    keys: Sequence[str],
+    *,
+    friction: str = "classical",
+    sets: Sequence[Any] = (),
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+    weights: Mapping[str, float] | None = None,
+    duration: float = 30.0,
+    window: float | None = 20.0,
+    workers: int | None = None,
+    dask: str | None = None,
+    seed: int = 0,
+    maxiter: int = 40,
+    popsize: int = 8,
+    rel_step: float = 0.01,
+    evaluate: Evaluator | None = None,
+    progress: Callable[[str, float], None] | None = None,
+) -> FitResult:
+    """Fit parameter keys to measured limit-cycle features (see the module docstring).
+
+    Parameters
+    ----------
+    experiments, keys, friction, sets, bounds, weights, duration, window,
+    workers, dask, evaluate
+        See :class:`LimitCycleProblem`.
+    seed : int
+        Seed of the global search.
+    maxiter : int
+        Generations of differential evolution (at most).
+    popsize : int
+        Population size per fitted key (scipy's multiplier).
+    rel_step : float
+        Relative finite-difference step of the Jacobian.
+    progress : callable, optional
+        ``progress(stage, fraction)`` with stage ``"global"`` or ``"local"``.
+
+    Returns
+    -------
+    FitResult
+    """
+    t0 = time.perf_counter()
+    if maxiter < 1 or popsize < 2:
+        raise ConfigError(f"maxiter must be >= 1 and popsize >= 2, got {maxiter}, {popsize}")
+    if not 1e-5 <= rel_step <= 0.2:
+        raise ConfigError(f"rel_step must be in [1e-5, 0.2], got {rel_step}")
+    prob = LimitCycleProblem(experiments, keys, friction=friction, sets=sets, bounds=bounds,
+                             weights=weights, duration=duration, window=window,
+                             evaluate=evaluate, workers=workers, dask=dask)
+    report = progress or (lambda stage, f: None)
+
+    def cost_vec(xt: np.ndarray) -> np.ndarray:
+        # vectorized DE: xt has shape (n, S)
+        res, _ = prob.evaluate_batch(prob.to_params(xt.T))
+        return np.sum(res**2, axis=1)
+
+    gen = [0]
+
+    def callback(intermediate_result):
+        gen[0] += 1
+        report("global", min(1.0, gen[0] / maxiter))
+
+    x0 = prob.to_unit(prob.current())
+    de = differential_evolution(
+        cost_vec, [(0.0, 1.0)] * prob.n, maxiter=maxiter, popsize=popsize, seed=seed,
+        init="latinhypercube", polish=False,
+        vectorized=True, updating="deferred", x0=x0, tol=1e-3, atol=0.0,
+        mutation=(0.5, 1.0), recombination=0.7, callback=callback,
+    )
+    report("global", 1.0)
+    x_best = np.clip(de.x, 0.0, 1.0)
+    global_cost = float(de.fun)
+    width = prob.hi - prob.lo
+
+    def fun(x):
+        return prob.residuals(prob.to_params(x))
+
+    def jac(x):
+        return prob.jacobian(prob.to_params(x), rel_step) * width
+
+    report("local", 0.0)
+    try:
+        ls = least_squares(fun, x_best, jac=jac, bounds=(0.0, 1.0), method="trf",
+                           x_scale="jac", max_nfev=12, ftol=1e-6, xtol=1e-6)
+        x_loc = np.clip(ls.x, 0.0, 1.0)
+        if np.sum(fun(x_loc) ** 2) < np.sum(fun(x_best) ** 2):
+            x_best = x_loc
+    except (ValueError, np.linalg.LinAlgError):
+        pass
+    report("local", 1.0)
+    p = prob.to_params(x_best)
+    res, rows_list = prob.evaluate_batch(p)
+    r = res[0]
+    rows = rows_list[0]
+    cost = float(np.sum(r**2))
+    J = prob.jacobian(p, rel_step)
+    warnings: list[str] = []
+    cov, why = _covariance(J, cost, prob.m, prob.n)
+    if why:
+        warnings.append(why)
+    stderr: dict[str, float | None] = {}
+    corr = None
+    if cov is not None:
+        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        stderr = {k: float(v) for k, v in zip(prob.keys, sd, strict=True)}
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = cov / np.outer(sd, sd)
+        corr = [[float(v) if math.isfinite(v) else None for v in row] for row in c]
+    else:
+        stderr = dict.fromkeys(prob.keys)
+    sv, flat = identifiability(J, p, prob.keys)
+    warnings += flat
+    for k, v in zip(prob.keys, p, strict=True):
+        se = stderr.get(k)
+        if se is not None and v != 0 and se / abs(v) > POOR_RELATIVE_STDERR:
+            warnings.append(f"{k} is poorly determined: standard error {se:.3g} "
+                            f"({100 * se / abs(v):.0f} % of the estimate)")
+    tol = 1e-3
+    for k, v, lo, hi in zip(prob.keys, p, prob.lo, prob.hi, strict=True):
+        if v <= lo + tol * (hi - lo) or v >= hi - tol * (hi - lo):
+            warnings.append(f"{k} = {v:.4g} is at its search bound [{lo:g}, {hi:g}]: "
+                            "widen --bounds or treat the estimate with care")
+    for i, row in enumerate(rows):
+        if row.get("status") != "limit_cycle":
+            warnings.append(f"experiment {prob.experiments[i].label!r}: the fitted "
+                            f"simulation has status {row.get('status')!r}, not a limit cycle")
+    residuals: dict[str, dict[str, float | None]] = {}
+    simulated: dict[str, dict[str, float | None]] = {}
+    measured: dict[str, dict[str, float]] = {}
+    status: dict[str, str] = {}
+    for i, exp in enumerate(prob.experiments):
+        residuals[exp.label] = {}
+        measured[exp.label] = dict(exp.features)
+        simulated[exp.label] = {name: _sim_feature(rows[i], name) for name in FEATURES}
+        status[exp.label] = str(rows[i].get("status"))
+    for j, (i, name) in enumerate(prob.layout):
+        sim = simulated[prob.experiments[i].label][name]
+        meas = prob.measured[j]
+        residuals[prob.experiments[i].label][name] = (
+            None if sim is None else float((sim - meas) / meas))
+    return FitResult(
+        keys=prob.keys,
+        estimate={k: float(v) for k, v in zip(prob.keys, p, strict=True)},
+        stderr=stderr,
+        residuals=residuals,
+        simulated=simulated,
+        measured=measured,
+        status=status,
+        cost=cost,
+        warnings=warnings,
+        bounds={k: (float(lo), float(hi))
+                for k, lo, hi in zip(prob.keys, prob.lo, prob.hi, strict=True)},
+        singular_values=sv,
+        correlation=corr,
+        global_cost=global_cost,
+        generations=int(de.nit),
+        evaluations=prob.nfev,
+        seconds=time.perf_counter() - t0,
+        extra={"configs": prob.configs},
+    )
+
+
+def experiment_config(result: FitResult, experiment_index: int) -> Config:
+    """The configuration of one experiment at the fitted estimate (for plots)."""
+    cfg = result.extra["configs"][experiment_index]
+    return cfg.with_values(result.estimate)
