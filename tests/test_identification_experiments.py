@@ -1,0 +1,180 @@
+"""Simple identification experiments (App. A.1-A.2, B.4, E.1, E.2) against the
+simulated rig, on saved logs, and on synthetic signals."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from frictionlab.config import build_config
+from frictionlab.identification import experiments as ex
+from frictionlab.identification.experiments import IdentificationError
+from frictionlab.identification.logs import read_log
+
+# a plant whose parameters all differ from the thesis defaults
+TRUE = {"friction.stiction": 2.1, "friction.coulomb": 1.35, "friction.viscous": 0.05,
+        "plant.omega0": 7.1, "plant.zeta": 0.06, "plant.input_gain": 1.2}
+NOISE = 0.002  # rad, rad, rad/s on the measured signals
+
+
+def _cfg(friction: str, noise: float = NOISE):
+    return build_config(friction=friction, sets=[*TRUE.items(), ("sim.noise", noise),
+                                                 ("sim.seed", 5)])
+
+
+def _close(value, truth, rel):
+    return abs(value - truth) <= rel * abs(truth)
+
+
+@pytest.fixture(scope="module")
+def stiction_log():
+    return ex.simulate_stiction(_cfg("classical"))
+
+
+@pytest.fixture(scope="module")
+def stribeck_log():
+    return ex.simulate_stribeck(_cfg("lugre"))
+
+
+@pytest.fixture(scope="module")
+def oscillation_log():
+    return ex.simulate_free_oscillation(_cfg("classical"))
+
+
+@pytest.fixture(scope="module")
+def scaling_log():
+    return ex.simulate_control_scaling(_cfg("classical"))
+
+
+def test_stiction_and_coulomb_recovered(stiction_log):
+    r = ex.analyse_stiction(stiction_log, input_gain=TRUE["plant.input_gain"])
+    for d in ("", "_positive", "_negative"):
+        assert _close(r["stiction" + d], TRUE["friction.stiction"], 0.05), r
+        assert _close(r["coulomb" + d], TRUE["friction.coulomb"], 0.05), r
+    assert r["breakaway_time_positive"] < r["breakaway_time_negative"]
+    assert {s["direction"] for s in r["segments"]} == {"positive", "negative"}
+
+
+def test_stiction_sees_asymmetric_friction():
+    cfg = build_config(friction="classical", sets=[
+        ("friction.stiction", 2.3), ("friction.coulomb", 1.6),
+        ("friction.stiction_negative", 1.9), ("friction.coulomb_negative", 1.3)])
+    r = ex.analyse_stiction(ex.simulate_stiction(cfg))
+    assert _close(r["stiction_positive"], 2.3, 0.05)
+    assert _close(r["stiction_negative"], 1.9, 0.05)
+    assert _close(r["coulomb_positive"], 1.6, 0.05)
+    assert _close(r["coulomb_negative"], 1.3, 0.05)
+
+
+def test_stribeck_curve_recovered(stribeck_log):
+    r = ex.analyse_stribeck(stribeck_log, input_gain=TRUE["plant.input_gain"])
+    assert _close(r["coulomb"], TRUE["friction.coulomb"], 0.05), r
+    assert _close(r["viscous"], TRUE["friction.viscous"], 0.20), r
+    assert _close(r["stiction"], TRUE["friction.stiction"], 0.05), r
+    assert _close(r["stribeck_velocity"], 1.0, 0.20), r
+    pts = np.array(r["points"])
+    assert (pts[:, 0] > 0).any() and (pts[:, 0] < 0).any()
+    # friction opposes motion in both directions
+    assert np.all(np.sign(pts[:, 1]) == np.sign(pts[:, 0]))
+
+
+def test_stribeck_without_rise_reports_unidentifiable_stribeck_part():
+    # classical friction: no Stribeck rise at speed, only a Coulomb level
+    cfg = build_config(friction="classical", sets=[("friction.coulomb", 1.4)])
+    r = ex.analyse_stribeck(ex.simulate_stribeck(cfg, references=(1.0, 2.0, 4.0, 8.0)))
+    assert _close(r["coulomb"], 1.4, 0.02)
+    assert r["stiction"] is None and r["stribeck_velocity"] is None
+    assert any("not identifiable" in w for w in r["warnings"])
+
+
+def test_free_oscillation_recovered(oscillation_log):
+    r = ex.analyse_free_oscillation(oscillation_log)
+    assert _close(r["omega0"], TRUE["plant.omega0"], 0.02), r
+    assert _close(r["zeta"], TRUE["plant.zeta"], 0.20), r
+    # the thesis's peak method alone is also within the acceptance bounds
+    assert _close(r["omega0_peaks"], TRUE["plant.omega0"], 0.02), r
+    assert _close(r["zeta_peaks"], TRUE["plant.zeta"], 0.20), r
+    assert len(r["peaks"]) >= 3
+    assert all(h <= 0.15 for _, h in r["peaks"])
+
+
+def test_control_scaling_recovered(scaling_log):
+    r = ex.analyse_control_scaling(scaling_log, coulomb=TRUE["friction.coulomb"])
+    assert _close(r["input_gain"], TRUE["plant.input_gain"], 0.05), r
+    assert _close(r["input_gain_free"], TRUE["plant.input_gain"], 0.05), r
+    assert _close(r["coulomb_free"], TRUE["friction.coulomb"], 0.10), r
+    assert r["u_scale"] == pytest.approx(-0.022 / r["input_gain"])
+    assert len(r["levels"]) == len(ex.SCALING_LEVELS)
+
+
+@settings(max_examples=25, deadline=None)
+@given(omega0=st.floats(4.0, 9.0), zeta=st.floats(0.01, 0.1),
+       amp=st.floats(0.08, 0.14), phase=st.floats(0.0, 2 * math.pi))
+def test_free_oscillation_analysis_on_eq22(omega0, zeta, amp, phase):
+    """The analysis inverts eq. (22) for any natural frequency and damping."""
+    h = 0.005
+    t = np.arange(0, 10.0, h)
+    wd = omega0 * math.sqrt(1 - zeta * zeta)
+    theta = 3.18 + amp * np.exp(-zeta * omega0 * t) * np.cos(wd * t + phase)
+    r = ex.analyse_free_oscillation({"t": t, "theta_m": theta})
+    assert _close(r["omega0"], omega0, 0.01)
+    assert _close(r["zeta"], zeta, 0.05)
+    assert r["rest_angle"] == pytest.approx(3.18, abs=1e-3)
+
+
+@pytest.mark.parametrize("ext", [".csv", ".dat"])
+def test_saved_log_gives_the_same_estimates(tmp_path, stiction_log, scaling_log, ext):
+    for log, analyse in ((stiction_log, ex.analyse_stiction),
+                         (scaling_log, ex.analyse_control_scaling)):
+        path = tmp_path / f"log{ext}"
+        log.save(path)
+        direct = ex.estimates_only(analyse(log))
+        again = ex.estimates_only(analyse(read_log(path, h=0.005)))
+        assert again.keys() == direct.keys()
+        for k in direct:
+            assert again[k] == pytest.approx(direct[k], rel=1e-5, abs=1e-6), k
+
+
+def test_log_without_the_needed_signal(tmp_path):
+    path = tmp_path / "x.csv"
+    path.write_text("t,theta_m,u\n0,3.1,0\n0.005,3.1,0\n0.01,3.1,0\n0.015,3.1,0\n")
+    with pytest.raises(IdentificationError, match="arm_dot_m"):
+        ex.analyse_stiction(read_log(path))
+    with pytest.raises(IdentificationError, match="peak"):
+        ex.analyse_free_oscillation(read_log(path))
+
+
+@pytest.mark.parametrize("text, match", [
+    ("", "empty"),
+    ("t,u\n1,2,3\n", "columns"),
+    ("t,u\n1,a\n", "malformed"),
+])
+def test_read_log_rejects(tmp_path, text, match):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match):
+        read_log(path)
+    with pytest.raises(ValueError, match="extension"):
+        read_log(tmp_path / "bad.txt")
+
+
+def test_plots(tmp_path, stiction_log, stribeck_log, oscillation_log, scaling_log):
+    from frictionlab.identification import plots
+
+    cases = [
+        (plots.plot_stiction, stiction_log, ex.analyse_stiction(stiction_log)),
+        (plots.plot_free_oscillation, oscillation_log,
+         ex.analyse_free_oscillation(oscillation_log)),
+        (plots.plot_control_scaling, scaling_log, ex.analyse_control_scaling(scaling_log)),
+    ]
+    for i, (fn, log, res) in enumerate(cases):
+        out = tmp_path / f"p{i}.png"
+        fn(log, res, str(out))
+        assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    out = tmp_path / "stribeck.png"
+    plots.plot_stribeck(ex.analyse_stribeck(stribeck_log), str(out))
+    assert out.stat().st_size > 1000
