@@ -280,22 +280,23 @@ def _warm_up() -> None:
     run_features(build_config(), 2.0)
 
 
-def _watch_parent(ppid: int) -> None:
-    while True:
-        time.sleep(1.0)
-        if os.getppid() != ppid:
-            os._exit(1)
+def _exit_with(parent) -> None:
+    parent.join()  # returns when the parent's end of the pipe closes
+    os._exit(1)
 
 
 def _pool_worker_init() -> None:
-    """Pool worker start-up: warm the simulator, and exit if orphaned.
+    """Pool worker start-up: warm the simulator, and exit when the sweep's process dies.
 
-    A pool worker whose parent (the forkserver, which exits with the main
-    process) disappears - e.g. the sweep was killed with SIGKILL - exits
-    within a second instead of lingering.
+    A worker whose parent disappears without shutting the pool down (e.g. it
+    was killed with SIGKILL) exits at once instead of lingering.
     """
+    import multiprocessing
+
     _warm_up()
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        threading.Thread(target=_exit_with, args=(parent,), daemon=True).start()
 
 
 # ---------------------------------------------------------------------------
@@ -805,7 +806,7 @@ def _groups(rows: Sequence[Mapping[str, Any]], varies: Sequence[tuple[str, Seque
 def markdown_table(rows: Sequence[Mapping[str, Any]],
                    varies: Sequence[tuple[str, Sequence[float]]], mode: str = "grid",
                    base_vals: Mapping[str, Any] | None = None) -> str:
-    """Markdown table(s) shaped like the thesis's Tables 2-3.
+    """Markdown table(s) shaped like the thesis's Tables 2-7 (one parameter per table).
 
     Columns: the varied key(s), peak1, peak2, valley, T, max(u), max(Ω̇)
     (three significant digits; ``-`` where undefined), plus ``status`` when
@@ -880,8 +881,8 @@ def register_cli(sub) -> None:
     p = sub.add_parser(
         "sweep", help="vary parameter keys; one limit-cycle feature row per parameter set",
         description="Run the closed loop for every parameter set and reduce each run to its "
-                    "limit-cycle features (Tables 2-3).  Rows are written to --out as they "
-                    "complete; --resume continues an interrupted sweep.")
+                    "limit-cycle features (the thesis's Tables 2-7).  Rows are written to "
+                    "--out as they complete; --resume continues an interrupted sweep.")
     _add_config_args(p)
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
                    help="values of a key: a list V1,V2,... or START:STOP:N (N evenly spaced "
@@ -906,16 +907,21 @@ def register_cli(sub) -> None:
                    help="keep the rows already in --out and run only the missing points")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     p.add_argument("--table", action="store_true",
-                   help="print a markdown table like Tables 2-3 (in the JSON with --json)")
+                   help="print a markdown table shaped like the thesis's Tables 2-7 (on "
+                        "stderr with --json)")
     p.add_argument("--plot", metavar="FILE.png", help="plot each feature against the key")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--json", action="store_true",
+                   help='print one JSON object {"rows", "out", "seconds"}')
     p.set_defaults(func=cmd_sweep)
 
 
 def _plan(args):
     """Everything checked before any work: (base, varies, points, duration, file)."""
+    import sys
+
     from .cli import UsageError, config_from_args
+    from .config import inert_keys
 
     base = config_from_args(args)
     if not args.vary:
@@ -923,6 +929,10 @@ def _plan(args):
     varies = [parse_vary(v) for v in args.vary]
     points = make_points(base, varies, args.mode)
     validate_points(base, points)
+    for key in inert_keys(base, [k for k, _ in varies]):
+        print(f"frictionlab sweep: note: varying {key} has no effect with the "
+              f"{base.friction_kind!r} plant friction and the {base.compensation_kind!r} "
+              "compensator", file=sys.stderr)
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise UsageError(f"--duration must be > 0, got {args.duration}")
     if args.window is not None and not (args.window > 0 and math.isfinite(args.window)):
@@ -1006,18 +1016,14 @@ def cmd_sweep(args) -> int:
         plot_sweep(ordered, varies, args.plot, args.mode, base_vals)
     counts = {s: sum(r["status"] == s for r in ordered + extra) for s in STATUSES}
     result = {"rows": len(ordered) + len(extra), "out": args.out,
-              "seconds": round(time.perf_counter() - t0, 3), "computed": len(todo),
-              "resumed": len(points) - len(todo), "statuses": counts}
+              "seconds": round(time.perf_counter() - t0, 3)}
     if table is not None:
-        result["table"] = table
-    if args.plot:
-        result["plot"] = args.plot
+        # stdout is the table, or with --json the JSON object alone
+        print(table, file=sys.stderr if args.json else sys.stdout)
+    print(f"frictionlab sweep: {result['rows']} rows in {args.out} ({len(todo)} computed, "
+          f"{len(points) - len(todo)} resumed) in {result['seconds']:.1f} s; "
+          + ", ".join(f"{s}: {c}" for s, c in counts.items() if c)
+          + (f"; plot {args.plot}" if args.plot else ""), file=sys.stderr)
     if args.json:
         emit_json(result)
-    else:
-        if table is not None:
-            print(table)
-        print(f"{result['rows']} rows in {args.out} ({len(todo)} computed, "
-              f"{result['resumed']} resumed) in {result['seconds']:.1f} s; "
-              + ", ".join(f"{s}: {c}" for s, c in counts.items() if c))
     return 0

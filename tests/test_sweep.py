@@ -1,0 +1,412 @@
+"""Parameter sweeps: parsing, backends (serial, pool, Dask), files, resume, CLI."""
+
+import csv
+import io
+import itertools
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from contextlib import redirect_stderr, redirect_stdout
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from frictionlab.cli import main
+from frictionlab.config import ConfigError, build_config
+from frictionlab.limit_cycles import FEATURES
+from frictionlab.reference import TABLE2
+from frictionlab.simulation import run_features
+from frictionlab.sweep import (
+    SweepFile,
+    columns,
+    evaluate,
+    make_points,
+    markdown_table,
+    parse_vary,
+    shutdown,
+)
+
+BAND = "friction.zero_velocity_band=0.03"
+TABLE2_FC = tuple(TABLE2)  # 1.1, 1.3, 1.5, 1.7, 1.9
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _close_backends():
+    yield
+    shutdown()
+
+
+def run_cli(*args):
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        rc = main(["sweep", *args])
+    return rc, out.getvalue(), err.getvalue()
+
+
+def summary_counts(err):
+    """(computed, resumed) from the one-line summary the sweep writes on stderr."""
+    m = re.search(r"\((\d+) computed, (\d+) resumed\)", err)
+    assert m is not None, err
+    return int(m.group(1)), int(m.group(2))
+
+
+def read_csv(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+# ---------------------------------------------------------------------------
+# parsing and points
+# ---------------------------------------------------------------------------
+
+
+def test_parse_value_list_and_range():
+    assert parse_vary("friction.coulomb=1.1,1.3, 1.5") == ("friction.coulomb", [1.1, 1.3, 1.5])
+    key, values = parse_vary("friction.coulomb=1.1:1.9:5")
+    assert key == "friction.coulomb"
+    assert values == list(TABLE2_FC)  # exactly, not 1.7000000000000002
+    assert parse_vary("plant.omega0=7.5:9:1") == ("plant.omega0", [7.5])
+    assert parse_vary("design.omega1=8:6:3")[1] == [8.0, 7.0, 6.0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(start=st.floats(-1e3, 1e3), span=st.floats(0.01, 1e3), n=st.integers(2, 200))
+def test_range_has_n_ordered_values_with_both_ends(start, span, n):
+    stop = start + span
+    _, values = parse_vary(f"friction.coulomb={start!r}:{stop!r}:{n}")
+    assert len(values) == n
+    assert values[0] == pytest.approx(start, rel=1e-11, abs=1e-9)
+    assert values[-1] == pytest.approx(stop, rel=1e-11, abs=1e-9)
+    assert all(a < b for a, b in itertools.pairwise(values))
+
+
+@pytest.mark.parametrize("text,fragment", [
+    ("friction.nope=1,2", "unknown key 'friction.nope'"),
+    ("friction.coulomb=", "empty list"),
+    ("friction.coulomb=1,,2", "empty value"),
+    ("friction.coulomb=1:2:0", "must be >= 1"),
+    ("friction.coulomb=1:2:2.5", "must be an integer"),
+    ("friction.coulomb=1:2", "START:STOP:N"),
+    ("friction.coulomb=1,abc", "'abc' is not a number"),
+    ("friction.coulomb=1,nan", "not a finite number"),
+    ("friction.coulomb=1,1.0", "appears twice"),
+    ("friction.coulomb", "KEY=V1,V2"),
+])
+def test_parse_rejects(text, fragment):
+    with pytest.raises(ConfigError, match=fragment):
+        parse_vary(text)
+
+
+def test_grid_is_the_cartesian_product_and_oat_varies_one_key_at_a_time():
+    base = build_config("fast", "classical")
+    varies = [("friction.coulomb", [1.1, 1.5]), ("friction.stiction", [2.1, 2.3, 2.5])]
+    grid = make_points(base, varies, "grid")
+    assert grid == [{"friction.coulomb": c, "friction.stiction": s}
+                    for c in (1.1, 1.5) for s in (2.1, 2.3, 2.5)]
+    oat = make_points(base, varies, "oat")
+    fc0, fs0 = base.get("friction.coulomb"), base.get("friction.stiction")
+    assert fc0 == 1.5 and fs0 == 2.3  # the thesis's base point of Tables 2-3
+    # (1.5, 2.3) occurs for both keys and is run once
+    assert oat == [{"friction.coulomb": 1.1, "friction.stiction": fs0},
+                   {"friction.coulomb": 1.5, "friction.stiction": fs0},
+                   {"friction.coulomb": fc0, "friction.stiction": 2.1},
+                   {"friction.coulomb": fc0, "friction.stiction": 2.5}]
+    # integer keys keep integer values
+    assert make_points(base, [("sim.seed", [1.0, 2.0])]) == [{"sim.seed": 1}, {"sim.seed": 2}]
+    assert all(isinstance(p["sim.seed"], int) for p in make_points(base, [("sim.seed", [3.0])]))
+
+
+# ---------------------------------------------------------------------------
+# engine
+# ---------------------------------------------------------------------------
+
+
+def test_serial_rows_are_run_features_and_failures_are_rows():
+    base = build_config("fast", "classical", sets=[BAND])
+    points = [{"friction.coulomb": 1.3}, {"friction.coulomb": -1.0}, {"plant.omega0": 20.0}]
+    calls = []
+    rows = evaluate(base, points, duration=10, workers=1,
+                    progress=lambda d, n: calls.append((d, n)))
+    assert [set(r) for r in rows] == [
+        {*p, "status", *FEATURES, "error"} for p in points]
+    direct = run_features(base.with_values(points[0]), 10)
+    assert rows[0]["status"] == direct.status == "limit_cycle"
+    assert rows[0]["error"] is None
+    for name in FEATURES:
+        assert rows[0][name] == getattr(direct, name)
+    # an invalid point is an error row naming the problem, not an exception
+    assert rows[1]["status"] == "error"
+    assert "friction.coulomb" in rows[1]["error"]
+    assert all(rows[1][f] is None for f in FEATURES)
+    # omega0 = 20 rad/s cannot be stabilised by the fast design: the pendulum falls
+    assert rows[2]["status"] == "fell"
+    assert rows[2]["period"] is None and rows[2]["error"] is None
+    assert calls[-1] == (3, 3)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls)
+
+
+@pytest.mark.timeout(300)
+def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
+    """Acceptance: Table 2's F_C values, pool vs Dask LocalCluster vs in-process."""
+    base = build_config("fast", "classical", sets=[BAND])
+    points = [{"friction.coulomb": v} for v in TABLE2_FC]
+    serial = evaluate(base, points, duration=10, workers=1)
+    pool = evaluate(base, points, duration=10, workers=2)
+    dask = evaluate(base, points, duration=10, dask="local", workers=2)
+    assert pool == serial
+    assert dask == pool
+    assert [r["friction.coulomb"] for r in pool] == list(TABLE2_FC)
+    assert all(r["status"] == "limit_cycle" for r in pool)
+    # larger F_C, larger limit cycle (Table 2's trend)
+    peaks = [r["peak1"] for r in pool]
+    assert peaks == sorted(peaks)
+    # the same through the command line: byte-identical CSV files
+    common = ["--design", "fast", "--friction", "classical", "--set", BAND, "--duration", "10",
+              "--vary", "friction.coulomb=1.1,1.3,1.5,1.7,1.9", "--no-progress", "--json"]
+    a, b = tmp_path / "pool.csv", tmp_path / "dask.csv"
+    rc, out, _ = run_cli(*common, "--workers", "2", "--out", str(a))
+    assert rc == 0 and json.loads(out)["rows"] == 5
+    rc, out, _ = run_cli(*common, "--dask", "local", "--workers", "2", "--out", str(b))
+    assert rc == 0 and json.loads(out)["rows"] == 5
+    assert a.read_bytes() == b.read_bytes()
+    assert [float(r["peak1"]) for r in read_csv(a)] == peaks
+
+
+def test_worker_failures_are_rows_in_the_pool():
+    base = build_config("fast", "classical")
+    points = [{"friction.coulomb": 1.3}, {"friction.coulomb": 1e9}, {"friction.coulomb": 1.5}]
+    rows = evaluate(base, points, duration=3, workers=2, chunk_size=1)
+    assert rows[0]["error"] is None and rows[2]["error"] is None
+    assert rows[1]["status"] == "error" and "out of range" in rows[1]["error"]
+    assert rows[0] == evaluate(base, points[:1], duration=3, workers=1)[0]
+
+
+# ---------------------------------------------------------------------------
+# files and resume
+# ---------------------------------------------------------------------------
+
+KILL_SWEEP = ["--vary", "friction.coulomb=1.0:2.0:40", "--set", "sim.substeps=300",
+              "--duration", "20", "--workers", "2", "--chunk-size", "2", "--no-progress"]
+
+
+def _data_lines(path):
+    return max(0, Path(path).read_text().count("\n") - 1) if Path(path).exists() else 0
+
+
+@pytest.mark.timeout(400)
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["term", "kill"])
+def test_killed_sweep_resumes_with_every_point_exactly_once(tmp_path, sig):
+    """Acceptance: terminate a sweep part-way, resume it, every point once."""
+    out = tmp_path / "killed.csv"
+    cmd = [sys.executable, "-m", "frictionlab", "sweep", *KILL_SWEEP, "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while _data_lines(out) < 4 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode != 0, "the sweep finished before it could be interrupted"
+    if sig == signal.SIGTERM:  # a clean stop says how to continue
+        assert "--resume" in err
+    meta = json.loads(Path(f"{out}.meta.json").read_text())
+    partial = SweepFile(str(out), ["friction.coulomb"], meta).load()  # drops a cut line
+    assert 4 <= len(partial) < 40
+    done_before = {r["friction.coulomb"] for r in partial}
+    assert len(done_before) == len(partial)
+
+    rc = subprocess.run([*cmd, "--json"], capture_output=True, text=True, timeout=300)
+    assert rc.returncode == 2 and "exists" in rc.stderr  # no silent overwrite
+
+    res = subprocess.run([*cmd, "--resume", "--json"], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert set(summary) == {"rows", "out", "seconds"}
+    assert summary["rows"] == 40 and summary["out"] == str(out)
+    assert summary_counts(res.stderr) == (40 - len(done_before), len(done_before))
+    rows = read_csv(out)
+    values = [float(r["friction.coulomb"]) for r in rows]
+    assert len(values) == len(set(values)) == 40
+    assert values == parse_vary("friction.coulomb=1.0:2.0:40")[1]  # sweep order
+    assert all(r["status"] == "limit_cycle" for r in rows)
+    # a row written before the kill holds the same result as a fresh run
+    v = min(done_before)
+    base = build_config("fast", "classical", sets=["sim.substeps=300"])
+    fresh = run_features(base.with_values({"friction.coulomb": v}), 20)
+    row = next(r for r in rows if float(r["friction.coulomb"]) == v)
+    assert float(row["peak1"]) == fresh.peak1
+
+
+def test_resume_skips_done_points_reruns_errors_and_drops_a_cut_line(tmp_path):
+    path = str(tmp_path / "s.csv")
+    keys = ["friction.coulomb"]
+    f = SweepFile(path, keys, {"keys": keys, "duration": 5.0, "window": None, "base": {}})
+    f.open()
+    ok = {"friction.coulomb": 1.3, "status": "limit_cycle", "peak1": 0.1, "error": None}
+    bad = {"friction.coulomb": 1.5, "status": "error", "error": "worker failed: x, y"}
+    f.append([ok, bad])
+    f.close()
+    with open(path, "a") as fh:
+        fh.write("1.7,limit_cyc")  # a row cut short by a kill
+    rows = SweepFile(path, keys, f.meta).load()
+    assert [r["friction.coulomb"] for r in rows] == [1.3, 1.5]
+    assert rows[0]["peak1"] == 0.1 and rows[0]["peak2"] is None
+    assert rows[1]["error"] == "worker failed: x, y"  # commas survive the CSV round trip
+    assert Path(path).read_text().endswith("\n")
+
+    # via the CLI: 1.3 is kept as is, 1.5 (error) and 1.7 (cut) are computed
+    rc, out, _ = run_cli("--vary", "friction.coulomb=1.3,1.5,1.7", "--duration", "5",
+                         "--out", path, "--resume", "--json", "--no-progress")
+    assert rc == 2  # the sidecar says base = {} which is not this sweep's base
+    os.remove(path + ".meta.json")
+    rc, out, err = run_cli("--vary", "friction.coulomb=1.3,1.5,1.7", "--duration", "5",
+                           "--out", path, "--resume", "--json", "--no-progress")
+    assert rc == 0
+    assert json.loads(out)["rows"] == 3
+    assert summary_counts(err) == (2, 1)
+    final = read_csv(path)
+    assert [r["friction.coulomb"] for r in final] == ["1.3", "1.5", "1.7"]
+    assert final[0]["peak1"] == "0.1"
+    assert final[1]["status"] == "limit_cycle" and final[1]["error"] == ""
+
+
+def test_resume_refuses_a_different_setup(tmp_path):
+    path = str(tmp_path / "r.csv")
+    args = ["--vary", "friction.coulomb=1.3,1.5", "--duration", "4", "--out", path,
+            "--no-progress", "--json"]
+    assert run_cli(*args)[0] == 0
+    rc, _, err = run_cli(*args, "--resume", "--set", "plant.omega0=7.5")
+    assert rc == 2 and "plant.omega0" in err and len(err.strip().splitlines()) == 1
+    rc, _, err = run_cli(*args[:3], "5", *args[4:], "--resume")
+    assert rc == 2 and "duration" in err
+    # the same set-up resumes with nothing to compute; more values extend it
+    rc, out, err = run_cli(*args, "--resume")
+    assert rc == 0 and summary_counts(err) == (0, 2)
+    rc, out, err = run_cli("--vary", "friction.coulomb=1.3,1.5,1.7", *args[2:], "--resume")
+    assert rc == 0 and json.loads(out)["rows"] == 3 and summary_counts(err) == (1, 2)
+    rc, out, _ = run_cli(*args, "--force")
+    assert rc == 0 and json.loads(out)["rows"] == 2 and len(read_csv(path)) == 2
+
+
+def test_parquet_output_matches_csv(tmp_path):
+    import pyarrow.parquet as pq
+
+    args = ["--vary", "friction.coulomb=1.1,1.5", "--vary", "sim.seed=0,1", "--duration", "4",
+            "--set", "sim.noise=0.001", "--no-progress", "--json"]
+    c, p = str(tmp_path / "a.csv"), str(tmp_path / "a.parquet")
+    assert run_cli(*args, "--out", c)[0] == 0
+    assert run_cli(*args, "--out", p)[0] == 0
+    assert not os.path.exists(p + ".partial.csv")
+    table = pq.read_table(p)
+    assert table.column_names == columns(["friction.coulomb", "sim.seed"])
+    assert str(table.schema.field("sim.seed").type) == "int64"
+    with open(c + ".meta.json") as fh:
+        meta = json.load(fh)
+    from_csv = SweepFile(c, ["friction.coulomb", "sim.seed"], meta).load()
+    assert table.to_pylist() == from_csv
+    # noise seeds differ, so the rows do
+    assert from_csv[0]["peak1"] != from_csv[1]["peak1"]
+
+
+# ---------------------------------------------------------------------------
+# command line
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("args,fragment", [
+    (["--vary", "friction.nope=1,2"], "unknown key"),
+    (["--vary", "friction.coulomb="], "empty list"),
+    (["--vary", "friction.coulomb=1:2:0"], ">= 1"),
+    (["--vary", "friction.coulomb=1,x"], "not a number"),
+    (["--vary", "friction.coulomb=-1,1.5"], "out of range"),
+    (["--vary", "plant.omega0=5,6", "--vary", "plant.omega0=7"], "more than once"),
+    ([], "--vary"),
+    (["--vary", "friction.coulomb=1", "--dask", "udp://x:1"], "--dask"),
+    (["--vary", "friction.coulomb=1", "--workers", "0"], "--workers"),
+    (["--vary", "friction.coulomb=1", "--duration", "-3"], "--duration"),
+    (["--vary", "friction.coulomb=1", "--plot", "x.txt"], "--plot"),
+])
+def test_bad_sweeps_exit_2_before_any_work(tmp_path, args, fragment):
+    out = tmp_path / "never.csv"
+    rc, stdout, err = run_cli(*args, "--out", str(out), "--json")
+    assert rc == 2
+    assert stdout == ""
+    assert fragment in err and len(err.strip().splitlines()) == 1
+    assert not any(tmp_path.iterdir())
+
+
+def test_bad_output_extension_exits_2(tmp_path):
+    rc, _, err = run_cli("--vary", "friction.coulomb=1", "--out", str(tmp_path / "x.txt"))
+    assert rc == 2 and ".csv or .parquet" in err
+
+
+def test_json_is_one_object_and_csv_has_documented_columns(tmp_path):
+    path = str(tmp_path / "j.csv")
+    rc, out, err = run_cli("--vary", "friction.coulomb=1.3,1.5", "--vary", "plant.omega0=7,20",
+                           "--duration", "5", "--out", path, "--json", "--table")
+    assert rc == 0
+    lines = out.strip().splitlines()
+    assert len(lines) == 1
+    summary = json.loads(lines[0])
+    assert set(summary) == {"rows", "out", "seconds"}  # exactly the interface's fields
+    assert summary["rows"] == 4 and summary["out"] == path and summary["seconds"] >= 0
+    assert "fell: 2" in err  # omega0 = 20 falls
+    assert "| friction.coulomb | plant.omega0 |" in err  # --table goes to stderr with --json
+    with open(path) as fh:
+        header = fh.readline().strip().split(",")
+    assert header == ["friction.coulomb", "plant.omega0", "status", *FEATURES, "error"]
+    rows = read_csv(path)
+    assert [(r["friction.coulomb"], r["plant.omega0"]) for r in rows] == [
+        ("1.3", "7.0"), ("1.3", "20.0"), ("1.5", "7.0"), ("1.5", "20.0")]
+    assert [r["status"] for r in rows][1::2] == ["fell", "fell"]
+
+
+def test_table_has_the_shape_of_table2(tmp_path):
+    path = str(tmp_path / "t.csv")
+    rc, out, _ = run_cli("--set", BAND, "--vary", "friction.coulomb=1.1,1.5,1.9",
+                         "--vary", "friction.stiction=2.1,2.3", "--mode", "oat",
+                         "--duration", "10", "--out", path, "--table", "--no-progress")
+    assert rc == 0
+    blocks = out.strip().split("\n\n")
+    assert len(blocks) == 2  # one table per varied key, like Tables 2 and 3
+    rows = read_csv(path)
+    fc_table = blocks[0].splitlines()
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in fc_table]
+    assert cells[0] == ["friction.coulomb", "peak1", "peak2", "valley", "T", "max(u)",
+                        "max(Ω̇)"]
+    assert set(cells[1]) == {"---"}
+    assert [c[0] for c in cells[2:]] == ["1.1", "1.5", "1.9"]
+    for c, r in zip(cells[2:], rows[:3], strict=True):
+        assert len(c) == 7
+        assert float(c[1]) == pytest.approx(float(r["peak1"]), rel=5e-3)
+        assert float(c[4]) == pytest.approx(float(r["period"]), rel=5e-3)
+    fs_cells = [line.split("|")[1].strip() for line in blocks[1].splitlines()[2:]]
+    assert fs_cells == ["2.1", "2.3"]  # the base point (F_C 1.5, F_S 2.3) is in both
+    assert len(rows) == 4
+
+
+def test_table_marks_rows_that_are_not_limit_cycles():
+    rows = [{"plant.omega0": 6.8, "status": "limit_cycle", **dict.fromkeys(FEATURES, 0.1)},
+            {"plant.omega0": 20.0, "status": "fell", **dict.fromkeys(FEATURES)}]
+    lines = markdown_table(rows, [("plant.omega0", [6.8, 20.0])]).splitlines()
+    assert lines[0].endswith("| status |")
+    assert lines[3].split("|")[2].strip() == "-" and lines[3].rstrip("| ").endswith("fell")
+
+
+def test_plot_file_and_engine_does_not_import_matplotlib(tmp_path):
+    png = tmp_path / "s.png"
+    rc, out, _ = run_cli("--vary", "friction.coulomb=1.1,1.5", "--vary", "plant.omega0=6.8,7.5",
+                         "--duration", "5", "--out", str(tmp_path / "p.csv"),
+                         "--plot", str(png), "--json", "--no-progress")
+    assert rc == 0 and json.loads(out)["rows"] == 4
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    probe = subprocess.run(
+        [sys.executable, "-c", "import sys, frictionlab.sweep; print('matplotlib' in sys.modules)"],
+        capture_output=True, text=True, timeout=120)
+    assert probe.stdout.strip() == "False"
