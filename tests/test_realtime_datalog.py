@@ -1,0 +1,79 @@
+"""The log writer: formats, bounded queue, recordings, sidecar."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from frictionlab.realtime.datalog import CSV_HEADER, LogWriter, read_csv_log
+from frictionlab.realtime.samples import NO_READING, SAMPLE_FIELDS, Sample
+from frictionlab.simulation import LOGGED
+
+
+def sample(k, flags=0):
+    vals = [0.001 * k + i for i in range(10)]
+    return Sample(k, k * 0.005, flags, *vals, 0.1, -0.2, 0.3, -0.0123, 12.5, 40.0, 30.0)
+
+
+def test_dat_csv_and_sidecar(tmp_path):
+    w = LogWriter(tmp_path, "run1", meta_fn=lambda: {"x": 1})
+    w.write_meta({"started": True, "nan": math.nan})
+    w.start()
+    for k in range(300):
+        w.put(sample(k, NO_READING if k == 7 else 0))
+    w.close({"stop_reason": "duration"})
+    assert w.written == 300 and w.dropped == 0
+    dat = np.loadtxt(tmp_path / "run1.dat")
+    assert dat.shape == (300, 10)           # the ten signals of Sec. 7.1, in order
+    np.testing.assert_allclose(dat[5], [0.005 + i for i in range(10)])
+    with open(tmp_path / "run1.csv") as fh:
+        assert fh.readline() == CSV_HEADER
+    log = read_csv_log(tmp_path / "run1.csv")
+    assert list(log) == ["t", "tick", *SAMPLE_FIELDS[2:3], *LOGGED, *SAMPLE_FIELDS[13:]]
+    np.testing.assert_array_equal(log["tick"], np.arange(300))
+    assert log["flags"][7] == NO_READING and log["u_da"][0] == pytest.approx(-0.0123)
+    meta = json.loads((tmp_path / "run1.json").read_text())
+    assert meta == {"stop_reason": "duration"}
+
+
+def test_queue_is_bounded_and_drops_are_counted(tmp_path):
+    w = LogWriter(tmp_path, "run2", maxsize=50)
+    for k in range(80):  # writer thread not started: nothing drains the queue
+        w.put(sample(k))
+    assert w.dropped == 30
+    w.start()
+    w.close()
+    assert w.written == 50
+    assert len(read_csv_log(tmp_path / "run2.csv")["tick"]) == 50
+
+
+def test_recording_saves_a_stretch_under_a_name(tmp_path):
+    w = LogWriter(tmp_path, "run3")
+    w.start()
+    for k in range(10):
+        w.put(sample(k))
+    w.record_start()
+    for k in range(10, 25):
+        w.put(sample(k))
+    out = w.record_stop("balance1.dat")
+    for k in range(25, 30):
+        w.put(sample(k))
+    w.close()
+    assert out["rows"] == 15 and out["dat"].endswith("balance1.dat")
+    assert np.loadtxt(out["dat"]).shape == (15, 10)
+    np.testing.assert_array_equal(read_csv_log(out["csv"])["tick"], np.arange(10, 25))
+    assert len(read_csv_log(tmp_path / "run3.csv")["tick"]) == 30
+    with pytest.raises(RuntimeError):
+        w.record_stop()
+
+
+def test_truncated_last_line_is_ignored_when_reading(tmp_path):
+    p = tmp_path / "x.csv"
+    p.write_text(CSV_HEADER + ",".join(["1"] * 20) + "\n" + "2,3,4")
+    assert len(read_csv_log(p)["t"]) == 1
+
+
+def test_flush_interval_is_at_most_100_ms(tmp_path):
+    with pytest.raises(ValueError, match="flush_interval"):
+        LogWriter(tmp_path, "bad", flush_interval=0.2)
