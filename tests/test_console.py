@@ -1,0 +1,410 @@
+"""Operator console, server side: request validation, access control, the sample stream and
+the HTTP API against a real :class:`RealtimeController` (sim backend, fake clock).
+
+The console in a real browser is tested in ``tests/browser``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pydantic import ValidationError
+
+from frictionlab.config import build_config
+from frictionlab.console import console_url, create_app, serve
+from frictionlab.console.app import Hub, json_safe
+from frictionlab.console.models import (
+    FEEDBACK_FIELDS,
+    OBSERVER_FIELDS,
+    CompensationRequest,
+    DesignRequest,
+    PushRequest,
+    RecordNameRequest,
+    field_errors,
+    schema,
+)
+from frictionlab.console.security import (
+    TOKEN_ENV,
+    Guard,
+    check_bind,
+    is_loopback,
+    resolve_token,
+)
+from frictionlab.console.stream import PLOT_SIGNALS, RingBuffer, SampleStream
+from frictionlab.design import PRESETS, DesignSpec, design
+from frictionlab.friction import FrictionParams
+from frictionlab.realtime import FakeClock, RealtimeController, Sample
+
+# --- request validation -----------------------------------------------------------------
+
+
+def _accepts(cls, **kw) -> bool:
+    try:
+        cls(**kw)
+    except ValueError:
+        return False
+    return True
+
+
+@settings(max_examples=60, deadline=None)
+@given(name=st.sampled_from(FEEDBACK_FIELDS + OBSERVER_FIELDS),
+       value=st.floats(allow_nan=False, allow_infinity=False, min_value=-50, max_value=50))
+def test_design_request_accepts_exactly_what_the_design_spec_accepts(name, value):
+    assert _accepts(DesignRequest, **{name: value}) == _accepts(DesignSpec, **{name: value})
+
+
+@settings(max_examples=60, deadline=None)
+@given(name=st.sampled_from(["stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0",
+                             "sigma1", "observer_gain", "hysteresis"]),
+       value=st.floats(allow_nan=False, allow_infinity=False, min_value=-1e3, max_value=1e3))
+def test_compensation_request_accepts_exactly_what_friction_params_accepts(name, value):
+    ok = _accepts(CompensationRequest, params={name: value})
+    assert ok == _accepts(FrictionParams, **{name: value})
+
+
+@pytest.mark.parametrize("body, field, words", [
+    ({"zeta1": 2.0}, "zeta1", "zeta1"),
+    ({"zeta1": "0.7"}, "zeta1", "must be a number"),
+    ({"omega1": float("nan")}, "omega1", "finite"),
+    ({"h": 0.01}, "h", "unknown field"),
+    ({"preset": "medium"}, "preset", "preset"),
+])
+def test_design_request_refusals_name_the_field(body, field, words):
+    with pytest.raises(ValidationError) as exc:
+        DesignRequest(**body)
+    errors = field_errors(exc.value)
+    assert errors[0]["field"] == field
+    assert words in errors[0]["message"]
+
+
+def test_design_request_needs_exactly_one_kind_of_change():
+    assert DesignRequest(preset="slow").changes() == {"design": "slow"}
+    assert DesignRequest(zeta1=0.8).changes() == {"design": {"zeta1": 0.8}}
+    for body in ({}, {"preset": "fast", "zeta1": 0.8}):
+        with pytest.raises(ValidationError):
+            DesignRequest(**body)
+
+
+def test_compensation_request_changes_and_refusals():
+    assert CompensationRequest(enabled=True).changes() == {"compensation_enabled": True}
+    assert CompensationRequest(kind="classical").changes() == {
+        "compensation": "classical", "compensation_enabled": True}
+    assert CompensationRequest(kind="lugre", enabled=False).changes()[
+        "compensation_enabled"] is False
+    for body in ({}, {"enabled": "yes"}, {"kind": "stribeck"}, {"params": {"mass": 1.0}},
+                 {"params": {"sigma0": -1.0}}):
+        with pytest.raises(ValidationError):
+            CompensationRequest(**body)
+
+
+@pytest.mark.parametrize("kick, ok", [(0.3, True), (-3.0, True), (0.0, False), (3.5, False)])
+def test_push_range(kick, ok):
+    assert _accepts(PushRequest, kick=kick) == ok
+
+
+@pytest.mark.parametrize("name, clean", [("run1", "run1"), ("run1.dat", "run1"),
+                                         (" a-b_c ", "a-b_c"), ("../etc/passwd", None),
+                                         ("a b", None), ("", None), (".hidden", None)])
+def test_record_names(name, clean):
+    if clean is None:
+        with pytest.raises(ValidationError):
+            RecordNameRequest(name=name)
+    else:
+        assert RecordNameRequest(name=name).name == clean
+
+
+def test_schema_ranges_are_the_dataclasses_ranges():
+    sch = schema()
+    fields = {f.name: f.metadata for f in dataclasses.fields(DesignSpec)}
+    for f in sch["feedback"] + sch["observer"]:
+        lo = fields[f["name"]]["lo"]
+        assert f["lo"] == (None if lo is None or math.isinf(lo) else lo)
+    assert sch["presets"]["slow"] == dataclasses.asdict(PRESETS["slow"])
+    assert set(sch["compensation"]["kinds"]) == {"coulomb", "classical", "lugre"}
+
+
+# --- access control ------------------------------------------------------------------------
+
+
+def test_loopback_and_bind_rules(monkeypatch):
+    assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
+    assert is_loopback("127.8.9.10") and is_loopback("[::1]")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.5")
+    check_bind("127.0.0.1", None)
+    with pytest.raises(ValueError, match="needs a token"):
+        check_bind("0.0.0.0", None)
+    check_bind("0.0.0.0", "long-enough-token")
+    assert resolve_token(None, {TOKEN_ENV: "from-the-environment"}) == "from-the-environment"
+    assert resolve_token("given-token", {TOKEN_ENV: "from-the-environment"}) == "given-token"
+    assert resolve_token(None, {}) is None
+    with pytest.raises(ValueError, match="at least"):
+        resolve_token("short", {})
+
+
+def test_serve_refuses_a_non_loopback_bind_without_token(monkeypatch):
+    from frictionlab.cli import UsageError
+
+    monkeypatch.delenv(TOKEN_ENV, raising=False)
+    with pytest.raises(UsageError, match="needs a token"):
+        serve(object(), "0.0.0.0", 0, None)
+
+
+def test_console_url():
+    assert console_url("127.0.0.1", 8000) == "http://127.0.0.1:8000/"
+    assert console_url("0.0.0.0", 8000, "abc12345") == "http://127.0.0.1:8000/?token=abc12345"
+    assert console_url("::1", 9000) == "http://[::1]:9000/"
+
+
+def _echo_app():
+    async def app(scope, receive, send):
+        body = b""
+        if scope["type"] == "http" and scope["method"] == "POST":
+            msg = await receive()
+            body = msg.get("body", b"")
+        await send({"type": "http.response.start", "status": 200,
+                    "headers": [(b"content-type", b"text/plain")]})
+        await send({"type": "http.response.body", "body": b"ok:" + body})
+
+    return app
+
+
+def test_guard_token_origin_host_type_and_size():
+    token = "s3cret-token-value"
+    client = TestClient(Guard(_echo_app(), token, loopback_only=False, max_body=100),
+                        base_url="http://console.example:8000")
+    assert client.get("/x").status_code == 401
+    assert client.get("/x").headers["www-authenticate"].startswith("Bearer")
+    assert client.get("/x", headers={"Authorization": "Bearer nope"}).status_code == 401
+    assert client.get(f"/x?token={token}").status_code == 200
+    auth = {"Authorization": f"Bearer {token}"}
+    r = client.get("/x", headers=auth)
+    assert r.status_code == 200 and r.headers["x-frame-options"] == "DENY"
+    assert "default-src 'self'" in r.headers["content-security-policy"]
+    client.cookies.set("frictionlab_token", token)
+    assert client.get("/x").status_code == 200
+    client.cookies.clear()
+    assert client.get("/x", headers={**auth, "Origin": "http://evil.example"}).status_code == 403
+    assert client.get("/x", headers={**auth, "Origin": "http://console.example:8000"}
+                      ).status_code == 200
+    post = {**auth, "Content-Type": "application/json"}
+    r = client.post("/x", content=b"{}", headers=post)
+    assert r.status_code == 200 and r.text == "ok:{}"
+    assert client.post("/x", content=b"x" * 101, headers=post).status_code == 413
+    assert client.post("/x", content=b"{}", headers={**auth, "Content-Type": "text/plain"}
+                       ).status_code == 415
+
+    def chunks():  # no Content-Length: the limit is counted as the body arrives
+        for _ in range(5):
+            yield b"x" * 40
+
+    assert client.post("/x", content=chunks(), headers=post).status_code == 413
+
+
+def test_guard_loopback_only_checks_the_host_header():
+    client = TestClient(Guard(_echo_app(), None, loopback_only=True),
+                        base_url="http://127.0.0.1:8000")
+    assert client.get("/x").status_code == 200
+    assert client.get("/x", headers={"Host": "attacker.example:8000"}).status_code == 400
+    assert client.get("/x", headers={"Host": "localhost:8000"}).status_code == 200
+
+
+# --- the stream ---------------------------------------------------------------------------
+
+
+@settings(max_examples=50, deadline=None)
+@given(capacity=st.integers(2, 20), sizes=st.lists(st.integers(0, 30), max_size=8))
+def test_ring_buffer_keeps_the_last_samples(capacity, sizes):
+    buf = RingBuffer(("a", "b"), capacity)
+    allv = np.zeros((2, 0))
+    start = 0
+    for n in sizes:
+        block = np.vstack([np.arange(start, start + n), -np.arange(start, start + n)]).astype(float)
+        start += n
+        buf.extend(block)
+        allv = np.hstack([allv, block])
+    assert len(buf) == min(capacity, allv.shape[1])
+    np.testing.assert_array_equal(buf.last(), allv[:, allv.shape[1] - len(buf):])
+    k = min(3, len(buf))
+    np.testing.assert_array_equal(buf.last(k), allv[:, allv.shape[1] - k:])
+
+
+def _sample(k: int, h: float = 0.005, theta: float = 0.0) -> Sample:
+    t = k * h
+    vals = dict.fromkeys(Sample._fields, 0.0)
+    vals.update(k=k, t=t, flags=0, theta_m=theta, theta_hat=theta, u=2 * theta,
+                arm_dot_m=math.cos(t))
+    return Sample(**vals)
+
+
+class _FakeController:
+    def __init__(self):
+        from frictionlab.realtime import Subscription
+
+        self.sub = Subscription(10_000)
+
+    def subscribe(self, maxlen):
+        return self.sub
+
+    def unsubscribe(self, sub):
+        sub.closed = True
+
+
+def test_stream_frames_decimate_and_reset_on_a_new_run():
+    ctl = _FakeController()
+    stream = SampleStream(ctl, h=0.005, history=2.0, max_points=50)
+    assert stream.poll() is None  # not open
+    stream.open()
+    assert stream.poll() is None  # no samples
+    for k in range(10):
+        ctl.sub.put(_sample(k))
+    frame = stream.poll()
+    assert frame["type"] == "samples" and not frame["reset"]
+    assert frame["t"] == [round(k * 0.005, 4) for k in range(10)]
+    assert set(PLOT_SIGNALS) <= set(frame)
+    for k in range(10, 500):
+        ctl.sub.put(_sample(k))
+    frame = stream.poll()
+    assert len(frame["t"]) == 50 and frame["t"][-1] == round(499 * 0.005, 4)
+    assert len(stream.buffer) == stream.buffer.capacity >= 400  # 2 s of history
+    for k in range(3):  # a new run starts at t = 0 again
+        ctl.sub.put(_sample(k))
+    frame = stream.poll()
+    assert frame["reset"] and len(stream.buffer) == 3
+    hist = stream.history(10.0)
+    assert hist["reset"] and len(hist["t"]) == 3
+
+
+def test_stream_figures_measure_a_synthetic_limit_cycle():
+    ctl = _FakeController()
+    stream = SampleStream(ctl, h=0.005, history=10.0)
+    stream.open()
+    assert stream.figures(5.0)["status"] is None
+    amp, period = 0.08, 0.9
+    for k in range(2000):
+        t = k * 0.005
+        ctl.sub.put(_sample(k, theta=amp * math.sin(2 * math.pi * t / period)))
+    stream.poll()
+    fig = stream.figures(5.0)
+    assert fig["status"] == "limit_cycle"
+    assert fig["peak_to_peak"] == pytest.approx(2 * amp, rel=0.02)
+    assert fig["period"] == pytest.approx(period, rel=0.02)
+
+
+def test_hub_fans_frames_out_and_drops_the_oldest_for_a_slow_page():
+    ctl = _FakeController()
+    stream = SampleStream(ctl, h=0.005)
+    stream.open()
+    hub = Hub(stream, lambda: {"running": True}, queue_size=3)
+
+    async def scenario():
+        slow = hub.add_client()
+        for k in range(6):
+            ctl.sub.put(_sample(k))
+            hub.tick()
+        hub.update_status()
+        texts = [slow.get_nowait() for _ in range(slow.qsize())]
+        return texts
+
+    texts = asyncio.run(scenario())
+    assert len(texts) == 3 and '"type":"status"' in texts[-1]
+    assert hub.frames_dropped == 4 and hub.frames_sent == 7
+
+
+def test_json_safe_replaces_non_finite_numbers():
+    assert json_safe({"a": math.nan, "b": [1.0, math.inf], "c": (1, 2)}) == {
+        "a": None, "b": [1.0, None], "c": [1, 2]}
+
+
+# --- the HTTP API with a real controller ----------------------------------------------------
+
+
+@pytest.fixture
+def app_and_controller(tmp_path):
+    cfg = build_config("fast", "classical")
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    exits = []
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05,
+                     on_exit=lambda: exits.append(True))
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        yield client, ctl, exits
+    ctl.close()
+
+
+def test_design_changes_and_refusals_through_the_api(app_and_controller):
+    client, _ctl, _ = app_and_controller
+    slow = design("slow")
+    r = client.post("/api/design", json={"preset": "slow"})
+    assert r.status_code == 200
+    np.testing.assert_allclose(r.json()["status"]["design"]["L"], slow.L)
+    np.testing.assert_allclose(r.json()["status"]["design"]["K"], slow.K)
+    r = client.post("/api/design", json={"zeta2": 0.9})
+    assert r.status_code == 200 and r.json()["status"]["design"]["spec"]["zeta2"] == 0.9
+    assert r.json()["status"]["design"]["preset"] is None
+    before = client.get("/api/status").json()["design"]
+    for body in ({"zeta1": 2}, {"zeta1": "abc"}, {"omega1": -1}, {"bogus": 1}):
+        r = client.post("/api/design", json=body)
+        assert r.status_code == 422, body
+        assert r.json()["errors"] and r.json()["detail"]
+    r = client.post("/api/design", content=b"[1, 2", headers={"Content-Type": "application/json"})
+    assert r.status_code == 422
+    assert client.get("/api/status").json()["design"] == before
+    r = client.post("/api/compensation", json={"kind": "classical", "params": {"stiction": 2.0}})
+    comp = r.json()["status"]["compensation"]
+    assert comp["enabled"] and comp["kind"] == "classical" and comp["params"]["stiction"] == 2.0
+    r = client.post("/api/compensation", json={"params": {"sigma1": -6}})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "params"
+    assert client.post("/api/push", json={"kick": 0.3}).status_code == 409  # not running
+
+
+def test_run_record_download_and_exit(app_and_controller, tmp_path):
+    client, ctl, exits = app_and_controller
+    assert client.post("/api/record/start", json={}).status_code == 409  # not running
+    r = client.post("/api/start", json={})
+    assert r.status_code == 200 and r.json()["status"]["running"]
+    assert client.post("/api/start", json={}).status_code == 409
+    assert client.post("/api/push", json={"kick": 0.2}).status_code == 200
+    assert client.post("/api/record/start", json={}).status_code == 200
+    assert client.get("/api/status").json()["recording"]
+    ticks0 = client.get("/api/status").json()["ticks"]
+    while (st := client.get("/api/status").json())["ticks"] < ticks0 + 100:
+        assert st["running"], st["stop_reason"]
+    r = client.post("/api/record/stop", json={})
+    assert r.status_code == 200 and r.json()["status"]["console"]["pending_recording"]
+    rows = r.json()["rows"]
+    assert rows >= 100
+    r = client.post("/api/record/name", json={"name": "../x"})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "name"
+    r = client.post("/api/record/name", json={"name": "trial"})
+    assert r.status_code == 200 and r.json()["urls"]["dat"] == "/api/files/trial.dat"
+    r = client.get("/api/files/trial.dat")
+    assert r.status_code == 200
+    data = np.loadtxt(r.text.splitlines())
+    assert data.shape == (rows, 10)
+    np.testing.assert_array_equal(data, np.loadtxt(tmp_path / "trial.dat"))
+    csv = client.get("/api/files/trial.csv").text.splitlines()
+    assert csv[0].startswith("t,") and len(csv) == rows + 1
+    assert client.post("/api/record/name", json={"name": "again"}).status_code == 409
+    assert client.get("/api/files/..%2Fsecret.dat").status_code == 404
+    assert client.get("/api/files/missing.dat").status_code == 404
+
+    with client.websocket_connect("ws://127.0.0.1:8000/ws") as ws:
+        first = ws.receive_json()
+        assert first["type"] == "samples" and first["reset"] and len(first["t"]) > 0
+        kinds = {first["type"], ws.receive_json()["type"]}
+        assert "status" in kinds
+
+    r = client.post("/api/stop", json={})
+    assert r.status_code == 200 and not r.json()["status"]["running"]
+    assert r.json()["status"]["stop_reason"] == "user"
+    r = client.post("/api/exit", json={})
+    assert r.status_code == 200 and exits == [True]
+    assert client.post("/api/start", json={}).status_code == 409
+    assert not ctl.running
