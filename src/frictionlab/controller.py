@@ -58,6 +58,7 @@ from .friction import (
 from .observers import arm_observer_step, pendulum_observer_step
 
 __all__ = [
+    "DEFAULT_ERROR_SIGNAL",
     "ERROR_SIGNALS",
     "Controller",
     "ControllerOutput",
@@ -71,9 +72,19 @@ G_L, G_K = 0, 4
 G_W0, G_G, G_ARMLEN, G_H, G_UMAX, G_COMP, G_ERR, G_FEEDNET = range(8, 16)
 NG = 16
 
-#: Candidate error signals e for the LuGre compensator's observer, eq. (19).
-ERROR_SIGNALS = ("none", "velocity_innovation", "position_innovation", "arm_velocity")
-E_NONE, E_VEL_INNOV, E_POS_INNOV, E_ARM_VEL = range(4)
+#: Candidate error signals e for the LuGre compensator's observer, eq. (19):
+#: ``none`` (e = 0, the plain model driven by the measured velocity),
+#: ``velocity_innovation`` (measured minus predicted arm velocity),
+#: ``position_innovation`` (measured minus predicted arm angle),
+#: ``arm_velocity`` and ``arm_angle`` (the arm's control errors, the latter the
+#: position error of Canudas de Wit et al. 1995).  docs/compensation.md
+#: compares them; only the innovations keep the loop up, and the velocity
+#: innovation is best on reduction, robustness and chatter, hence the default.
+ERROR_SIGNALS = ("none", "velocity_innovation", "position_innovation", "arm_velocity",
+                 "arm_angle")
+E_NONE, E_VEL_INNOV, E_POS_INNOV, E_ARM_VEL, E_ARM_ANGLE = range(5)
+#: The error signal chosen by the comparison in docs/compensation.md.
+DEFAULT_ERROR_SIGNAL = "velocity_innovation"
 
 
 @njit(cache=True)
@@ -155,6 +166,8 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
             e = arm_m - arm_hat
         elif err == E_ARM_VEL:
             e = arm_dot_m
+        elif err == E_ARM_ANGLE:
+            e = arm_m
         f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
     u = u_fb + f_hat
     umax = gp[G_UMAX]
@@ -215,7 +228,7 @@ class Controller:
     compensation: str = "none"
     compensation_params: FrictionParams = dataclasses.field(
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
-    error_signal: str = "velocity_innovation"
+    error_signal: str = DEFAULT_ERROR_SIGNAL
     u_max: float = 1.0 / 0.022
     feed_net: bool = True
 

@@ -1,0 +1,540 @@
+r"""Model-based friction compensation (Sec. 6): compensators, metrics and tuning.
+
+A compensator estimates the arm friction :math:`\hat F` from the measured arm
+velocity and adds it to the feedback control, :math:`u = u_{fb} + \hat F`, so
+that the plant's net arm acceleration :math:`u - F` (eq. 5) is close to the
+intended :math:`u_{fb}`.  Three compensators, as in Sec. 6.1-6.3:
+
+``coulomb``
+    :math:`\hat F = F_C s` with the relay :math:`s` switching at
+    :math:`\pm\varepsilon` (Sec. 6.1; state: the relay).
+``classical``
+    The implementation form of eq. (17) (Sec. 6.2): inside the band
+    :math:`|\dot\Omega| < \varepsilon` the estimate balances the feedback
+    signal (:math:`\hat F = u_{fb}`, limited to :math:`\pm F_S`); outside it is
+    the Stribeck level :math:`(F_C + (F_S - F_C)e^{-(\dot\Omega/v_S)^2})
+    \mathrm{sgn}\,\dot\Omega`.  Memoryless.
+``lugre``
+    The observer of eq. (19) with gain k (Sec. 6.3; state: :math:`\hat z`).
+
+The force laws are those of :mod:`frictionlab.friction`, called through the
+compiled :func:`frictionlab.controller.compensator_force` that the simulator
+and the real-time loop run; :class:`Compensator` wraps it as an ``init`` /
+``step`` pair with explicit state for scripts, tests and other loops.
+
+The LuGre observer's error signal
+---------------------------------
+Eq. (19) leaves e open.  With :math:`\tilde z = z - \hat z` the estimation
+error, :math:`\dot{\tilde z} = -a\tilde z + k e` (:math:`a = \sigma_0|v|/s(v)
+\ge 0`), so e must be a signal that the friction error drives *back*.  The
+controller feeds the observers :math:`u - \hat F` (see
+:mod:`frictionlab.controller`), so the arm observer predicts the acceleration
+:math:`u - \hat F` while the arm gets :math:`u - F`; the velocity innovation
+:math:`e = \dot\Omega_m - \hat{\dot\Omega}` therefore integrates
+:math:`-(F - \hat F) \approx -\sigma_0\tilde z`, and :math:`\dot{\tilde z} =
+-a\tilde z - k\sigma_0\int\tilde z` is a damped oscillator: the observer
+corrects itself.  The arm's control errors carry no such information and, in
+simulation, make the loop fall; docs/compensation.md has the comparison and
+:data:`frictionlab.controller.DEFAULT_ERROR_SIGNAL` is the result.
+
+Bristle discretisation
+----------------------
+:math:`\hat z` is advanced with the exact exponential update for the velocity
+held over the sample (:func:`frictionlab.friction.lugre_step_exact`), which is
+stable for any :math:`\sigma_0` and exact in steady sliding.  Forward Euler,
+:math:`\hat z^+ = \hat z + h\dot{\hat z}`, has the multiplier
+:math:`1 - ah` and diverges once :math:`ah > 2`, i.e. at h = 5 ms for
+:math:`\sigma_0|v|/s(v) > 400` 1/s: with :math:`\sigma_0 = 300` already at
+:math:`|v| \approx 2.6` rad/s, inside the limit cycles of Sec. 5 - the likely
+"numerical problems" of Sec. 6.3.
+
+Tuning
+------
+:func:`tune` searches a grid of ``compensation.*`` values through the sweep
+engine (:func:`frictionlab.sweep.evaluate`) for the smallest peak-to-peak
+of the measured pendulum angle, then re-runs the shortlist to measure control
+chatter and picks the best ``score = peak_to_peak * (1 + w * reversals/s)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .config import COMPENSATOR_FIELDS, Config, ConfigError
+from .controller import (
+    DEFAULT_ERROR_SIGNAL,
+    ERROR_SIGNALS,
+    NS,
+    S_RELAY,
+    S_ZHAT,
+    compensator_force,
+)
+from .friction import COULOMB, LUGRE, STRIBECK, FrictionParams
+
+__all__ = [
+    "COMPENSATORS",
+    "DEFAULT_GRIDS",
+    "ChatterMetrics",
+    "ClassicalCompensator",
+    "Comparison",
+    "Compensator",
+    "CompensatorState",
+    "CoulombCompensator",
+    "LuGreCompensator",
+    "TuneResult",
+    "chatter",
+    "check_grid",
+    "compare",
+    "make_compensator",
+    "reversals",
+    "tune",
+]
+
+#: Compensators (``--compensation`` values other than ``none``).
+COMPENSATORS = ("coulomb", "classical", "lugre")
+
+
+@dataclass(frozen=True)
+class CompensatorState:
+    """Explicit state of a compensator.
+
+    Attributes
+    ----------
+    relay : float
+        Coulomb relay output (-1, 0 or +1).
+    z_hat : float
+        LuGre bristle estimate :math:`\\hat z` (rad).
+    friction_estimate : float
+        The last :math:`\\hat F` (m/s^2).
+    """
+
+    relay: float = 0.0
+    z_hat: float = 0.0
+    friction_estimate: float = 0.0
+
+
+@dataclass(frozen=True)
+class Compensator:
+    """A friction compensator: ``init() -> state``, ``step(state, ...) -> (F_hat, state)``.
+
+    Parameters
+    ----------
+    params : FrictionParams
+        The compensator's own friction model (keys ``compensation.*``);
+        default: the settings Sec. 6 found best on the rig.
+    h : float
+        Sampling period (s); the LuGre observer integrates over it.
+    """
+
+    kind: ClassVar[str] = ""
+    params: FrictionParams = None  # type: ignore[assignment]
+    h: float = 0.005
+    _cp: np.ndarray = dataclasses.field(default=None, init=False, repr=False,
+                                        compare=False)
+
+    def __post_init__(self) -> None:
+        if self.kind not in COMPENSATORS:
+            raise ValueError(f"compensator must be one of {', '.join(COMPENSATORS)}; "
+                             f"got {self.kind!r}")
+        if self.params is None:
+            object.__setattr__(self, "params", FrictionParams.defaults(self.kind,
+                                                                       "compensation"))
+        if not isinstance(self.params, FrictionParams):
+            raise ValueError("params must be a FrictionParams")
+        if not (isinstance(self.h, int | float) and math.isfinite(self.h) and 0 < self.h <= 1):
+            raise ValueError(f"h must be in (0, 1] s, got {self.h!r}")
+        object.__setattr__(self, "_cp", self.params.pack())
+
+    @property
+    def code(self) -> int:
+        """The compiled code's compensator number."""
+        return {"coulomb": COULOMB, "classical": STRIBECK, "lugre": LUGRE}[self.kind]
+
+    def init(self, z_hat: float = 0.0) -> CompensatorState:
+        """Initial state: relay undecided, bristle at ``z_hat`` (default relaxed)."""
+        return CompensatorState(0.0, float(z_hat), 0.0)
+
+    def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0,
+             e: float = 0.0) -> tuple[float, CompensatorState]:
+        """Friction estimate for the coming sample.
+
+        Parameters
+        ----------
+        state : CompensatorState
+            From :meth:`init` or the previous step (not modified).
+        v : float
+            Measured arm velocity (rad/s).
+        u_fb : float
+            Feedback control signal (the classical form balances it inside
+            the band).
+        e : float
+            Error signal of the LuGre observer, eq. (19).
+
+        Returns
+        -------
+        (F_hat, next_state)
+            ``F_hat`` in m/s^2 (added to u).  For LuGre it is the mean of
+            eq. (19)'s :math:`\\hat F` over the sample with v held.
+        """
+        s = np.zeros(NS)
+        s[S_RELAY] = state.relay
+        s[S_ZHAT] = state.z_hat
+        f = float(compensator_force(self.code, s, self._cp, float(v), float(u_fb), float(e),
+                                    float(self.h)))
+        return f, CompensatorState(float(s[S_RELAY]), float(s[S_ZHAT]), f)
+
+
+@dataclass(frozen=True)
+class CoulombCompensator(Compensator):
+    """Pure Coulomb relay with hysteresis :math:`\\pm\\varepsilon` (Sec. 6.1)."""
+
+    kind: ClassVar[str] = "coulomb"
+
+
+@dataclass(frozen=True)
+class ClassicalCompensator(Compensator):
+    """Implementation form of the classical model with Stribeck decay and the
+    :math:`\\pm\\varepsilon` band (Sec. 6.2)."""
+
+    kind: ClassVar[str] = "classical"
+
+
+@dataclass(frozen=True)
+class LuGreCompensator(Compensator):
+    """The LuGre observer of eq. (19) with gain ``params.observer_gain`` (Sec. 6.3).
+
+    ``error_signal`` names what the controller feeds as e (one of
+    :data:`frictionlab.controller.ERROR_SIGNALS`); :meth:`step` takes e itself.
+    """
+
+    kind: ClassVar[str] = "lugre"
+    error_signal: str = DEFAULT_ERROR_SIGNAL
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.error_signal not in ERROR_SIGNALS:
+            raise ValueError(f"error_signal must be one of {', '.join(ERROR_SIGNALS)}; "
+                             f"got {self.error_signal!r}")
+
+
+_CLASSES = {"coulomb": CoulombCompensator, "classical": ClassicalCompensator,
+            "lugre": LuGreCompensator}
+
+
+def make_compensator(kind: str, params: FrictionParams | None = None, h: float = 0.005,
+                     **overrides) -> Compensator:
+    """Build a compensator, e.g. ``make_compensator("lugre", sigma0=1000)``.
+
+    ``overrides`` are :class:`FrictionParams` fields applied to ``params``
+    (default: the compensator's Sec. 6 settings); invalid values raise
+    ``ValueError`` naming the field.
+    """
+    if kind not in _CLASSES:
+        raise ValueError(f"compensator must be one of {', '.join(COMPENSATORS)}; "
+                         f"got {kind!r}")
+    base = params if params is not None else FrictionParams.defaults(kind, "compensation")
+    if overrides:
+        base = dataclasses.replace(base, **overrides)
+    return _CLASSES[kind](base, h)
+
+
+# ---------------------------------------------------------------------------
+# metrics
+# ---------------------------------------------------------------------------
+
+
+def reversals(signal: np.ndarray, threshold: float) -> int:
+    """Full sign reversals of ``signal``: passages from above ``+threshold`` to
+    below ``-threshold`` or back (a Schmitt trigger, so noise around zero does
+    not count)."""
+    x = np.asarray(signal, dtype=float)
+    if not threshold > 0:
+        raise ValueError(f"threshold must be > 0, got {threshold}")
+    side = np.where(x > threshold, 1, np.where(x < -threshold, -1, 0))
+    side = side[side != 0]
+    return int(np.count_nonzero(np.diff(side)))
+
+
+@dataclass(frozen=True)
+class ChatterMetrics:
+    """Control chatter over an analysis window.
+
+    Attributes
+    ----------
+    reversals_per_s : float
+        Sign reversals per second of the friction estimate, counted with a
+        Schmitt trigger at half the compensator's Coulomb level (a smooth
+        limit cycle has two per period; a toggling relay many more).
+    u_roughness : float
+        RMS of the sample-to-sample change of u (m/s^2).
+    """
+
+    reversals_per_s: float
+    u_roughness: float
+
+    def as_dict(self) -> dict[str, float]:
+        return dataclasses.asdict(self)
+
+
+def chatter(traj, window: float | None = None) -> ChatterMetrics:
+    """:class:`ChatterMetrics` of a trajectory over its last ``window`` seconds
+    (default: the last half)."""
+    t = traj.t
+    if len(t) < 3:
+        return ChatterMetrics(0.0, 0.0)
+    span = window if window is not None else 0.5 * (t[-1] - t[0])
+    m = t >= t[-1] - span - 1e-12
+    seconds = max(float(np.count_nonzero(m)) * traj.h, traj.h)
+    f = traj["friction_hat"][m]
+    cfg = traj.config
+    level = cfg.compensation.coulomb if cfg is not None else 0.0
+    thr = 0.5 * level if level > 0 else 0.5 * float(np.max(np.abs(f), initial=0.0))
+    n_rev = reversals(f, thr) if thr > 0 else 0
+    u = traj["u"][m]
+    rough = float(np.sqrt(np.mean(np.diff(u) ** 2))) if len(u) > 1 else 0.0
+    return ChatterMetrics(n_rev / seconds, rough)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One configuration with and without its compensator."""
+
+    status: str
+    features: dict[str, Any]
+    chatter: ChatterMetrics
+    baseline_status: str
+    baseline_features: dict[str, Any]
+    baseline_chatter: ChatterMetrics
+
+    @property
+    def reduction(self) -> float | None:
+        """Peak-to-peak without / with compensation (None if undefined)."""
+        a = self.baseline_features.get("peak_to_peak")
+        b = self.features.get("peak_to_peak")
+        if a is None or b is None or b <= 0 or self.status == "fell":
+            return None
+        return a / b
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"status": self.status, "features": self.features,
+                "chatter": self.chatter.as_dict(), "baseline_status": self.baseline_status,
+                "baseline_features": self.baseline_features,
+                "baseline_chatter": self.baseline_chatter.as_dict(),
+                "reduction": self.reduction}
+
+
+def _run(cfg: Config, duration: float | None, window: float | None, controller=None):
+    from .limit_cycles import trajectory_features
+    from .simulation import simulate_config
+
+    traj = simulate_config(cfg, duration, controller=controller)
+    feats = trajectory_features(traj, window)
+    status = "fell" if traj.status == "fell" else feats.status
+    return traj, status, feats.interface_dict(), chatter(traj, window)
+
+
+def compare(cfg: Config, duration: float | None = None, window: float | None = None, *,
+            controller=None, return_trajectories: bool = False):
+    """Run ``cfg`` with its compensator and with ``compensation = none``.
+
+    Parameters
+    ----------
+    cfg : Config
+        The compensated configuration (``cfg.compensation_kind`` != none).
+    duration, window : float, optional
+        As for :func:`frictionlab.simulation.run_features`.
+    controller : Controller, optional
+        A controller for the compensated run (e.g. another error signal).
+    return_trajectories : bool
+        Also return the two trajectories ``(compensated, baseline)``.
+    """
+    if cfg.compensation_kind == "none":
+        raise ConfigError("compare needs a compensator (coulomb, classical or lugre)")
+    traj, st, feats, ch = _run(cfg, duration, window, controller)
+    base_cfg = dataclasses.replace(cfg, compensation_kind="none")
+    btraj, bst, bfeats, bch = _run(base_cfg, duration, window)
+    out = Comparison(st, feats, ch, bst, bfeats, bch)
+    return (out, traj, btraj) if return_trajectories else out
+
+
+# ---------------------------------------------------------------------------
+# tuning
+# ---------------------------------------------------------------------------
+
+#: Default search grids of ``frictionlab compensate tune`` around the values
+#: Sec. 6 explored (the thesis varied sigma0, sigma1 and k for LuGre).
+DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
+    "coulomb": [("compensation.coulomb", [1.1, 1.3, 1.5, 1.7, 1.9]),
+                ("compensation.hysteresis", [0.0, 0.01, 0.02, 0.05, 0.08, 0.12])],
+    "classical": [("compensation.stiction", [1.9, 2.3, 2.7]),
+                  ("compensation.coulomb", [1.3, 1.5, 1.55, 1.7]),
+                  ("compensation.stribeck_velocity", [0.5, 1.0, 2.0]),
+                  ("compensation.hysteresis", [0.02, 0.05, 0.08, 0.12])],
+    "lugre": [("compensation.sigma0", [50.0, 100.0, 300.0, 1000.0]),
+              ("compensation.sigma1", [2.0, 4.0, 6.0, 10.0]),
+              ("compensation.observer_gain", [1.0, 3.0, 7.0, 15.0])],
+}
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """Outcome of :func:`tune`.
+
+    Attributes
+    ----------
+    best : dict
+        The winning ``compensation.*`` values.
+    peak_to_peak, score : float
+        The winner's peak-to-peak (rad) and penalised score.
+    status : str
+        The winner's run status.
+    chatter : ChatterMetrics
+        The winner's chatter.
+    baseline_status, baseline_peak_to_peak, baseline_chatter
+        The same loop without compensation.
+    candidates : list of dict
+        The re-run shortlist: values, peak_to_peak, chatter, score (best first).
+    evaluated, failed : int
+        Grid points run, and those that fell or errored.
+    """
+
+    best: dict[str, float]
+    peak_to_peak: float
+    score: float
+    status: str
+    chatter: ChatterMetrics
+    baseline_status: str
+    baseline_peak_to_peak: float | None
+    baseline_chatter: ChatterMetrics
+    candidates: list[dict[str, Any]]
+    evaluated: int
+    failed: int
+
+    @property
+    def reduction(self) -> float | None:
+        """Baseline peak-to-peak / tuned peak-to-peak."""
+        if self.baseline_peak_to_peak is None or not self.peak_to_peak > 0:
+            return None
+        return self.baseline_peak_to_peak / self.peak_to_peak
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"best": self.best, "peak_to_peak": self.peak_to_peak, "score": self.score,
+                "status": self.status, "chatter": self.chatter.as_dict(),
+                "baseline_status": self.baseline_status,
+                "baseline_peak_to_peak": self.baseline_peak_to_peak,
+                "baseline_chatter": self.baseline_chatter.as_dict(),
+                "reduction": self.reduction, "candidates": self.candidates,
+                "evaluated": self.evaluated, "failed": self.failed}
+
+
+def check_grid(cfg: Config, grid: Sequence[tuple[str, Sequence[float]]]) -> list[dict]:
+    """The grid's points, every one validated (raises :class:`ConfigError` before
+    anything runs): only ``compensation.*`` keys the compensator reads."""
+    from .sweep import make_points, validate_points
+
+    if cfg.compensation_kind == "none":
+        raise ConfigError("tuning needs a compensator: coulomb, classical or lugre")
+    used = COMPENSATOR_FIELDS[cfg.compensation_kind]
+    for key, _ in grid:
+        section, _, field = key.partition(".")
+        if section != "compensation":
+            raise ConfigError(f"tune varies compensator parameters only (compensation.*), "
+                              f"got {key!r}")
+        if field not in used:
+            raise ConfigError(f"{key} has no effect on the {cfg.compensation_kind!r} "
+                              f"compensator; it reads {', '.join(sorted(used))}")
+    points = make_points(cfg, grid, "grid")
+    validate_points(cfg, points)
+    return points
+
+
+def tune(
+    cfg: Config,
+    grid: Sequence[tuple[str, Sequence[float]]] | None = None,
+    *,
+    duration: float | None = None,
+    window: float | None = None,
+    chatter_weight: float = 0.05,
+    shortlist: int = 8,
+    workers: int | None = None,
+    dask: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> TuneResult:
+    """Search compensator parameters that minimise the limit cycle.
+
+    Stage 1 runs every grid point through :func:`frictionlab.sweep.evaluate`
+    and ranks the runs that kept the pendulum up by the peak-to-peak of the
+    measured pendulum angle.  Stage 2 re-runs the ``shortlist`` best (same
+    seed, so the same runs) to measure :func:`chatter` and returns the point
+    with the smallest ``peak_to_peak * (1 + chatter_weight * reversals_per_s)``.
+
+    Parameters
+    ----------
+    cfg : Config
+        Plant, design and compensator; the grid's keys override its
+        ``compensation.*`` values.
+    grid : sequence of (key, values), optional
+        ``compensation.*`` keys and their values (Cartesian product);
+        default :data:`DEFAULT_GRIDS` of the compensator.
+    duration, window : float, optional
+        Per run (defaults: ``sim.duration``; the last half).
+    chatter_weight : float
+        Penalty weight w (s): 20 reversals/s double the score at w = 0.05.
+    shortlist : int
+        Points re-run for the chatter measurement.
+    workers, dask, progress
+        Passed to :func:`frictionlab.sweep.evaluate`.
+
+    Raises
+    ------
+    ConfigError
+        Bad grid (unknown or non-compensator keys, invalid values), bad
+        weights; raised before any simulation.
+    """
+    from .sweep import evaluate
+
+    if not (isinstance(chatter_weight, int | float) and math.isfinite(chatter_weight)
+            and chatter_weight >= 0):
+        raise ConfigError(f"chatter weight must be >= 0, got {chatter_weight!r}")
+    if isinstance(shortlist, bool) or int(shortlist) != shortlist or shortlist < 1:
+        raise ConfigError(f"shortlist must be an integer >= 1, got {shortlist!r}")
+    grid = list(grid) if grid is not None else DEFAULT_GRIDS.get(cfg.compensation_kind, [])
+    points = check_grid(cfg, grid)
+    rows = evaluate(cfg, points, duration=duration, window=window, workers=workers,
+                    dask=dask, progress=progress)
+    ok = [(r["peak_to_peak"], i) for i, r in enumerate(rows)
+          if r["status"] in ("limit_cycle", "settled") and r["peak_to_peak"] is not None]
+    failed = len(rows) - len(ok)
+    _, bstatus, bfeats, bch = _run(dataclasses.replace(cfg, compensation_kind="none"),
+                                   duration, window)
+    if not ok:
+        raise RuntimeError(f"every one of the {len(rows)} grid points fell or failed; "
+                           "widen the grid")
+    ok.sort()
+    cands = []
+    for _, i in ok[:int(shortlist)]:
+        p = points[i]
+        _, st, feats, ch = _run(cfg.with_values(p), duration, window)
+        ptp = feats["peak_to_peak"]
+        if st == "fell" or ptp is None:
+            continue
+        score = ptp * (1.0 + chatter_weight * ch.reversals_per_s)
+        cands.append({"values": dict(p), "status": st, "peak_to_peak": ptp,
+                      "chatter": ch.as_dict(), "score": score})
+    if not cands:
+        raise RuntimeError("no shortlisted point kept the pendulum up when re-run")
+    cands.sort(key=lambda c: c["score"])
+    win = cands[0]
+    return TuneResult(
+        best=win["values"], peak_to_peak=win["peak_to_peak"], score=win["score"],
+        status=win["status"], chatter=ChatterMetrics(**win["chatter"]),
+        baseline_status=bstatus,
+        baseline_peak_to_peak=None if bstatus == "fell" else bfeats["peak_to_peak"],
+        baseline_chatter=bch, candidates=cands, evaluated=len(rows), failed=failed)
+

@@ -1,0 +1,170 @@
+"""``frictionlab compensate tune``: search compensator parameters (Sec. 6).
+
+The search itself is :func:`frictionlab.compensation.tune` (through the sweep
+engine); this module parses the command line, prints the result and draws
+the before/after figure (cf. the thesis's Figs. 25-30).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+__all__ = ["plot_before_after", "register_cli"]
+
+
+def plot_before_after(traj_off, traj_on, path: str, window: float | None = None,
+                      title: str | None = None) -> str:
+    """Limit cycle without (left) and with (right) compensation.
+
+    Rows: measured pendulum angle, measured arm velocity, control signal,
+    friction (plant's, and the compensator's estimate), over the last
+    ``window`` seconds of each run (default: the last half, at most 10 s).
+    Both columns share the y axes, so the reduction is visible at a glance.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, axes = plt.subplots(4, 2, figsize=(11, 8.5), sharex="col", sharey="row")
+    for col, (traj, name) in enumerate(((traj_off, "without compensation"),
+                                        (traj_on, "with compensation"))):
+        t = traj.t
+        if len(t) == 0:
+            raise ValueError(f"empty trajectory ({name}): nothing to plot")
+        span = min(window if window is not None else 0.5 * t[-1], 10.0, t[-1])
+        m = t >= t[-1] - span
+        tt = t[m] - t[m][0]
+        ax = axes[0, col]
+        ax.plot(tt, traj["theta_m"][m], lw=0.8)
+        ptp = np.ptp(traj["theta_m"][m])
+        ax.set_title(f"{name}  (raw peak-to-peak {ptp:.3f} rad)", fontsize=9)
+        axes[1, col].plot(tt, traj["arm_dot_m"][m], lw=0.8, color="C1")
+        axes[2, col].plot(tt, traj["u"][m], lw=0.8, color="C2")
+        ax = axes[3, col]
+        ax.plot(tt, traj["friction"][m], lw=0.8, color="C3", label="friction (plant)")
+        if np.any(traj["friction_hat"][m] != 0):
+            ax.plot(tt, traj["friction_hat"][m], "--", lw=0.8, color="C4",
+                    label="estimate")
+        ax.legend(loc="upper right", fontsize=7)
+        ax.set_xlabel("time [s]")
+    axes[0, 0].set_ylabel(r"$\theta_m$ [rad]")
+    axes[1, 0].set_ylabel(r"$\dot\Omega_m$ [rad/s]")
+    axes[2, 0].set_ylabel(r"$u$ [m/s$^2$]")
+    axes[3, 0].set_ylabel(r"friction [m/s$^2$]")
+    for a in axes.flat:
+        a.grid(alpha=0.3)
+    if title is None and traj_on.config is not None:
+        c = traj_on.config
+        title = (f"{c.friction_kind} plant friction, {c.compensation_kind} compensator, "
+                 f"h = {c.design.h:g} s")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def register_cli(sub) -> None:
+    """Add ``frictionlab compensate`` (subcommand ``tune``) to the CLI."""
+    from .cli import _add_config_args
+
+    p = sub.add_parser("compensate", help="friction compensation: tune a compensator (Sec. 6)")
+    csub = p.add_subparsers(dest="compensate_command", metavar="ACTION")
+    csub.required = True
+    t = csub.add_parser(
+        "tune", help="search compensator parameters minimising the limit cycle",
+        description="Run a grid of compensation.* values through the sweep engine, rank the "
+                    "runs by the peak-to-peak of the measured pendulum angle, re-run the "
+                    "shortlist to measure control chatter (sign reversals per second of the "
+                    "friction estimate) and report the best score peak_to_peak * (1 + W * "
+                    "reversals/s), with the reduction against no compensation.")
+    _add_config_args(t)
+    t.set_defaults(compensation="lugre")
+    t.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
+                   help="values of a compensation.* key (list or START:STOP:N); repeatable; "
+                        "default: a grid per compensator around the thesis's settings")
+    t.add_argument("--duration", type=float, default=30.0,
+                   help="simulated time per run in s (default 30)")
+    t.add_argument("--window", type=float, default=None,
+                   help="analyse the last S seconds of each run (default: the last half)")
+    t.add_argument("--chatter-weight", type=float, default=0.05, metavar="W",
+                   help="penalty weight in s (default 0.05: 20 reversals/s double the score)")
+    t.add_argument("--shortlist", type=int, default=8,
+                   help="best points re-run to measure chatter (default 8)")
+    t.add_argument("--workers", type=int, default=None,
+                   help="local processes (default: all cores; 1 = in-process)")
+    t.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
+                   help="run the grid on Dask")
+    t.add_argument("--plot", metavar="FILE.png",
+                   help="before/after figure of the best setting (cf. Figs. 25-30)")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    t.add_argument("--json", action="store_true", help="print one JSON object")
+    t.set_defaults(func=cmd_tune)
+
+
+def cmd_tune(args) -> int:
+    """``frictionlab compensate tune``."""
+    from .cli import UsageError, config_from_args, emit_json, progress_bar
+    from .compensation import DEFAULT_GRIDS, check_grid, tune
+    from .sweep import parse_vary
+
+    t0 = time.perf_counter()
+    cfg = config_from_args(args)
+    if cfg.compensation_kind == "none":
+        raise UsageError("--compensation must be coulomb, classical or lugre")
+    if not (args.duration > 0 and math.isfinite(args.duration)):
+        raise UsageError(f"--duration must be > 0, got {args.duration}")
+    if args.window is not None and not (0 < args.window <= args.duration):
+        raise UsageError(f"--window must be in (0, --duration], got {args.window}")
+    if not (math.isfinite(args.chatter_weight) and args.chatter_weight >= 0):
+        raise UsageError(f"--chatter-weight must be >= 0, got {args.chatter_weight}")
+    if args.shortlist < 1:
+        raise UsageError(f"--shortlist must be >= 1, got {args.shortlist}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if args.plot and not args.plot.endswith((".png", ".pdf", ".svg")):
+        raise UsageError(f"--plot {args.plot}: extension must be .png, .pdf or .svg")
+    grid = [parse_vary(v) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]
+    n = len(check_grid(cfg, grid))  # every point validated before anything runs
+    print(f"frictionlab compensate tune: {cfg.compensation_kind} compensator, {n} points, "
+          f"{args.design} design, {cfg.friction_kind} plant friction", file=sys.stderr)
+    with progress_bar(f"tune {n} points", not args.no_progress) as upd:
+        res = tune(cfg, grid, duration=args.duration, window=args.window,
+                   chatter_weight=args.chatter_weight, shortlist=args.shortlist,
+                   workers=args.workers, dask=args.dask,
+                   progress=lambda done, total: upd(done / total))
+    out = {"compensation": cfg.compensation_kind, "design": args.design,
+           "friction": cfg.friction_kind, **res.as_dict(),
+           "seconds": round(time.perf_counter() - t0, 3)}
+    if args.plot:
+        from .compensation import compare
+
+        _, traj_on, traj_off = compare(cfg.with_values(res.best), args.duration, args.window,
+                                       return_trajectories=True)
+        plot_before_after(traj_off, traj_on, args.plot, args.window)
+        out["plot"] = args.plot
+    if args.json:
+        emit_json(out)
+    else:
+        print(f"best {cfg.compensation_kind} settings ({args.design} design, "
+              f"{cfg.friction_kind} plant):")
+        for k, v in res.best.items():
+            print(f"  {k:34s} {v:g}")
+        red = res.reduction
+        print(f"peak-to-peak {res.peak_to_peak:.4g} rad (without compensation "
+              f"{_fmt(res.baseline_peak_to_peak)}): reduction "
+              f"{'-' if red is None else f'{red:.2f}x'}")
+        print(f"chatter: {res.chatter.reversals_per_s:.2f} reversals/s of the estimate, "
+              f"u roughness {res.chatter.u_roughness:.3g} m/s^2 per sample")
+        print(f"{res.evaluated} points, {res.failed} fell or failed; "
+              f"{out['seconds']:.1f} s" + (f"; plot {args.plot}" if args.plot else ""))
+    return 0
+
+
+def _fmt(v) -> str:
+    return "-" if v is None else f"{v:.4g}"

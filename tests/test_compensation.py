@@ -1,0 +1,411 @@
+"""Friction compensation (Sec. 6): acceptance of issue 6, compensator API, tuning, CLI."""
+
+import dataclasses
+import io
+import json
+import math
+from contextlib import redirect_stderr, redirect_stdout
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from frictionlab import compensation as comp
+from frictionlab.cli import main
+from frictionlab.compensation import (
+    ClassicalCompensator,
+    CoulombCompensator,
+    LuGreCompensator,
+    chatter,
+    compare,
+    make_compensator,
+    reversals,
+    tune,
+)
+from frictionlab.config import ConfigError, build_config
+from frictionlab.controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
+from frictionlab.design import design as make_design
+from frictionlab.friction import (
+    FrictionParams,
+    lugre_force,
+    lugre_step_exact,
+    stribeck_curve,
+    stribeck_level,
+)
+from frictionlab.simulation import simulate_config
+
+DUR, WIN = 30.0, 15.0
+NOISE = "sim.noise=0.002"
+#: the compensator's model equal to the plant's eq. (21) values (k is the observer's own gain)
+MATCHED = ["compensation.stiction=2.3", "compensation.coulomb=1.5", "compensation.viscous=0.07",
+           "compensation.sigma0=100", "compensation.sigma1=5",
+           "compensation.stribeck_velocity=1", "compensation.observer_gain=7"]
+
+
+def lugre_cfg(*sets, design="fast", friction="lugre", compensation="lugre"):
+    return build_config(design, friction, compensation, sets=[NOISE, *sets])
+
+
+def controller(cfg, error_signal=DEFAULT_ERROR_SIGNAL, feed_net=True):
+    return Controller(make_design(cfg.design, cfg.plant), cfg.compensation_kind,
+                      cfg.compensation, error_signal=error_signal, feed_net=feed_net)
+
+
+# ---------------------------------------------------------------------------
+# acceptance: reduction of the limit cycle
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def matched():
+    return compare(lugre_cfg(*MATCHED), DUR, WIN)
+
+
+def test_matched_lugre_compensator_reduces_limit_cycle_5x(matched):
+    assert matched.baseline_status == "limit_cycle"
+    assert matched.status != "fell"
+    assert matched.reduction >= 5.0, matched.as_dict()
+
+
+def test_mismatched_sigma0_300_still_5x():
+    sets = [*MATCHED, "compensation.sigma0=300"]
+    res = compare(lugre_cfg(*sets), DUR, WIN)
+    assert res.status != "fell"
+    assert res.reduction >= 5.0, res.as_dict()
+
+
+def test_classical_plant_lugre_compensator_3x():
+    cfg = lugre_cfg("friction.stiction=2.3", "friction.coulomb=1.5", friction="classical")
+    res = compare(cfg, DUR, WIN)
+    assert res.baseline_status == "limit_cycle"
+    assert res.status != "fell"
+    assert res.reduction >= 3.0, res.as_dict()
+
+
+def test_compensation_shrinks_control_and_arm_motion(matched):
+    # the compensated loop needs less control and moves the arm less
+    assert matched.features["max_u"] < matched.baseline_features["max_u"]
+    assert (matched.features["max_arm_velocity"]
+            < 0.5 * matched.baseline_features["max_arm_velocity"])
+
+
+# ---------------------------------------------------------------------------
+# the error signal e of eq. (19) and what the observers are fed
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def error_signal_runs():
+    cfg = lugre_cfg(*MATCHED, "compensation.sigma0=300")
+    base = compare(cfg, DUR, WIN)
+    out = {}
+    for err in ERROR_SIGNALS:
+        out[err] = compare(cfg, DUR, WIN, controller=controller(cfg, err))
+    return base, out
+
+
+def test_default_error_signal_is_the_best_candidate(error_signal_runs):
+    _, runs = error_signal_runs
+    ok = {k: r.reduction for k, r in runs.items() if r.status != "fell"}
+    assert DEFAULT_ERROR_SIGNAL in ok
+    assert max(ok, key=ok.get) == DEFAULT_ERROR_SIGNAL
+
+
+def test_arm_control_errors_destabilise(error_signal_runs):
+    _, runs = error_signal_runs
+    assert runs["arm_velocity"].status == "fell"
+    assert runs["arm_angle"].status == "fell"
+
+
+def test_observers_must_be_fed_the_net_acceleration():
+    cfg = lugre_cfg(*MATCHED)
+    net = compare(cfg, DUR, WIN, controller=controller(cfg, feed_net=True))
+    raw = compare(cfg, DUR, WIN, controller=controller(cfg, feed_net=False))
+    assert net.status != "fell"
+    assert raw.status == "fell" or raw.features["peak_to_peak"] > 5 * net.features[
+        "peak_to_peak"]
+
+
+# ---------------------------------------------------------------------------
+# the bristle discretisation at sigma0 = 1000, h = 5 ms
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=40, deadline=None)
+@given(v=st.floats(0.05, 5.0), sign=st.sampled_from([-1.0, 1.0]),
+       sigma0=st.floats(50.0, 1000.0), z0=st.floats(-0.05, 0.05))
+def test_observer_steady_sliding_accurate(v, sign, sigma0, z0):
+    c = make_compensator("lugre", sigma0=sigma0)
+    p = c.params.pack()
+    st_ = c.init(z0)
+    vv = sign * v
+    f_max = 0.0
+    for _ in range(2000):  # 10 s of steady sliding
+        f, st_ = c.step(st_, vv)
+        f_max = max(f_max, abs(f))
+    assert math.isfinite(f) and f_max < 1e3
+    assert abs(f - stribeck_curve(vv, p)) < 0.05 * c.params.coulomb
+
+
+def test_observer_tracks_true_lugre_friction_at_sigma0_1000():
+    """Bounded and within 5% of F_C of the true friction (integrated 100x finer)
+    wherever the arm slides, for a slowly varying velocity up to 3 rad/s."""
+    h, sub = 0.005, 100
+    prm = FrictionParams(sigma0=1000.0)
+    p = prm.pack()
+    c = LuGreCompensator(prm, h)
+    st_ = c.init()
+    z = 0.0
+    errs, fmax = [], 0.0
+    for k in range(4000):
+        t0 = k * h
+        v0 = 3.0 * math.sin(2 * math.pi * t0 / 10.0)
+        f_hat, st_ = c.step(st_, v0)
+        f_true = 0.0
+        for j in range(sub):
+            v = 3.0 * math.sin(2 * math.pi * (t0 + j * h / sub) / 10.0)
+            z_new, zm, dzm = lugre_step_exact(v, z, 0.0, h / sub, p)
+            f_true += lugre_force(v, zm, dzm, p) / sub
+            z = z_new
+        fmax = max(fmax, abs(f_hat))
+        if abs(v0) > 0.3:
+            errs.append(abs(f_hat - f_true))
+    assert fmax < 2 * prm.stiction + 3 * prm.viscous
+    assert max(errs) < 0.05 * prm.coulomb
+
+
+def test_closed_loop_stays_bounded_with_stiff_bristles():
+    cfg = lugre_cfg("friction.sigma0=1000", "compensation.sigma0=1000")
+    traj = simulate_config(cfg, 20.0)
+    assert traj.status == "ok"
+    assert np.all(np.isfinite(traj["friction_hat"]))
+    assert np.max(np.abs(traj["friction_hat"])) < 10.0
+
+
+# ---------------------------------------------------------------------------
+# Coulomb hysteresis
+# ---------------------------------------------------------------------------
+
+
+def coulomb_run(eps):
+    cfg = build_config("fast", "classical", "coulomb",
+                       sets=[NOISE, f"compensation.hysteresis={eps}"])
+    res, traj, _ = compare(cfg, DUR, WIN, return_trajectories=True)
+    return res, chatter(traj, WIN)
+
+
+def test_coulomb_without_hysteresis_chatters_and_with_eps_does_not():
+    _, ch0 = coulomb_run(0.0)
+    res5, ch5 = coulomb_run(0.05)
+    print(f"sign reversals of F_hat: eps=0 {ch0.reversals_per_s:.1f}/s, "
+          f"eps=0.05 {ch5.reversals_per_s:.1f}/s")
+    period = res5.features["period"]
+    assert period is not None
+    # with the hysteresis the estimate reverses only at the limit cycle's turning
+    # points (twice a period); without it, many times more often
+    assert ch5.reversals_per_s <= 1.1 * 2.0 / period
+    assert ch0.reversals_per_s > 4.0 * ch5.reversals_per_s
+    assert ch0.u_roughness > 1.5 * ch5.u_roughness
+
+
+def test_reversals_count_only_full_swings():
+    x = np.array([0.0, 1.0, 0.1, -0.1, 0.2, -1.0, -0.2, 1.0, 1.0])
+    assert reversals(x, 0.5) == 2
+    assert reversals(np.full(5, 0.3), 0.5) == 0
+    with pytest.raises(ValueError, match="threshold"):
+        reversals(x, 0.0)
+
+
+# ---------------------------------------------------------------------------
+# compensator API = the controller's compiled path
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=60, deadline=None)
+@given(vs=st.lists(st.floats(-0.2, 0.2), min_size=1, max_size=30),
+       eps=st.floats(0.0, 0.1))
+def test_coulomb_relay_hysteresis(vs, eps):
+    c = make_compensator("coulomb", hysteresis=eps)
+    s = c.init()
+    prev = 0.0
+    for v in vs:
+        f, s = c.step(s, v)
+        if v > eps:
+            assert f == c.params.coulomb
+        elif v < -eps:
+            assert f == -c.params.coulomb
+        else:
+            assert f == prev  # inside the band the relay keeps its value
+        prev = f
+
+
+@settings(max_examples=60, deadline=None)
+@given(v=st.floats(-5.0, 5.0), u_fb=st.floats(-10.0, 10.0))
+def test_classical_implementation_form(v, u_fb):
+    c = ClassicalCompensator()
+    p = c.params
+    f, _ = c.step(c.init(), v, u_fb=u_fb)
+    if abs(v) < p.hysteresis:
+        assert f == pytest.approx(min(max(u_fb, -p.stiction), p.stiction))
+    else:
+        assert f == pytest.approx(math.copysign(stribeck_level(v, p.pack()), v))
+
+
+def test_api_matches_controller_tick(fast_design):
+    """The public compensators reproduce the controller's estimates tick by tick."""
+    rng = np.random.default_rng(3)
+    for kind in ("coulomb", "classical", "lugre"):
+        prm = FrictionParams.defaults(kind, "compensation")
+        ctrl = Controller(fast_design, kind, prm)
+        cmp_ = make_compensator(kind, prm, h=fast_design.spec.h)
+        s, cs = ctrl.init(0.02), cmp_.init()
+        for _ in range(200):
+            th, arm, ad = rng.normal(0, [0.02, 0.1, 0.5])
+            out, s_next = ctrl.step(s, th, arm, ad)
+            f, cs = cmp_.step(cs, ad, u_fb=out.u_feedback, e=ad - out.arm_dot_hat)
+            assert f == out.friction_estimate
+            assert cs.z_hat == s_next[5]
+            s = s_next
+
+
+def test_step_does_not_mutate_state():
+    c = make_compensator("lugre")
+    s0 = c.init(0.001)
+    _, s1 = c.step(s0, 1.0)
+    assert s0.z_hat == 0.001 and s1.z_hat != 0.001
+
+
+# ---------------------------------------------------------------------------
+# invalid parameters are rejected before anything runs
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind,field,value", [
+    ("lugre", "sigma0", -300.0), ("lugre", "observer_gain", -1.0),
+    ("classical", "stribeck_velocity", 0.0), ("coulomb", "hysteresis", -0.05),
+    ("coulomb", "coulomb", float("nan")),
+])
+def test_invalid_compensator_params_rejected(kind, field, value):
+    with pytest.raises(ValueError, match=field):
+        make_compensator(kind, **{field: value})
+    with pytest.raises(ConfigError, match=f"compensation.{field}"):
+        build_config("fast", "lugre", kind, sets=[f"compensation.{field}={value}"])
+
+
+def test_invalid_compensator_options_rejected():
+    with pytest.raises(ValueError, match="error_signal"):
+        LuGreCompensator(error_signal="pendulum")
+    with pytest.raises(ValueError, match="h must"):
+        CoulombCompensator(h=0.0)
+    with pytest.raises(ValueError, match="compensator must be"):
+        make_compensator("viscous")
+
+
+def run_cli(*args):
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        rc = main(list(args))
+    return rc, out.getvalue(), err.getvalue()
+
+
+def test_cli_rejects_bad_compensator_before_running(monkeypatch):
+    def boom(*a, **k):
+        raise AssertionError("a simulation started")
+
+    monkeypatch.setattr("frictionlab.simulation.simulate_config", boom)
+    monkeypatch.setattr("frictionlab.sweep.evaluate", boom)
+    rc, out, err = run_cli("simulate", "--compensation", "lugre", "--set",
+                           "compensation.sigma0=-5", "--json")
+    assert rc == 2 and out == "" and "compensation.sigma0" in err
+    rc, out, err = run_cli("compensate", "tune", "--vary", "compensation.sigma0=100,-5",
+                           "--json")
+    assert rc == 2 and out == "" and "compensation.sigma0" in err
+    rc, out, err = run_cli("compensate", "tune", "--vary", "friction.coulomb=1,2", "--json")
+    assert rc == 2 and "compensation.*" in err
+    rc, out, err = run_cli("compensate", "tune", "--compensation", "coulomb", "--vary",
+                           "compensation.sigma0=100,300", "--json")
+    assert rc == 2 and "no effect" in err
+    rc, out, err = run_cli("compensate", "tune", "--compensation", "none", "--json")
+    assert rc == 2 and "--compensation" in err
+
+
+def test_tune_validates_before_evaluating(monkeypatch):
+    called = []
+    monkeypatch.setattr("frictionlab.sweep.evaluate", lambda *a, **k: called.append(1))
+    cfg = lugre_cfg()
+    with pytest.raises(ConfigError, match="sigma1"):
+        tune(cfg, [("compensation.sigma1", [5.0, -1.0])])
+    with pytest.raises(ConfigError, match="chatter"):
+        tune(cfg, [("compensation.sigma1", [5.0])], chatter_weight=-1.0)
+    assert not called
+
+
+# ---------------------------------------------------------------------------
+# tuning
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def small_tune():
+    cfg = build_config("fast", "classical", "coulomb", sets=[NOISE])
+    grid = [("compensation.hysteresis", [0.0, 0.05])]
+    return cfg, tune(cfg, grid, duration=20.0, workers=1, shortlist=2)
+
+
+def test_tune_picks_the_best_penalised_point(small_tune):
+    _, res = small_tune
+    assert res.evaluated == 2
+    assert len(res.candidates) == 2
+    scores = [c["score"] for c in res.candidates]
+    assert scores == sorted(scores)
+    for c in res.candidates:
+        assert c["score"] == pytest.approx(
+            c["peak_to_peak"] * (1 + 0.05 * c["chatter"]["reversals_per_s"]))
+    assert res.best == res.candidates[0]["values"]
+    assert res.reduction == pytest.approx(res.baseline_peak_to_peak / res.peak_to_peak)
+    # the penalty matters: eps = 0 has the smaller limit cycle but chatters
+    ptp = {c["values"]["compensation.hysteresis"]: c for c in res.candidates}
+    assert ptp[0.0]["chatter"]["reversals_per_s"] > ptp[0.05]["chatter"]["reversals_per_s"]
+
+
+def test_tune_without_penalty_prefers_smallest_limit_cycle(small_tune):
+    cfg, _ = small_tune
+    res = tune(cfg, [("compensation.hysteresis", [0.0, 0.05])], duration=20.0, workers=1,
+               chatter_weight=0.0)
+    best = min(res.candidates, key=lambda c: c["peak_to_peak"])
+    assert res.best == best["values"]
+
+
+def test_tune_cli_json_and_plot(tmp_path):
+    png = tmp_path / "ba.png"
+    rc, out, err = run_cli("compensate", "tune", "--friction", "lugre", "--compensation",
+                           "lugre", "--set", NOISE, "--vary", "compensation.observer_gain=3,7",
+                           "--duration", "16", "--workers", "1", "--no-progress",
+                           "--plot", str(png), "--json")
+    assert rc == 0, err
+    lines = out.strip().splitlines()
+    assert len(lines) == 1
+    res = json.loads(lines[0])
+    assert res["best"]["compensation.observer_gain"] in (3.0, 7.0)
+    assert res["reduction"] == pytest.approx(res["baseline_peak_to_peak"]
+                                             / res["peak_to_peak"])
+    assert res["reduction"] > 1.0
+    assert set(res["chatter"]) == {"reversals_per_s", "u_roughness"}
+    assert png.stat().st_size > 10_000
+
+
+def test_simulate_cli_runs_every_compensator_against_every_plant():
+    for plant in ("classical", "lugre", "coulomb"):
+        for kind in comp.COMPENSATORS:
+            rc, out, err = run_cli("simulate", "--friction", plant, "--compensation", kind,
+                                   "--duration", "6", "--json")
+            assert rc == 0, err
+            assert json.loads(out)["status"] in ("limit_cycle", "settled")
+
+
+def test_compare_needs_a_compensator():
+    with pytest.raises(ConfigError):
+        compare(build_config("fast", "lugre", "none"), 2.0)
+    cfg = dataclasses.replace(lugre_cfg(), compensation_kind="coulomb")
+    assert compare(cfg, 4.0).baseline_status in ("limit_cycle", "settled")
