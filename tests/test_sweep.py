@@ -24,6 +24,7 @@ from frictionlab.reference import TABLE2
 from frictionlab.simulation import run_features
 from frictionlab.sweep import (
     SweepFile,
+    _get_dask,
     columns,
     evaluate,
     make_points,
@@ -161,6 +162,10 @@ def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
     dask = evaluate(base, points, duration=10, dask="local", workers=2)
     assert pool == serial
     assert dask == pool
+    # joining a running scheduler by address (here the LocalCluster's own)
+    address = _get_dask("local", 2).scheduler.address
+    assert address.startswith("tcp://")
+    assert evaluate(base, points[:2], duration=10, dask=address) == pool[:2]
     assert [r["friction.coulomb"] for r in pool] == list(TABLE2_FC)
     assert all(r["status"] == "limit_cycle" for r in pool)
     # larger F_C, larger limit cycle (Table 2's trend)
