@@ -85,8 +85,12 @@ def _write_report(path: str, obj: dict) -> None:
         raise UsageError(f"cannot write --report {path}: {exc.strerror}") from None
 
 
+def _never(*args, **kwargs):  # pragma: no cover - validation only
+    raise AssertionError("validation must not simulate")
+
+
 def cmd_limit_cycle(args) -> int:
-    from .limit_cycle import check_fit_keys, fit_limit_cycle
+    from .limit_cycle import LimitCycleProblem, check_fit_keys, fit_limit_cycle
 
     experiments = _load_measured(args.measured)
     keys = check_fit_keys([k.strip() for k in args.fit.split(",") if k.strip()])
@@ -103,8 +107,11 @@ def cmd_limit_cycle(args) -> int:
         from ..config import load_toml
 
         sets = [*load_toml(args.config), *sets]
-    # validate the common settings early (exit 2 before any simulation)
-    build_config(design="fast", friction=args.friction, sets=sets)
+    # validate the whole problem (settings, bounds, run length) before any
+    # output or simulation: bad input exits 2 with a single stderr line
+    LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
+                      weights=weights, duration=args.duration, window=args.window,
+                      evaluate=_never)
     err = sys.stderr
     print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
           f"{', '.join(keys)} ({args.friction} friction, {args.duration:g} s runs)", file=err)

@@ -1,0 +1,168 @@
+"""``frictionlab identify ...`` on the command line: JSON contract, plots,
+logs, and exit status 2 on infeasible input."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from frictionlab.cli import main
+from frictionlab.config import build_config
+from frictionlab.simulation import run_features
+
+DURATION, WINDOW = 16.0, 10.0
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory):
+    """Features of the fast and slow designs at Coulomb 1.4 (other keys default)."""
+    exps = []
+    for design in ("fast", "slow"):
+        cfg = build_config(design=design, friction="classical",
+                           sets=[("friction.coulomb", 1.4)])
+        exps.append({"design": design,
+                     "features": run_features(cfg, DURATION, WINDOW).interface_dict()})
+    path = tmp_path_factory.mktemp("measured") / "m.json"
+    path.write_text(json.dumps({"experiments": exps}))
+    return path
+
+
+def _run(capsys, argv):
+    rc = main(argv)
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
+    plot, report = tmp_path / "fit.png", tmp_path / "full.json"
+    rc, out, err = _run(capsys, [
+        "identify", "limit-cycle", "--measured", str(measured), "--fit", "friction.coulomb",
+        "--bounds", "friction.coulomb=1.0:2.0", "--duration", str(DURATION),
+        "--window", str(WINDOW), "--maxiter", "12", "--popsize", "8", "--workers", "1",
+        "--plot", str(plot), "--report", str(report), "--json"])
+    assert rc == 0
+    lines = out.strip().splitlines()
+    assert len(lines) == 1
+    obj = json.loads(lines[0])
+    assert list(obj) == ["estimate", "stderr", "residuals", "cost"]
+    assert abs(obj["estimate"]["friction.coulomb"] - 1.4) < 0.02
+    assert set(obj["residuals"]) == {"fast", "slow"}
+    assert obj["cost"] >= 0
+    # progress and the summary go to stderr
+    assert "identify limit-cycle" in err and "done in" in err
+    assert plot.read_bytes()[:4] == b"\x89PNG"
+    full = json.loads(report.read_text())
+    assert full["estimate"] == obj["estimate"]
+    assert set(full["simulated"]) == {"fast", "slow"}
+    assert "warnings" in full and "singular_values" in full
+
+
+def test_limit_cycle_text_output(capsys, measured):
+    rc, out, _ = _run(capsys, [
+        "identify", "limit-cycle", "--measured", str(measured), "--fit", "friction.coulomb",
+        "--bounds", "friction.coulomb=1.2:1.6", "--duration", str(DURATION),
+        "--window", str(WINDOW), "--maxiter", "2", "--popsize", "3", "--workers", "1",
+        "--quiet"])
+    assert rc == 0
+    assert "friction.coulomb" in out and "residuals" in out
+
+
+def _write(tmp_path, obj, name="m.json"):
+    p = tmp_path / name
+    p.write_text(obj if isinstance(obj, str) else json.dumps(obj))
+    return str(p)
+
+
+GOOD = {"experiments": [{"design": "fast", "features": {"period": 1.0, "peak1": 0.1}}]}
+
+
+@pytest.mark.parametrize("measured, extra, match", [
+    ({"experiments": []}, [], "non-empty"),
+    ({"experiments": [{"design": "fast", "features": {"peak9": 0.1}}]}, [], "unknown feature"),
+    (GOOD, ["--bounds", "friction.coulomb=2:1"], "below upper"),
+    (GOOD, ["--bounds", "friction.coulomb=1"], "KEY=LO:HI"),
+    (GOOD, ["--bounds", "plant.omega0=6:7"], "not fitted"),
+    (GOOD, ["--fit", "friction.nonsense"], "not a parameter"),
+    (GOOD, ["--fit", "sim.substeps"], "real-valued"),
+    (GOOD, ["--weights", "peak7=2"], "unknown feature"),
+    (GOOD, ["--set", "plant.omega0=-3"], "omega0"),
+    ("{not json", [], "not valid JSON"),
+])
+def test_limit_cycle_infeasible_input_exits_2(capsys, tmp_path, measured, extra, match):
+    argv = ["identify", "limit-cycle", "--measured", _write(tmp_path, measured),
+            "--workers", "1", "--quiet"]
+    if "--fit" not in extra:
+        argv += ["--fit", "friction.coulomb"]
+    rc, out, err = _run(capsys, argv + extra)
+    assert rc == 2
+    assert out == ""
+    msg = err.strip().splitlines()
+    assert len(msg) == 1 and match in msg[0]
+
+
+def test_limit_cycle_missing_file_exits_2(capsys, tmp_path):
+    rc, _, err = _run(capsys, ["identify", "limit-cycle", "--measured",
+                               str(tmp_path / "none.json"), "--fit", "friction.coulomb"])
+    assert rc == 2 and "cannot read" in err
+
+
+@pytest.mark.parametrize("name, sets, expect", [
+    ("stiction", ["friction.stiction=2.1", "friction.coulomb=1.35"],
+     {"stiction": (2.1, 0.05), "coulomb": (1.35, 0.05)}),
+    ("free-oscillation", ["plant.omega0=7.1", "plant.zeta=0.06"],
+     {"omega0": (7.1, 0.02), "zeta": (0.06, 0.2)}),
+    ("control-scaling", ["plant.input_gain=0.8"], {"input_gain": (0.8, 0.05)}),
+])
+def test_experiment_simulate_save_then_log(capsys, tmp_path, name, sets, expect):
+    save = tmp_path / "log.csv"
+    argv = ["identify", "experiment", name, "--simulate", "--json"]
+    for s in sets:
+        argv += ["--set", s]
+    rc, out, _ = _run(capsys, [*argv, "--save", str(save)])
+    assert rc == 0
+    sim = json.loads(out)
+    for key, (truth, rel) in expect.items():
+        assert abs(sim[key] - truth) <= rel * truth, (key, sim[key])
+    assert sim["source"] == "simulated"
+    # the same analysis on the saved log (the plant's assumed settings given again)
+    plot = tmp_path / "fig.png"
+    rc, out, _ = _run(capsys, ["identify", "experiment", name, "--log", str(save),
+                               *[x for s in sets for x in ("--set", s)],
+                               "--plot", str(plot), "--json"])
+    assert rc == 0
+    logged = json.loads(out)
+    for key in expect:
+        assert logged[key] == pytest.approx(sim[key], rel=1e-5)
+    assert plot.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_stribeck_experiment_cli(capsys):
+    rc, out, _ = _run(capsys, ["identify", "experiment", "stribeck", "--json",
+                               "--references", "0.3,0.6,1,2,4,8,12", "--hold", "1",
+                               "--set", "friction.coulomb=1.4", "--set", "friction.viscous=0.06"])
+    assert rc == 0
+    r = json.loads(out)
+    assert abs(r["coulomb"] - 1.4) < 0.05 * 1.4
+    assert abs(r["viscous"] - 0.06) < 0.2 * 0.06
+    assert {"coulomb", "viscous", "stribeck_velocity"} <= set(r)
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["stiction", "--log", "nothere.csv"], "cannot read"),
+    (["stiction", "--save", "x.txt"], "extension"),
+    (["stribeck", "--references", "a,b"], "not a number"),
+    (["stiction", "--hold", "0"], "--hold"),
+    (["stiction", "--set", "friction.coulomb=-1"], "coulomb"),
+])
+def test_experiment_bad_input_exits_2(capsys, argv, match):
+    rc, out, err = _run(capsys, ["identify", "experiment", *argv, "--json"])
+    assert rc == 2 and out == ""
+    assert match in err
+
+
+def test_experiment_log_lacking_a_signal_exits_2(capsys, tmp_path):
+    p = tmp_path / "l.csv"
+    p.write_text("t,theta_m\n0,3.1\n0.005,3.1\n0.01,3.1\n")
+    rc, _, err = _run(capsys, ["identify", "experiment", "control-scaling", "--log", str(p)])
+    assert rc == 2 and "'u'" in err
