@@ -76,6 +76,26 @@ def _bind(host: str, port: int) -> socket.socket:
     return sock
 
 
+#: SCHED_FIFO priority of the server's event-loop thread: below the loop (50) and the log
+#: writer (10), above every normal process.
+SERVER_PRIORITY = 5
+
+
+def _server_thread_priority() -> None:
+    """Run the event loop (plot stream, WebSocket) at a low real-time priority.
+
+    The server shares the GIL with the loop thread.  At normal priority a busy
+    host (the browser itself) can preempt the server while it holds the GIL,
+    and the loop then waits for the GIL for a whole time slice.  At
+    SCHED_FIFO 5 nothing but real-time threads preempts it, and the loop
+    (SCHED_FIFO 50) still preempts it.  Where it is not permitted nothing
+    changes (the loop has already said so).
+    """
+    from ..realtime.osrt import try_realtime_priority
+
+    try_realtime_priority(SERVER_PRIORITY)
+
+
 def serve(controller, host: str = "127.0.0.1", port: int = 8000, token: str | None = None, *,
           log_dir=None, autostart: bool | None = None, out=None,
           log_level: str = "warning") -> None:
@@ -131,6 +151,8 @@ def serve(controller, host: str = "127.0.0.1", port: int = 8000, token: str | No
     server = _Server(config)
     server.signalled = False
     out = sys.stdout if out is None else out
+    if getattr(controller, "realtime", False):
+        _server_thread_priority()
     print(f"frictionlab console: {console_url(host, actual_port, token)}  "
           f"(Exit button or Ctrl-C to stop)", file=out, flush=True)
     try:

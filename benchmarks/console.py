@@ -1,0 +1,149 @@
+"""Benchmark: the real-time loop's timing while the operator console streams to a browser.
+
+Starts ``frictionlab run`` (console on a free loopback port, sim backend unless
+``--backend`` says otherwise), opens the console in headless chromium (Debian's
+``/usr/bin/chromium`` driven by Playwright), lets the loop run for ``--duration``
+seconds of loop time with the plot streaming, then reads the loop's statistics
+(over the whole run, start-up and browser launch included) from ``/api/status``
+and presses Exit.  ``--no-browser`` measures the same
+without a page connected (the server still runs).
+
+Prints the figures; the last line is JSON: the statistics of
+``frictionlab run --headless --json`` (INTERFACE.md) plus ``console`` (frames
+sent and received, frame rate, samples the console dropped).
+
+    .venv/bin/python benchmarks/console.py --duration 120
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+
+CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _status(port: int) -> dict:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/status", timeout=10) as r:
+        return json.loads(r.read())
+
+
+def _exit(port: int) -> None:
+    req = urllib.request.Request(f"http://127.0.0.1:{port}/api/exit", data=b"{}",
+                                 method="POST", headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(req, timeout=30) as r:
+        r.read()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=120.0, help="seconds of loop time")
+    ap.add_argument("--backend", default="sim")
+    ap.add_argument("--no-browser", action="store_true", help="no page connected (baseline)")
+    ap.add_argument("--chromium", default="/usr/bin/chromium")
+    args = ap.parse_args(argv)
+
+    port = _free_port()
+    log_dir = tempfile.mkdtemp(prefix="frictionlab-console-bench-")
+    env = {k: v for k, v in os.environ.items() if k != "FRICTIONLAB_TOKEN"}
+    proc = subprocess.Popen([sys.executable, "-m", "frictionlab", "run", "--port", str(port),
+                             "--backend", args.backend, "--log-dir", log_dir],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    err: list[str] = []
+    threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True).start()
+    url = None
+    for line in proc.stdout:
+        m = re.search(r"frictionlab console: (http://\S+)", line)
+        if m:
+            url = m.group(1)
+            break
+    if url is None:
+        print("".join(err), file=sys.stderr)
+        return 1
+    threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()
+
+    pw = browser = page = None
+    try:
+        while not (st := _status(port))["running"] or st["ticks"] == 0:
+            if proc.poll() is not None:
+                raise SystemExit("frictionlab run ended: " + "".join(err))
+            time.sleep(0.1)
+        if not args.no_browser:
+            from playwright.sync_api import sync_playwright
+
+            pw = sync_playwright().start()
+            browser = pw.chromium.launch(executable_path=args.chromium, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            page.goto(url)
+            page.wait_for_selector("#conn.live", timeout=30_000)
+        t0 = _status(port)["t"]
+        frames0 = page.evaluate("() => window.__console.frames") if page else 0
+        wall0 = time.monotonic()
+        while (st := _status(port))["t"] < t0 + args.duration:
+            if not st["running"]:
+                break
+            time.sleep(0.5)
+        wall = time.monotonic() - wall0
+        frames = (page.evaluate("() => window.__console.frames") - frames0) if page else 0
+        st = _status(port)
+    finally:
+        if browser is not None:
+            browser.close()
+        if pw is not None:
+            pw.stop()
+        try:
+            _exit(port)
+        except OSError:
+            proc.send_signal(signal.SIGTERM)
+        proc.wait(30)
+
+    con = st["console"]
+    out = {
+        "ticks": st["ticks"], "missed": st["missed"], "overruns": st["overruns"],
+        "jitter_ms": {k: st["jitter_ms"][k] for k in ("p50", "p99", "max")},
+        "compute_us": {k: st["compute_us"][k] for k in ("p50", "p99")},
+        "max_stall_ms": st.get("max_stall_ms"),
+        "stop_reason": st["stop_reason"], "log": st.get("log"),
+        "missed_fraction": st["missed"] / max(st["ticks"] + st["missed"], 1),
+        "dropped_log_samples": st.get("dropped_log_samples"),
+        "console": {"browser": not args.no_browser, "frames_sent": con["frames_sent"],
+                    "frames_received": frames,
+                    "frames_per_s": round(frames / wall, 2) if wall > 0 else None,
+                    "frames_dropped": con["frames_dropped"],
+                    "samples_dropped": con["samples_dropped"]},
+        "duration_s": args.duration, "backend": args.backend,
+    }
+    j, c = out["jitter_ms"], out["compute_us"]
+    print(f"console benchmark: {args.duration:g} s of loop time, backend {args.backend}, "
+          f"{'browser connected' if not args.no_browser else 'no browser'}; loop "
+          f"{'still running' if st['running'] else 'stopped: ' + str(st['stop_reason'])}")
+    print(f"  ticks {out['ticks']}, missed {out['missed']} ({100 * out['missed_fraction']:.3f}%), "
+          f"overruns {out['overruns']}, max stall {out['max_stall_ms']} ms")
+    print(f"  jitter p50 {j['p50']} ms, p99 {j['p99']} ms, max {j['max']} ms; "
+          f"compute p50 {c['p50']} us, p99 {c['p99']} us")
+    print(f"  page: {frames} frames ({out['console']['frames_per_s']} /s), console dropped "
+          f"{con['samples_dropped']} samples, {con['frames_dropped']} frames")
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
