@@ -244,3 +244,29 @@ def test_loop_with_emulated_rig_balances_and_logs_raw_values(cfg):
     uda = np.array([s.u_da for s in samples[:-1]])
     np.testing.assert_allclose(uda, np.clip(-0.022 * u, -1, 1), atol=1e-12)
     assert emu.last_command_seq == loop.stop_tick and emu.u_da == 0.0
+
+
+@pytest.mark.parametrize("lockstep", [False, True])
+def test_sim_rig_moves_on_through_missed_ticks_unless_lockstep(cfg, lockstep):
+    steps = []
+
+    class Counting(SimRig):
+        def open(self):
+            super().open()
+            step = self.plant.step
+
+            def counted(state, u):
+                steps.append(u)
+                return step(state, u)
+
+            self.plant.step = counted
+
+    def latency(deadline):
+        return 23_000_000 if len(clock.sleeps) == 51 else 0
+
+    clock = FakeClock(wake_latency=latency)
+    rig = Counting(cfg, lockstep=lockstep)
+    loop, _ = run_loop(cfg, clock, rig=rig, duration=0.5)
+    assert loop.missed == 4
+    # wall: the plant followed every deadline (100 steps); lockstep: one per executed tick
+    assert len(steps) == (loop.ticks - 1 if lockstep else 99)

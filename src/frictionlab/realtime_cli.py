@@ -93,6 +93,10 @@ def register_cli(sub) -> None:
                         "0 = off; see docs/realtime.md)")
     p.add_argument("--cpu", type=_cpu_arg, default="auto", help=_CPU_HELP)
     p.add_argument("--fsync", action="store_true", help="fsync the log after every write")
+    p.add_argument("--sim-lockstep", action="store_true",
+                   help="sim backend: advance the simulated plant one step per executed tick, "
+                        "so that missed deadlines (host pauses) do not move it (default: it "
+                        "moves on in real time with u held)")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("rig-sim", help="the emulated rig speaking the UDP protocol "
@@ -142,7 +146,8 @@ def cmd_run(args) -> int:
     ctl = RealtimeController(cfg, args.backend, log_dir=args.log_dir,
                              clock=MonotonicClock(), safety=safety, prewarm_us=args.prewarm_us,
                              duration=args.duration, realtime=not args.no_realtime,
-                             fsync=args.fsync, cpu=_resolve_cpu(args.cpu))
+                             fsync=args.fsync, cpu=_resolve_cpu(args.cpu),
+                             sim_lockstep=args.sim_lockstep)
     if not args.headless:
         if start_console(ctl, args.host, args.port, args.token):
             return 0

@@ -58,14 +58,18 @@ class RealtimeController:
         Cache pre-warming before each deadline (see :mod:`.loop`); 0 = off.
     cpu : int, optional
         Pin the loop thread to this CPU (with ``realtime``; see :mod:`.osrt`).
+    sim_lockstep : bool
+        ``sim`` backend: one plant step per executed tick (see
+        :class:`~.rigs.SimRig`).
     """
 
     def __init__(self, cfg: Config, backend: str | Rig = "sim", *, log_dir="runs",
                  clock=None, safety: Safety | None = None, duration: float | None = None,
                  realtime: bool = True, manage_gc: bool = True, fsync: bool = False,
                  scaling: RigScaling | None = None, prewarm_us: float = 0.0,
-                 cpu: int | None = None):
+                 cpu: int | None = None, sim_lockstep: bool = False):
         self.cfg = cfg
+        self.sim_lockstep = sim_lockstep
         self.backend = backend
         self.backend_name = backend if isinstance(backend, str) else backend.name
         self.log_dir = None if log_dir is None else Path(log_dir)
@@ -151,7 +155,8 @@ class RealtimeController:
                 raise RuntimeError("the controller is closed")
             if self.running:
                 raise RuntimeError("the controller is already running")
-            rig = (open_rig(self.backend, self.cfg) if isinstance(self.backend, str)
+            rig = (open_rig(self.backend, self.cfg, lockstep=self.sim_lockstep)
+                   if isinstance(self.backend, str)
                    else self.backend)
             rig.open()
             try:
@@ -380,6 +385,7 @@ class RealtimeController:
             "started": self.started,
             "running": self.running and loop is not None and loop.stop_reason is None,
             "backend": self.backend_name,
+            "sim_lockstep": self.sim_lockstep,
             "h": self.cfg.design.h,
             "t0_monotonic_ns": None if loop is None else loop.t0_ns,
             "x0": None if loop is None else loop.x0,

@@ -175,14 +175,21 @@ class SimRig(Rig):
     cfg : Config
         Plant, friction and ``sim.*`` settings (``sim.initial_angle`` is the
         start; ``sim.noise``/``sim.quantization``/``sim.seed`` shape the readings).
+    lockstep : bool
+        Advance the plant one step per *executed* tick: missed deadlines (a
+        pause of the host) then pause the simulated world too, and a run
+        reproduces the simulator's whatever the machine's load.  Default
+        False: the plant moves on in real time with u held, as a real one
+        would.
     """
 
     name = "sim"
     emulated = True
 
     def __init__(self, cfg: Config, scaling: RigScaling | None = None,
-                 arm_offset: float = ARM_START):
+                 arm_offset: float = ARM_START, lockstep: bool = False):
         self.cfg = cfg
+        self.lockstep = lockstep
         self.scaling = scaling or RigScaling()
         self.plant = SimulatedPlant(cfg)
         self.plant_friction = cfg.friction_kind
@@ -206,6 +213,8 @@ class SimRig(Rig):
         st = self.state
         step = self.plant.step
         u = self._u
+        if self.lockstep and self._k < k:
+            self._k = k - 1
         while self._k < k:
             st = step(st, u)
             self._k += 1
@@ -484,8 +493,10 @@ class FramedRig(Rig):
         return {"late_replies": self.late_replies, "ignored_frames": self.ignored}
 
 
-def open_rig(spec: str, cfg: Config) -> Rig:
+def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
     """The rig a ``--backend`` string names (not yet opened).
+
+    ``lockstep`` applies to ``sim`` (see :class:`SimRig`).
 
     Raises
     ------
@@ -493,7 +504,7 @@ def open_rig(spec: str, cfg: Config) -> Rig:
         For an unknown scheme or a malformed address.
     """
     if spec == "sim":
-        return SimRig(cfg)
+        return SimRig(cfg, lockstep=lockstep)
     parts = urlsplit(spec)
     if parts.scheme == "udp":
         if not parts.hostname or parts.port is None:

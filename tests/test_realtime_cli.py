@@ -1,0 +1,202 @@
+"""``frictionlab run`` / ``rig-sim`` end to end, in real time (a few short runs).
+
+These are the tests that cannot use a fake clock: a 10 s headless run on the
+``sim`` backend compared with ``frictionlab simulate``, SIGKILL of a run
+against ``rig-sim`` over UDP (the log on disk must hold all but the last
+100 ms), and SIGINT/SIGTERM.  They assert on what was logged and on the
+rig's state, never on wall-clock timings.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from frictionlab.cli import main
+from frictionlab.config import build_config
+from frictionlab.limit_cycles import FEATURES, features
+from frictionlab.realtime.datalog import read_csv_log
+from frictionlab.realtime.rigsim import send_control
+from frictionlab.realtime.samples import MISSED, STOP
+
+INTERFACE_KEYS = {"ticks", "missed", "overruns", "jitter_ms", "compute_us", "stop_reason", "log"}
+CLI = [sys.executable, "-m", "frictionlab"]
+
+
+@pytest.fixture(scope="module")
+def rig_sim():
+    """A ``frictionlab rig-sim`` process on a free UDP port."""
+    proc = subprocess.Popen([*CLI, "rig-sim", "--port", "0", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line, proc.stderr.read()
+        info = json.loads(line)
+        yield info["host"], info["port"]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(10)
+
+
+def wait_for(pred, timeout=60.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = pred()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError("timed out waiting")
+
+
+def started_log(log_dir: Path):
+    """The run's CSV once its loop has started (the sidecar names t0)."""
+    for js in log_dir.glob("run-*.json"):
+        try:
+            meta = json.loads(js.read_text())
+        except (OSError, ValueError):
+            continue
+        if meta.get("t0_monotonic_ns"):
+            return Path(meta["files"]["csv"]), meta
+    return None
+
+
+def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path):
+    # lockstep: a pause of this shared machine pauses the simulated plant too (in the
+    # default mode it would act as a disturbance and change the cycle)
+    out = subprocess.run([*CLI, "run", "--headless", "--duration", "10", "--json",
+                          "--sim-lockstep", "--log-dir", str(tmp_path)], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    st = json.loads(out.stdout)
+    assert set(st) == INTERFACE_KEYS
+    assert set(st["jitter_ms"]) == {"p50", "p99", "max"} and set(st["compute_us"]) == {
+        "p50", "p99"}
+    assert st["stop_reason"] == "duration" and st["ticks"] + st["missed"] == 2000
+    log = read_csv_log(st["log"])
+    assert int(log["flags"][-1]) & STOP
+    rows = slice(0, -1)
+    t, theta = log["t"][rows], log["theta_m"][rows]
+    assert np.all(np.abs(theta) < 0.35)
+    rt = features(t, theta, log["u"][rows], log["arm_dot_m"][rows], window=5.0)
+    from frictionlab.cli import simulate_result
+
+    _traj, sim, status = simulate_result(build_config("fast", "classical"), 10.0, 5.0)
+    assert status == rt.status == "limit_cycle"
+    for name in FEATURES:
+        a, b = getattr(rt, name), getattr(sim, name)
+        assert a == pytest.approx(b, rel=0.10), name
+    meta = json.loads(Path(st["log"]).with_suffix(".json").read_text())
+    assert meta["stop_reason"] == "duration" and meta["dropped_log_samples"] == 0
+    assert meta["stats"]["ticks"] == st["ticks"]
+
+
+def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
+    host, port = rig_sim
+    proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--backend",
+                             f"udp://{host}:{port}", "--log-dir", str(tmp_path)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        csv, meta = wait_for(lambda: started_log(tmp_path))
+        t_kill = meta["t0_monotonic_ns"] + 3_000_000_000
+        while time.monotonic_ns() < t_kill:
+            time.sleep(0.01)
+        assert proc.poll() is None, proc.stderr.read()
+        proc.kill()
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    # the last tick the controller executed is the last command the rig received
+    rig = send_control(host, port, {"cmd": "status"})
+    last = rig["last_command_seq"]
+    assert last >= 200  # it was running
+    log = read_csv_log(csv)
+    ticks = log["tick"].astype(int)
+    flags = log["flags"].astype(int)
+    assert ticks[0] == 0 and np.all(np.diff(ticks) >= 1)
+    # no row missing before the end: every gap is a flagged skip-ahead after a stall
+    gaps = np.nonzero(np.diff(ticks) > 1)[0]
+    assert all(flags[i + 1] & MISSED for i in gaps)
+    assert ticks[-1] >= last - 20, f"log ends at tick {ticks[-1]}, rig saw {last}"
+    dat = [ln for ln in csv.with_suffix(".dat").read_text().splitlines(keepends=True)
+           if ln.endswith("\n")]
+    assert len(dat) >= len(ticks) - 1 and all(len(ln.split()) == 10 for ln in dat)
+    assert json.loads(csv.with_suffix(".json").read_text())["running"] is True
+    # and the rig's own watchdog has zeroed the motor
+    time.sleep(0.1)
+    rig = send_control(host, port, {"cmd": "status"})
+    assert rig["watchdog_tripped"] and rig["u_da"] == 0.0
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
+    host, port = rig_sim
+    proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--json",
+                             "--backend", f"udp://{host}:{port}", "--log-dir", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: started_log(tmp_path))
+        time.sleep(0.5)
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr
+    st = json.loads(stdout)
+    assert set(st) == INTERFACE_KEYS and st["stop_reason"] == "signal"
+    log = read_csv_log(st["log"])
+    assert int(log["flags"][-1]) & STOP and log["u_da"][-1] == 0.0
+    meta = json.loads(Path(st["log"]).with_suffix(".json").read_text())
+    assert meta["stop_reason"] == "signal" and not meta["running"]
+    rig = send_control(host, port, {"cmd": "status"})
+    assert rig["u_da"] == 0.0 and rig["last_command_seq"] == meta["stop_tick"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["run", "--headless", "--duration", "-1"], "--duration"),
+    (["run", "--headless", "--backend", "tcp://x:1"], "backend"),
+    (["run", "--headless", "--set", "design.omega1=-3"], "design.omega1"),
+    (["run", "--headless", "--angle-limit", "0"], "angle-limit"),
+    (["rig-sim", "--fault", "meteor=1"], "--fault"),
+])
+def test_bad_input_exits_2_with_a_message(argv, message, capsys, tmp_path):
+    assert main([*argv, "--log-dir", str(tmp_path)] if argv[0] == "run" else argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_unreachable_rig_exits_1(tmp_path, capsys):
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    code = main(["run", "--headless", "--duration", "1", "--backend",
+                 f"udp://127.0.0.1:{port}", "--log-dir", str(tmp_path)])
+    assert code == 1
+    assert "no answer from the rig" in capsys.readouterr().err
+
+
+def test_run_without_headless_hands_over_to_the_console(monkeypatch, tmp_path):
+    from frictionlab import realtime_cli
+
+    served = {}
+
+    class FakeConsole:
+        @staticmethod
+        def serve(ctl, host, port, token):
+            served.update(ctl=ctl, host=host, port=port, token=token)
+
+    monkeypatch.setitem(sys.modules, "frictionlab.console", FakeConsole)
+    assert main(["run", "--port", "8123", "--log-dir", str(tmp_path)]) == 0
+    assert served["port"] == 8123 and served["host"] == "127.0.0.1"
+    assert served["ctl"].backend_name == "sim" and not served["ctl"].running
+    assert realtime_cli.start_console  # the hook the console is reached through
+    assert os.environ.get("FRICTIONLAB_TOKEN") == served["token"]
