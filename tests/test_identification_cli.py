@@ -51,6 +51,7 @@ def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
     assert obj["cost"] >= 0
     # progress and the summary go to stderr
     assert "identify limit-cycle" in err and "done in" in err
+    assert "global search: 100 %" in err and "least-squares polish" in err
     assert plot.read_bytes()[:4] == b"\x89PNG"
     full = json.loads(report.read_text())
     assert full["estimate"] == obj["estimate"]

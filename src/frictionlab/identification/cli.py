@@ -102,6 +102,11 @@ def cmd_limit_cycle(args) -> int:
         raise UsageError(f"{args.report}: --report extension must be .json")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if args.maxiter < 1 or args.popsize < 2:
+        raise UsageError(f"--maxiter must be >= 1 and --popsize >= 2, got {args.maxiter}, "
+                         f"{args.popsize}")
+    if not 1e-5 <= args.rel_step <= 0.2:
+        raise UsageError(f"--rel-step must be in [1e-5, 0.2], got {args.rel_step}")
     sets = list(args.sets)
     if args.config:
         from ..config import load_toml
@@ -115,9 +120,20 @@ def cmd_limit_cycle(args) -> int:
     err = sys.stderr
     print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
           f"{', '.join(keys)} ({args.friction} friction, {args.duration:g} s runs)", file=err)
-    with progress_bar("fitting", not args.quiet) as upd:
-        def progress(stage: str, frac: float) -> None:
+    tty = err.isatty()
+    last = [-1]
+
+    with progress_bar("fitting", tty and not args.quiet) as upd:
+        def progress(stage: str, frac: float, cost: float) -> None:
             upd(0.9 * frac if stage == "global" else 0.9 + 0.1 * frac)
+            if tty or args.quiet:
+                return
+            # not a terminal (a log file): a line per 10 % of the global search
+            step = int(10 * frac) if stage == "global" else 10 + int(frac)
+            if step > last[0]:
+                last[0] = step
+                what = ("global search" if stage == "global" else "least-squares polish")
+                print(f"{what}: {100 * frac:3.0f} %, best cost {cost:.4g}", file=err)
 
         result = fit_limit_cycle(
             experiments, keys, friction=args.friction, sets=sets, bounds=bounds,

@@ -674,7 +674,8 @@ def fit_limit_cycle(
     rel_step : float
         Relative finite-difference step of the Jacobian.
     progress : callable, optional
-        ``progress(stage, fraction)`` with stage ``"global"`` or ``"local"``.
+        ``progress(stage, fraction, best_cost)`` with stage ``"global"`` (after
+        every generation) or ``"local"`` (before and after the polish).
 
     Returns
     -------
@@ -688,7 +689,7 @@ def fit_limit_cycle(
     prob = LimitCycleProblem(experiments, keys, friction=friction, sets=sets, bounds=bounds,
                              weights=weights, duration=duration, window=window,
                              evaluate=evaluate, workers=workers, dask=dask)
-    report = progress or (lambda stage, f: None)
+    report = progress or (lambda stage, f, c: None)
 
     def cost_vec(xt: np.ndarray) -> np.ndarray:
         # vectorized DE: xt has shape (n, S)
@@ -699,7 +700,7 @@ def fit_limit_cycle(
 
     def callback(intermediate_result):
         gen[0] += 1
-        report("global", min(1.0, gen[0] / maxiter))
+        report("global", min(1.0, gen[0] / maxiter), float(intermediate_result.fun))
 
     x0 = prob.to_unit(prob.current())
     de = differential_evolution(
@@ -708,7 +709,7 @@ def fit_limit_cycle(
         vectorized=True, updating="deferred", x0=x0, tol=1e-3, atol=0.0,
         mutation=(0.5, 1.0), recombination=0.7, callback=callback,
     )
-    report("global", 1.0)
+    report("global", 1.0, float(de.fun))
     x_best = np.clip(de.x, 0.0, 1.0)
     global_cost = float(de.fun)
     width = prob.hi - prob.lo
@@ -719,7 +720,7 @@ def fit_limit_cycle(
     def jac(x):
         return prob.jacobian(prob.to_params(x), rel_step) * width
 
-    report("local", 0.0)
+    report("local", 0.0, global_cost)
     try:
         ls = least_squares(fun, x_best, jac=jac, bounds=(0.0, 1.0), method="trf",
                            x_scale="jac", max_nfev=12, ftol=1e-6, xtol=1e-6)
@@ -728,7 +729,7 @@ def fit_limit_cycle(
             x_best = x_loc
     except (ValueError, np.linalg.LinAlgError):
         pass
-    report("local", 1.0)
+    report("local", 1.0, float(np.sum(fun(x_best) ** 2)))
     p = prob.to_params(x_best)
     res, rows_list = prob.evaluate_batch(p)
     r = res[0]
