@@ -328,7 +328,7 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
     # --- status --------------------------------------------------------------------------
 
     @app.get("/api/status")
-    def status():
+    async def status():  # on the event loop thread (see server.py): cheap, non-blocking
         return full_status()
 
     @app.get("/api/schema")
