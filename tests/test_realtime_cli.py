@@ -8,7 +8,6 @@ rig's state, never on wall-clock timings.
 """
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -195,8 +194,10 @@ def test_run_without_headless_hands_over_to_the_console(monkeypatch, tmp_path):
             served.update(ctl=ctl, host=host, port=port, token=token)
 
     monkeypatch.setitem(sys.modules, "frictionlab.console", FakeConsole)
-    assert main(["run", "--port", "8123", "--log-dir", str(tmp_path)]) == 0
-    assert served["port"] == 8123 and served["host"] == "127.0.0.1"
+    token = "x" * 32
+    assert main(["run", "--port", "8123", "--token", token, "--log-dir", str(tmp_path)]) == 0
+    assert served == {"ctl": served["ctl"], "host": "127.0.0.1", "port": 8123, "token": token}
     assert served["ctl"].backend_name == "sim" and not served["ctl"].running
-    assert realtime_cli.start_console  # the hook the console is reached through
-    assert os.environ.get("FRICTIONLAB_TOKEN") == served["token"]
+    # the hook reports a missing console instead of serving
+    monkeypatch.setitem(sys.modules, "frictionlab.console", None)
+    assert realtime_cli.start_console(served["ctl"], "127.0.0.1", 0) is False

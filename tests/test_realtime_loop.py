@@ -270,3 +270,43 @@ def test_sim_rig_moves_on_through_missed_ticks_unless_lockstep(cfg, lockstep):
     assert loop.missed == 4
     # wall: the plant followed every deadline (100 steps); lockstep: one per executed tick
     assert len(steps) == (loop.ticks - 1 if lockstep else 99)
+
+
+def test_controller_api_record_push_subscribe_and_status(cfg, tmp_path):
+    clock = FakeClock()
+    rig = SimRig(cfg)
+    ctl = RealtimeController(cfg, rig, log_dir=tmp_path, clock=clock, duration=1.0,
+                             realtime=False, manage_gc=False)
+    sub = ctl.subscribe(maxlen=10)
+    t0 = clock.now_ns() + H_NS
+    saved, seen = {}, {}
+
+    def at(k, fn):
+        clock.call_at(t0 + k * H_NS - H_NS // 2, fn)
+
+    at(50, ctl.record_start)
+    at(60, lambda: seen.update(v=rig.state.x[1], status=ctl.status()))
+    at(60, lambda: ctl.push(0.5))
+    at(61, lambda: seen.update(v_after=rig.state.x[1]))
+    at(150, lambda: saved.update(ctl.record_stop("balance")))
+    stats = ctl.run()
+    assert stats["stop_reason"] == "duration"
+    # Save: the samples of ticks 50..149 under the given name
+    assert saved["rows"] == 100 and saved["dat"] == str(tmp_path / "balance.dat")
+    assert np.loadtxt(saved["dat"]).shape == (100, 10)
+    # the push changed the simulated pendulum's velocity by 0.5 rad/s (plus one tick's
+    # worth of acceleration, a few hundredths)
+    assert seen["v_after"] - seen["v"] == pytest.approx(0.5, abs=0.1)
+    # a slow subscriber loses samples, counted, and never blocks the loop
+    assert len(sub) == 10 and sub.dropped == stats["ticks"] + 1 - 10
+    assert stats["dropped_console_samples"] == sub.dropped
+    st = seen["status"]
+    for key in ("running", "run_id", "backend", "h", "t", "ticks", "missed", "overruns",
+                "jitter_ms", "compute_us", "design", "compensation", "recording", "log",
+                "stop_reason", "sched_fifo", "pending_changes", "safety", "friction"):
+        assert key in st, key
+    assert st["running"] and st["recording"] and st["friction"] == "classical"
+    assert st["design"]["preset"] == "fast" and len(st["design"]["K"]) == 4
+    assert not ctl.status()["running"] and ctl.status()["stop_reason"] == "duration"
+    ctl.unsubscribe(sub)
+    assert sub.closed

@@ -136,8 +136,8 @@ def cmd_run(args) -> int:
         raise UsageError(f"--duration must be > 0, got {args.duration}")
     if not 0 <= args.prewarm_us < cfg.design.h * 1e6 / 2:
         raise UsageError(f"--prewarm-us must be in [0, h/2), got {args.prewarm_us}")
-    if not 0 < args.port < 65536:
-        raise UsageError(f"--port must be in 1..65535, got {args.port}")
+    if not 0 <= args.port < 65536:
+        raise UsageError(f"--port must be in 0..65535, got {args.port}")
     try:
         safety = Safety(angle_limit=args.angle_limit, start_tolerance=args.start_tolerance)
     except ValueError as exc:

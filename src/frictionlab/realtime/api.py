@@ -202,19 +202,25 @@ class RealtimeController:
                     _p, fut = loop.mailbox.popleft()
                     if fut is not None and not fut.done():
                         fut.set_result(None)
-            self._event("stop", reason=loop.stop_reason, detail=loop.stop_detail)
             try:
-                self._rig.close()
-            except Exception as exc:
-                self._event("rig_close_error", error=repr(exc))
+                self._finish(loop)
+            finally:
+                self._done.set()
+
+    def _finish(self, loop: Loop) -> None:
+        """After the loop: release the rig, close the log, final statistics."""
+        self._event("stop", reason=loop.stop_reason, detail=loop.stop_detail)
+        try:
+            self._rig.close()
+        except Exception as exc:
+            self._event("rig_close_error", error=repr(exc))
+        self.last_stats = self._stats()
+        if self._writer is not None:
+            was_recording = self._writer.recording
+            self._writer.close(self._meta())
+            if was_recording:
+                self._unnamed_recording = self._writer.last_recording
             self.last_stats = self._stats()
-            if self._writer is not None:
-                was_recording = self._writer.recording
-                self._writer.close(self._meta())
-                if was_recording:
-                    self._unnamed_recording = self._writer.last_recording
-                self.last_stats = self._stats()
-            self._done.set()
 
     def _new_run_id(self) -> str:
         base = time.strftime("run-%Y%m%d-%H%M%S") + f"-{os.getpid()}"
