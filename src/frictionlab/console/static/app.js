@@ -287,11 +287,12 @@
         series: [{}, ...sigs.map((s) => ({ label: s.label, stroke: s.color, width: 1.5, show: s.on, points: { show: false } }))],
         axes: [
           { size: 28, values: (u, ticks) => ticks.map((v) => v.toFixed(1)) },
-          { label: g.unit, size: 64, values: (u, ticks) => ticks.map((v) => +v.toPrecision(3)) },
+          { label: g.unit, size: 64, space: 20, values: (u, ticks) => ticks.map((v) => +v.toPrecision(3)) },
         ],
       };
       charts[g.id] = { plot: new uPlot(opts, [[], ...sigs.map(() => [])], el), sigs };
     }
+    ui.charts = charts;
     ui.shown = (key) => {   // whether a signal's curve is drawn (for tests)
       const s = SIGNALS.find((x) => x.key === key), c = charts[s.group];
       return c.plot.series[c.sigs.indexOf(s) + 1].show;
