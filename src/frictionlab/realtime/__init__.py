@@ -66,7 +66,14 @@ Everything the operator console (or a script) needs is one object,
 Samples (:class:`Sample`, a NamedTuple): ``k, t, flags``, the ten signals
 of Sec. 7.1 in SI (``theta_m, theta_hat, theta_dot_hat, u, arm_m,
 arm_dot_m, arm_hat, arm_dot_hat, friction_hat, z_hat``), the raw ``y, x,
-v, u_da``, and ``jitter_us, compute_us``; flag bits in :mod:`.samples`.
+v, u_da``, and ``jitter_us, compute_us, rig_us`` (``compute_us`` is the tick's
+own work, ``rig_us`` the rig read it excludes); flag bits in :mod:`.samples`.
+New fields are only ever appended: read them by name.
+
+``frictionlab run`` without ``--headless`` builds the controller and calls
+:func:`frictionlab.realtime_cli.start_console` ``(ctl, host, port, token)``,
+which calls ``frictionlab.console.serve(ctl, host, port, token)`` and closes
+the controller when it returns.
 
 Threads: the loop thread (SCHED_FIFO 50 where permitted), the log writer
 (SCHED_FIFO 10 where permitted), and the caller's.  The console's own
