@@ -21,8 +21,8 @@ nanoseconds on the monotonic clock, so there is no drift):
 6. hand the :class:`~frictionlab.realtime.samples.Sample` to the sinks
    (log writer, console subscriptions) without blocking;
 7. between ticks: apply pending parameter changes atomically (the
-   mailbox), and the scheduled housekeeping (garbage collection, steal-time
-   sampling).
+   mailbox), and the scheduled housekeeping (garbage collection once a
+   second, the host's steal time every 100 ms).
 
 Pre-warming (``prewarm_us`` > 0): on a virtual machine whose CPU sits idle
 between ticks, the first microseconds after a wake-up run from cold caches
@@ -444,13 +444,14 @@ class Loop:
                 for _p, fut in applied:
                     if fut is not None and not fut.done():
                         fut.set_result(k + 1)
-            if k % 200 == 100:
+            if k % 20 == 10:
+                self.stalls.sample_steal()
+            elif k % 200 == 100:
                 self._housekeeping(k)
             k += 1
 
     def _housekeeping(self, k: int) -> None:
-        """Scheduled garbage collection and steal-time sampling (outside the tick)."""
-        self.stalls.sample_steal()
+        """Scheduled garbage collection (outside the tick)."""
         if not self.manage_gc:
             return
         now = self.clock.now_ns

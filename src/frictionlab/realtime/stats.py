@@ -87,9 +87,10 @@ def read_steal_ns() -> int | None:
 class StallLog:
     """Stalls (late wake-ups of more than a period) with the host steal time.
 
-    ``sample_steal()`` is called by the loop about once a second outside the
-    tick; a stall's steal figure is the steal accumulated since that sample,
-    divided by the number of CPUs (steal is summed over all of them).
+    ``sample_steal()`` is called by the loop every 100 ms outside the tick;
+    a stall's steal figure is the steal accumulated since that sample,
+    divided by the number of CPUs (steal is summed over all of them).  The
+    kernel counts steal in clock ticks (USER_HZ, usually 10 ms), so the figure is coarse.
     """
 
     def __init__(self, keep: int = 200):
