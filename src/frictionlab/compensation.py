@@ -317,7 +317,8 @@ class Comparison:
         """Peak-to-peak without / with compensation (None if undefined)."""
         a = self.baseline_features.get("peak_to_peak")
         b = self.features.get("peak_to_peak")
-        if a is None or b is None or b <= 0 or self.status == "fell":
+        if (a is None or b is None or b <= 0 or self.status == "fell"
+                or self.baseline_status == "fell"):
             return None
         return a / b
 

@@ -15,7 +15,7 @@ __all__ = ["plot_before_after", "register_cli"]
 
 
 def plot_before_after(traj_off, traj_on, path: str, window: float | None = None,
-                      title: str | None = None) -> str:
+                      title: str | None = None, dpi: int = 100) -> str:
     """Limit cycle without (left) and with (right) compensation.
 
     Rows: measured pendulum angle, measured arm velocity, control signal,
@@ -64,7 +64,7 @@ def plot_before_after(traj_off, traj_on, path: str, window: float | None = None,
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
 
