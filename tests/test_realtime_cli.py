@@ -97,8 +97,10 @@ def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path
 
 def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     host, port = rig_sim
+    # a wide angle limit: a pause of this shared machine must not end the run early
     proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--backend",
-                             f"udp://{host}:{port}", "--log-dir", str(tmp_path)],
+                             f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir",
+                             str(tmp_path)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         csv, meta = wait_for(lambda: started_log(tmp_path))
@@ -137,7 +139,8 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
 def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     host, port = rig_sim
     proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--json",
-                             "--backend", f"udp://{host}:{port}", "--log-dir", str(tmp_path)],
+                             "--backend", f"udp://{host}:{port}", "--angle-limit", "1.2",
+                             "--log-dir", str(tmp_path)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         wait_for(lambda: started_log(tmp_path))

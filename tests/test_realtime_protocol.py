@@ -96,3 +96,12 @@ def test_control_messages_carry_json():
     assert frame.type == P.MSG_CONTROL and P.parse_control(frame) == {"cmd": "fault", "nan": 1}
     with pytest.raises(P.FrameError):
         P.parse_control(P.decode(P.encode(P.MSG_CONTROL, 1, b"[1]")))
+
+
+def test_noise_resembling_a_header_does_not_hold_up_the_stream():
+    # sync bytes, version 1, an unknown type and a long length: rejected at once
+    noise = P.SYNC + bytes([1, 0x77, 0, 0, 0, 0, 0xFF, 0x03])
+    good = P.encode(P.MSG_SENSOR, 9, P.sensor_payload(0.1, 0.2, 0.3, 0.0, 0))
+    out = P.FrameDecoder().feed(noise + good)
+    assert isinstance(out[0], P.FrameError)
+    assert [f.seq for f in out if isinstance(f, P.Frame)] == [9]

@@ -200,9 +200,11 @@ class FrameDecoder:
             if len(buf) < HEADER:
                 return out
             version, msg_type, _s, length = _HDR.unpack_from(buf, 2)
-            if (version != VERSION or length > MAX_PAYLOAD
+            if (version != VERSION or length > MAX_PAYLOAD or msg_type not in MSG_NAMES
                     or FIXED_PAYLOAD.get(msg_type, length) != length):
-                out.append(FrameError("bad header (version or length) in stream"))
+                # checked before waiting for the payload, so that noise resembling a
+                # header cannot hold up the frames behind it
+                out.append(FrameError("bad header (version, type or length) in stream"))
                 del buf[:1]
                 continue
             total = OVERHEAD + length
