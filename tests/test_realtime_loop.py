@@ -310,3 +310,14 @@ def test_controller_api_record_push_subscribe_and_status(cfg, tmp_path):
     assert not ctl.status()["running"] and ctl.status()["stop_reason"] == "duration"
     ctl.unsubscribe(sub)
     assert sub.closed
+
+
+def test_a_stall_at_the_end_counts_only_the_run_s_deadlines(cfg):
+    def latency(deadline):
+        return 17_000_000 if len(clock.sleeps) == 99 else 0  # the wake-up for tick 98
+
+    clock = FakeClock(wake_latency=latency)
+    loop, _ = run_loop(cfg, clock, duration=0.5)
+    assert loop.stop_reason == "duration"
+    assert loop.ticks == 98 and loop.missed == 2  # 98 and 99 of the 100 deadlines
+    assert loop.ticks + loop.missed == 100

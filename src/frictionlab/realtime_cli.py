@@ -75,7 +75,7 @@ def register_cli(sub) -> None:
                    help="console access token (default $FRICTIONLAB_TOKEN); required when "
                         "--host is not a loopback address (docs/console.md)")
     p.add_argument("--headless", action="store_true", help="run without the console")
-    p.add_argument("--duration", type=float, default=None,
+    p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true",
                    help="print the run's statistics as one JSON object")

@@ -317,7 +317,8 @@ class Loop:
                 m = late // h_ns
                 k += m
                 deadline += m * h_ns
-                self.missed += m
+                # count only the deadlines inside the run (a stall at its very end)
+                self.missed += m if n_ticks is None else max(0, min(m, n_ticks - k + m))
                 flags |= MISSED
                 self.stalls.add(k, k * h, late, m)
                 late -= m * h_ns
