@@ -409,3 +409,21 @@ def test_compare_needs_a_compensator():
         compare(build_config("fast", "lugre", "none"), 2.0)
     cfg = dataclasses.replace(lugre_cfg(), compensation_kind="coulomb")
     assert compare(cfg, 4.0).baseline_status in ("limit_cycle", "settled")
+
+
+def test_compare_cli_reports_chatter_and_reduction(tmp_path):
+    rc, out, err = run_cli("compensate", "compare", "--friction", "classical",
+                           "--compensation", "coulomb", "--set", NOISE, "--set",
+                           "compensation.hysteresis=0", "--duration", "12",
+                           "--plot", str(tmp_path / "c.png"), "--json")
+    assert rc == 0, err
+    res = json.loads(out)
+    assert res["reduction"] == pytest.approx(res["baseline_features"]["peak_to_peak"]
+                                             / res["features"]["peak_to_peak"])
+    # the hysteresis-free relay toggles far more often than the limit cycle reverses
+    assert res["chatter"]["reversals_per_s"] > 3 * 2.0 / res["features"]["period"]
+    assert res["baseline_chatter"]["reversals_per_s"] == 0.0
+    assert (tmp_path / "c.png").exists()
+    rc, out, err = run_cli("compensate", "compare", "--compensation", "lugre",
+                           "--duration", "-1", "--json")
+    assert rc == 2 and out == "" and "--duration" in err

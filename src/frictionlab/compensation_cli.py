@@ -1,8 +1,10 @@
-"""``frictionlab compensate tune``: search compensator parameters (Sec. 6).
+"""``frictionlab compensate tune|compare``: friction compensation on the command line (Sec. 6).
 
-The search itself is :func:`frictionlab.compensation.tune` (through the sweep
-engine); this module parses the command line, prints the result and draws
-the before/after figure (cf. the thesis's Figs. 25-30).
+``tune`` searches compensator parameters (:func:`frictionlab.compensation.tune`,
+through the sweep engine); ``compare`` runs one configuration with and
+without its compensator (:func:`frictionlab.compensation.compare`).  This
+module parses the command line, prints the results and draws the
+before/after figure (cf. the thesis's Figs. 25-30).
 """
 
 from __future__ import annotations
@@ -70,12 +72,29 @@ def plot_before_after(traj_off, traj_on, path: str, window: float | None = None,
 
 
 def register_cli(sub) -> None:
-    """Add ``frictionlab compensate`` (subcommand ``tune``) to the CLI."""
+    """Add ``frictionlab compensate`` (``tune``, ``compare``) to the CLI."""
     from .cli import _add_config_args
 
-    p = sub.add_parser("compensate", help="friction compensation: tune a compensator (Sec. 6)")
+    p = sub.add_parser("compensate",
+                       help="friction compensation: tune a compensator, or compare a run "
+                            "with and without it (Sec. 6)")
     csub = p.add_subparsers(dest="compensate_command", metavar="ACTION")
     csub.required = True
+    c = csub.add_parser(
+        "compare", help="one configuration with and without its compensator",
+        description="Simulate the configuration with its compensator and with "
+                    "compensation none; report both runs' limit-cycle features and chatter "
+                    "(sign reversals per second of the friction estimate, u roughness) and "
+                    "the reduction of the peak-to-peak.")
+    _add_config_args(c)
+    c.set_defaults(compensation="lugre")
+    c.add_argument("--duration", type=float, default=30.0,
+                   help="simulated time in s (default 30)")
+    c.add_argument("--window", type=float, default=None,
+                   help="analyse the last S seconds (default: the last half)")
+    c.add_argument("--plot", metavar="FILE.png", help="before/after figure (cf. Figs. 25-30)")
+    c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.set_defaults(func=cmd_compare)
     t = csub.add_parser(
         "tune", help="search compensator parameters minimising the limit cycle",
         description="Run a grid of compensation.* values through the sweep engine, rank the "
@@ -107,6 +126,47 @@ def register_cli(sub) -> None:
     t.set_defaults(func=cmd_tune)
 
 
+def _check_run_args(args):
+    from .cli import UsageError
+
+    if not (args.duration > 0 and math.isfinite(args.duration)):
+        raise UsageError(f"--duration must be > 0, got {args.duration}")
+    if args.window is not None and not (0 < args.window <= args.duration):
+        raise UsageError(f"--window must be in (0, --duration], got {args.window}")
+    if args.plot and not args.plot.endswith((".png", ".pdf", ".svg")):
+        raise UsageError(f"--plot {args.plot}: extension must be .png, .pdf or .svg")
+
+
+def cmd_compare(args) -> int:
+    """``frictionlab compensate compare``."""
+    from .cli import UsageError, config_from_args, emit_json
+    from .compensation import compare
+
+    cfg = config_from_args(args)
+    if cfg.compensation_kind == "none":
+        raise UsageError("--compensation must be coulomb, classical or lugre")
+    _check_run_args(args)
+    res, traj_on, traj_off = compare(cfg, args.duration, args.window,
+                                     return_trajectories=True)
+    out = {"compensation": cfg.compensation_kind, "design": args.design,
+           "friction": cfg.friction_kind, **res.as_dict()}
+    if args.plot:
+        plot_before_after(traj_off, traj_on, args.plot, args.window)
+        out["plot"] = args.plot
+    if args.json:
+        emit_json(out)
+    else:
+        for name, st, f, ch in (("without", res.baseline_status, res.baseline_features,
+                                 res.baseline_chatter),
+                                ("with", res.status, res.features, res.chatter)):
+            print(f"{name:7s} compensation: {st:11s} peak-to-peak {_fmt(f['peak_to_peak'])} "
+                  f"rad, period {_fmt(f['period'])} s, {ch.reversals_per_s:.2f} "
+                  f"reversals/s, u roughness {ch.u_roughness:.3g}")
+        red = res.reduction
+        print(f"reduction: {'-' if red is None else f'{red:.2f}x'}")
+    return 0
+
+
 def cmd_tune(args) -> int:
     """``frictionlab compensate tune``."""
     from .cli import UsageError, config_from_args, emit_json, progress_bar
@@ -117,18 +177,13 @@ def cmd_tune(args) -> int:
     cfg = config_from_args(args)
     if cfg.compensation_kind == "none":
         raise UsageError("--compensation must be coulomb, classical or lugre")
-    if not (args.duration > 0 and math.isfinite(args.duration)):
-        raise UsageError(f"--duration must be > 0, got {args.duration}")
-    if args.window is not None and not (0 < args.window <= args.duration):
-        raise UsageError(f"--window must be in (0, --duration], got {args.window}")
+    _check_run_args(args)
     if not (math.isfinite(args.chatter_weight) and args.chatter_weight >= 0):
         raise UsageError(f"--chatter-weight must be >= 0, got {args.chatter_weight}")
     if args.shortlist < 1:
         raise UsageError(f"--shortlist must be >= 1, got {args.shortlist}")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
-    if args.plot and not args.plot.endswith((".png", ".pdf", ".svg")):
-        raise UsageError(f"--plot {args.plot}: extension must be .png, .pdf or .svg")
     grid = [parse_vary(v) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]
     n = len(check_grid(cfg, grid))  # every point validated before anything runs
     print(f"frictionlab compensate tune: {cfg.compensation_kind} compensator, {n} points, "
