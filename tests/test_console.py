@@ -408,3 +408,20 @@ def test_run_record_download_and_exit(app_and_controller, tmp_path):
     assert r.status_code == 200 and exits == [True]
     assert client.post("/api/start", json={}).status_code == 409
     assert not ctl.running
+
+
+def test_stop_while_recording_asks_for_the_name(app_and_controller, tmp_path):
+    client, _ctl, _ = app_and_controller
+    assert client.post("/api/start", json={}).status_code == 200
+    assert client.post("/api/record/start", json={}).status_code == 200
+    ticks0 = client.get("/api/status").json()["ticks"]
+    while (st := client.get("/api/status").json())["ticks"] < ticks0 + 20:
+        assert st["running"], st["stop_reason"]
+    r = client.post("/api/stop", json={})
+    assert r.status_code == 200
+    st = r.json()["status"]
+    assert not st["running"] and not st["recording"]
+    assert st["console"]["pending_recording"]
+    r = client.post("/api/record/name", json={"name": "after_stop"})
+    assert r.status_code == 200 and r.json()["rows"] >= 20
+    assert np.loadtxt(tmp_path / "after_stop.dat").shape == (r.json()["rows"], 10)

@@ -357,8 +357,13 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
 
     @app.post("/api/stop")
     def stop(body: dict | None = None):
+        was_recording = bool(controller.status().get("recording"))
         controller.stop("user")
         controller.wait(2.0)
+        if was_recording and not controller.running:
+            # the run closed the recording under an automatic name: ask for the name
+            with contextlib.suppress(RuntimeError, ValueError, OSError):
+                _pending(controller.record_stop(None))
         return {"ok": True, "status": full_status()}
 
     @app.post("/api/exit")
@@ -420,9 +425,12 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
             rec = controller.record_stop(None)
         except RuntimeError as exc:
             raise _error(409, str(exc)) from None
+        _pending(rec)
+        return {"ok": True, "rows": console.pending["rows"], "status": full_status()}
+
+    def _pending(rec: dict) -> None:
         console.pending = {"dat": str(rec["dat"]), "csv": str(rec["csv"]),
                            "rows": int(rec.get("rows", 0))}
-        return {"ok": True, "rows": console.pending["rows"], "status": full_status()}
 
     @app.post("/api/record/name")
     def record_name(req: RecordNameRequest):

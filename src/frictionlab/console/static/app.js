@@ -395,6 +395,15 @@
   }
 
   // --- buttons ------------------------------------------------------------------------------------
+  async function stopRecording() {
+    const r = await api("POST", "/api/record/stop");
+    if (!r.ok) { setMsg("save-msg", "refused: " + r.data.detail, true); return false; }
+    setMsg("save-msg", `${r.data.rows} samples recorded; name the file (no extension, .dat is added)`);
+    $("save-prompt").hidden = false;
+    $("save-name").focus();
+    return true;
+  }
+
   function wire() {
     $("start").addEventListener("click", async () => {
       const running = ui.status && ui.status.running;
@@ -405,6 +414,13 @@
     let exitArmed = null;
     $("exit").addEventListener("click", async () => {
       if (!exitArmed) {   // two presses: a stray click must not drop the pendulum
+        const st = ui.status || {};
+        if (st.recording) await stopRecording();
+        if (st.recording || (st.console && st.console.pending_recording)) {
+          // as in the thesis, Exit asks for the recording's name first
+          setMsg("save-msg", "name the recording at out> before you exit (Exit again keeps it " +
+            "under its automatic name in the log directory)");
+        }
         $("exit").textContent = "Confirm exit";
         exitArmed = setTimeout(() => { exitArmed = null; $("exit").textContent = "Exit"; }, 4000);
         return;
@@ -442,11 +458,7 @@
         if (r.ok) { $("save-links").textContent = ""; $("save-prompt").hidden = true; }
         return;
       }
-      const r = await api("POST", "/api/record/stop");
-      if (!r.ok) { setMsg("save-msg", "refused: " + r.data.detail, true); return; }
-      setMsg("save-msg", `${r.data.rows} samples recorded; name the file (no extension, .dat is added)`);
-      $("save-prompt").hidden = false;
-      $("save-name").focus();
+      await stopRecording();
     });
     $("save-prompt").addEventListener("submit", async (ev) => {
       ev.preventDefault();
