@@ -321,3 +321,26 @@ def test_a_stall_at_the_end_counts_only_the_run_s_deadlines(cfg):
     assert loop.stop_reason == "duration"
     assert loop.ticks == 98 and loop.missed == 2  # 98 and 99 of the 100 deadlines
     assert loop.ticks + loop.missed == 100
+
+
+def test_realtime_priority_is_dropped_when_the_run_ends(cfg):
+    import os
+    import threading
+
+    out = {}
+
+    def body():
+        loop = Loop(SimRig(cfg), FakeClock(), ControlParams.from_config(cfg), duration=0.05,
+                    realtime=True, manage_gc=False)
+        loop.rig.open()
+        seen = []
+        loop.sinks = (lambda s: seen.append(os.sched_getscheduler(0)),)
+        loop.run()
+        out.update(fifo=loop.sched_fifo, during=seen, after=os.sched_getscheduler(0))
+
+    th = threading.Thread(target=body)
+    th.start()
+    th.join(60)
+    expected = os.SCHED_FIFO if out["fifo"] else os.SCHED_OTHER
+    assert set(out["during"]) == {expected}
+    assert out["after"] == os.SCHED_OTHER

@@ -64,7 +64,7 @@ from dataclasses import dataclass
 from .._validation import Validated, param
 from ..controller import G_COMP, G_W0, S_ARM, S_ARMDOT, S_RELAY, S_X1, S_X2, S_ZHAT, controller_step
 from ..rig import RigScaling
-from .osrt import try_realtime_priority
+from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
 from .rigs import BadReading, Rig
 from .samples import CHANGED, COMPENSATE, MISSED, NO_READING, OVERRUN, START, STOP, Sample
@@ -204,13 +204,9 @@ class Loop:
         """Run until a stop; return the stop reason."""
         global _rt_warned
         self.running = True
-        if self.realtime:
-            self.rt_note = try_realtime_priority(self.priority, self.cpu)
-            self.sched_fifo = self.rt_note is None or "SCHED_FIFO" not in self.rt_note
-            if self.rt_note and not _rt_warned:
-                _rt_warned = True
-                print(f"frictionlab: {self.rt_note}", file=sys.stderr)
-        # compile (or load from numba's cache) before the first deadline
+        # compile (or load from numba's cache) and collect garbage before the first
+        # deadline, and before raising the priority: a long setup at real-time priority
+        # would starve everything else on the CPU
         p = self.params
         controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
         gc_was = gc.isenabled()
@@ -218,6 +214,12 @@ class Loop:
             gc.collect()
             gc.freeze()
             gc.disable()
+        if self.realtime:
+            self.rt_note = try_realtime_priority(self.priority, self.cpu)
+            self.sched_fifo = self.rt_note is None or "SCHED_FIFO" not in self.rt_note
+            if self.rt_note and not _rt_warned:
+                _rt_warned = True
+                print(f"frictionlab: {self.rt_note}", file=sys.stderr)
         try:
             self._ticks()
         except _Stop as stop:
@@ -231,6 +233,8 @@ class Loop:
             try:
                 self.rig.stop_motor()
             finally:
+                if self.sched_fifo:
+                    normal_priority()
                 if self.manage_gc:
                     gc.unfreeze()
                     if gc_was:

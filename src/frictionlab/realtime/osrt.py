@@ -18,7 +18,7 @@ import ctypes.util
 import os
 import threading
 
-__all__ = ["default_cpu", "try_realtime_priority"]
+__all__ = ["default_cpu", "normal_priority", "try_realtime_priority"]
 
 _PR_SET_TIMERSLACK = 29
 
@@ -55,3 +55,11 @@ def try_realtime_priority(priority: int, cpu: int | None = None) -> str | None:
     except (PermissionError, OSError, AttributeError) as exc:
         notes.append(f"SCHED_FIFO is not permitted here ({exc}); running at normal priority")
     return "; ".join(notes) or None
+
+
+def normal_priority() -> None:
+    """Put the calling thread back on the normal scheduler (SCHED_OTHER); never raises."""
+    try:
+        os.sched_setscheduler(threading.get_native_id(), os.SCHED_OTHER, os.sched_param(0))
+    except (OSError, AttributeError):
+        pass
