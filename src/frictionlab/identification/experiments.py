@@ -46,6 +46,7 @@ from ..simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory
 
 __all__ = [
     "EXPERIMENTS",
+    "IdentificationError",
     "analyse_control_scaling",
     "analyse_free_oscillation",
     "analyse_stiction",
