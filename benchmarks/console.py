@@ -12,7 +12,7 @@ Prints the figures; the last line is JSON: the statistics of
 ``frictionlab run --headless --json`` (INTERFACE.md) plus ``console`` (frames
 sent and received, frame rate, samples the console dropped).
 
-    .venv/bin/python benchmarks/console.py --duration 120
+    .venv/bin/python benchmarks/console.py --duration 120 [--backend udp] [--no-browser]
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ def _status(port: int) -> dict:
         return json.loads(r.read())
 
 
-def _exit(port: int) -> None:
-    req = urllib.request.Request(f"http://127.0.0.1:{port}/api/exit", data=b"{}",
+def _post(port: int, path: str) -> None:
+    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", data=b"{}",
                                  method="POST", headers={"Content-Type": "application/json"})
     with urllib.request.urlopen(req, timeout=30) as r:
         r.read()
@@ -56,16 +56,24 @@ def _exit(port: int) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=120.0, help="seconds of loop time")
-    ap.add_argument("--backend", default="sim")
+    ap.add_argument("--backend", default="sim",
+                    help="sim (default), udp (starts frictionlab rig-sim on a free port) or "
+                         "any backend of frictionlab run")
     ap.add_argument("--no-browser", action="store_true", help="no page connected (baseline)")
     ap.add_argument("--chromium", default="/usr/bin/chromium")
     args = ap.parse_args(argv)
 
+    rig = None
+    backend = args.backend
+    if backend == "udp":
+        rig = subprocess.Popen([sys.executable, "-m", "frictionlab", "rig-sim", "--port", "0",
+                                "--json"], stdout=subprocess.PIPE, text=True)
+        backend = f"udp://127.0.0.1:{json.loads(rig.stdout.readline())['port']}"
     port = _free_port()
     log_dir = tempfile.mkdtemp(prefix="frictionlab-console-bench-")
     env = {k: v for k, v in os.environ.items() if k != "FRICTIONLAB_TOKEN"}
     proc = subprocess.Popen([sys.executable, "-m", "frictionlab", "run", "--port", str(port),
-                             "--backend", args.backend, "--log-dir", log_dir],
+                             "--backend", backend, "--log-dir", log_dir],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     err: list[str] = []
     threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True).start()
@@ -82,7 +90,11 @@ def main(argv=None) -> int:
 
     pw = browser = page = None
     try:
+        started = False
         while not (st := _status(port))["running"] or st["ticks"] == 0:
+            if not st["running"] and not started and backend != "sim":
+                _post(port, "/api/start")  # a rig's loop waits for Start
+                started = True
             if proc.poll() is not None:
                 raise SystemExit("frictionlab run ended: " + "".join(err))
             time.sleep(0.1)
@@ -110,10 +122,13 @@ def main(argv=None) -> int:
         if pw is not None:
             pw.stop()
         try:
-            _exit(port)
+            _post(port, "/api/exit")
         except OSError:
             proc.send_signal(signal.SIGTERM)
         proc.wait(30)
+        if rig is not None:
+            rig.send_signal(signal.SIGTERM)
+            rig.wait(10)
 
     con = st["console"]
     out = {
