@@ -17,6 +17,11 @@ Figures (sets per second of wall time):
   ``--serial-points`` sets (default 200) and reported as a rate; the rate of a
   serial sweep does not depend on its length, so it extrapolates to 1,000.
 
+Besides wall-clock rates it prints the CPU time per set summed over all the
+benchmark's processes (main, pool or Dask workers, forkserver, nannies): on a
+machine shared with other jobs this shows the engine's own cost, and
+``cores / cpu_per_set`` is the rate the backend would reach with the cores free.
+
 The pool and the cluster are started and warmed up (compiled simulator loaded
 in every worker) before the timed sweep, as they are in a session that runs
 several sweeps (identification, tuning; the engine keeps them); their start-up
@@ -44,6 +49,8 @@ import json
 import statistics
 import time
 
+import psutil
+
 from frictionlab.config import Config, build_config
 from frictionlab.sweep import evaluate, make_points, parse_vary, shutdown
 
@@ -61,14 +68,30 @@ def sweep_points(base: Config) -> list[dict]:
     return points
 
 
-def _rates(fn, n_sets: int, repeats: int) -> tuple[float, float, list]:
-    """(best, median) sets per second of ``fn()`` over ``repeats`` calls, and the last rows."""
-    times, rows = [], None
+def _cpu_seconds() -> float:
+    """CPU time (user + system) of this process and all its live descendants."""
+    me = psutil.Process()
+    total = 0.0
+    for p in [me, *me.children(recursive=True)]:
+        try:
+            t = p.cpu_times()
+        except psutil.NoSuchProcess:
+            continue
+        total += t.user + t.system
+    return total
+
+
+def _rates(fn, n_sets: int, repeats: int) -> tuple[float, float, float, list]:
+    """Best and median sets per second of ``fn()`` over ``repeats`` calls, CPU ms per set
+    (all processes, median), and the last rows."""
+    times, cpu, rows = [], [], None
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = _cpu_seconds(), time.perf_counter()
         rows = fn()
         times.append(time.perf_counter() - t0)
-    return n_sets / min(times), n_sets / statistics.median(times), rows
+        cpu.append(_cpu_seconds() - c0)
+    return (n_sets / min(times), n_sets / statistics.median(times),
+            1e3 * statistics.median(cpu) / n_sets, rows)
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -91,25 +114,29 @@ def main(argv: list[str] | None = None) -> dict:
 
     sub = points[:args.serial_points]
     evaluate(base, sub[:2], duration=DURATION, workers=1)  # load the compiled code
-    serial, serial_med, serial_rows = _rates(
+    serial, serial_med, serial_cpu, serial_rows = _rates(
         lambda: evaluate(base, sub, duration=DURATION, workers=1), len(sub), args.repeats)
     print(f"serial: {serial:.1f} sets/s (median {serial_med:.1f}), timed on {len(sub)} sets "
-          f"({1e3 / serial:.2f} ms per set)")
+          f"({1e3 / serial:.2f} ms per set; CPU {serial_cpu:.2f} ms per set)")
 
     t0 = time.perf_counter()
     evaluate(base, points[:4 * cores], duration=DURATION, workers=cores, chunk_size=1)
     print(f"pool start-up and warm-up: {time.perf_counter() - t0:.2f} s")
-    pool, pool_med, pool_rows = _rates(lambda: run(workers=cores), N_SETS, args.repeats)
-    print(f"pool: {pool:.1f} sets/s (median {pool_med:.1f})")
+    pool, pool_med, pool_cpu, pool_rows = _rates(lambda: run(workers=cores), N_SETS,
+                                                 args.repeats)
+    print(f"pool: {pool:.1f} sets/s (median {pool_med:.1f}); CPU {pool_cpu:.2f} ms per set, "
+          f"i.e. {cores * 1e3 / pool_cpu:.0f} sets/s if {cores} cores were free")
     shutdown()
 
     t0 = time.perf_counter()
     evaluate(base, points[:4 * cores], duration=DURATION, dask="local", workers=cores,
              chunk_size=1)
     print(f"dask LocalCluster start-up and warm-up: {time.perf_counter() - t0:.2f} s")
-    dask, dask_med, dask_rows = _rates(lambda: run(dask="local", workers=cores), N_SETS,
-                                       args.repeats)
-    print(f"dask: {dask:.1f} sets/s (median {dask_med:.1f}); {dask / pool:.2f} x the pool")
+    dask, dask_med, dask_cpu, dask_rows = _rates(lambda: run(dask="local", workers=cores),
+                                                 N_SETS, args.repeats)
+    print(f"dask: {dask:.1f} sets/s (median {dask_med:.1f}); {dask / pool:.2f} x the pool; "
+          f"CPU {dask_cpu:.2f} ms per set, i.e. {cores * 1e3 / dask_cpu:.0f} sets/s if "
+          f"{cores} cores were free")
     shutdown()
 
     identical = pool_rows == dask_rows and pool_rows[:len(sub)] == serial_rows

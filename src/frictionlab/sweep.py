@@ -330,10 +330,38 @@ def _drop_pool(workers: int, ex) -> None:
     ex.shutdown(wait=False, cancel_futures=True)
 
 
+def _local_dask_config() -> dict[str, Any]:
+    """Dask settings for the workers of a ``LocalCluster`` started by a sweep.
+
+    * No ``MALLOC_TRIM_THRESHOLD_`` (Dask's default sets it): fixing a malloc
+      threshold turns off glibc's adaptive mmap threshold, so every run's
+      trajectory buffer (about 0.8 MB for 30 s) is mmapped and page-faulted
+      afresh - measured at about 20% of a 30 s run's CPU time.
+    * No statistical profiler (a thread sampling every 10 ms contends for the
+      GIL with the task, which holds it during the compiled simulation).
+    * No work stealing: the tasks are equal chunks, and the scheduler (in this
+      process) would re-balance them every 100 ms on the cores the workers need.
+    * Event-loop health ticks every 1 s instead of 20 ms and system monitoring
+      every 2 s instead of 0.5 s: with the scheduler and the nannies in this
+      process, the defaults cost about 7% of a core while the cluster is idle
+      (2% with these).
+    """
+    import dask
+
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    return {"distributed.nanny.pre-spawn-environ": environ,
+            "distributed.worker.profile.enabled": False,
+            "distributed.scheduler.work-stealing": False,
+            "distributed.admin.tick.interval": "1s",
+            "distributed.admin.system-monitor.interval": "2s"}
+
+
 def _get_dask(address: str, workers: int | None):
     """A cached ``distributed.Client`` for ``"local"`` or ``"tcp://HOST:PORT"``."""
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
 
     n = workers or os.cpu_count() or 1
@@ -343,9 +371,10 @@ def _get_dask(address: str, workers: int | None):
         if hit is not None and hit[0].status == "running":
             return hit[0]
         if address == "local":
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, host="127.0.0.1",
-                                   silence_logs=logging.ERROR)
+            with dask.config.set(_local_dask_config()):
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, host="127.0.0.1",
+                                       silence_logs=logging.ERROR)
             try:
                 client = Client(cluster, timeout="60s")
             except BaseException:
