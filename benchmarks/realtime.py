@@ -15,7 +15,9 @@ Figures per run (INTERFACE.md's, plus): ``missed_fraction`` (missed /
 scheduled ticks), ``max_stall_ms`` and ``unaccounted_stalls_over_50ms``
 (stalls longer than 50 ms not covered by the host's steal time),
 ``dropped_log_samples``, ``rig_us`` (request-to-reply time of the UDP
-exchange, not part of ``compute_us``), ``rig_timeouts``.  Targets (issue 7):
+exchange, not part of ``compute_us``), ``rig_timeouts``, and the rig's own
+counters (``rig_sim``: requests answered, commands received, bad frames,
+watchdog trips).  Targets (issue 7):
 jitter p99 < 1 ms, missed <= 0.05 %, no unaccounted stall > 50 ms, compute
 p99 < 200 us, 0 dropped log samples.
 
@@ -41,6 +43,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from frictionlab.realtime.rigsim import send_control
 
 CLI = [sys.executable, "-m", "frictionlab"]
 TARGETS = {"jitter_p99_ms": 1.0, "missed_fraction": 0.0005, "unaccounted_stalls_over_50ms": 0,
@@ -71,6 +75,10 @@ def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str]) -> dic
                               "--backend", f"udp://127.0.0.1:{port}", "--log-dir",
                               str(log_dir), *extra], capture_output=True, text=True,
                              timeout=duration + 120)
+        try:
+            rig_status = send_control("127.0.0.1", port, {"cmd": "status"})
+        except TimeoutError:
+            rig_status = {}
     finally:
         if hog is not None:
             hog.kill()
@@ -97,6 +105,8 @@ def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str]) -> dic
         "late_replies": full.get("late_replies"),
         "sched_fifo": full["sched_fifo"],
         "other_core_busy": busy,
+        "rig_sim": {k: rig_status.get(k) for k in ("samples", "commands", "bad_frames",
+                                                   "watchdog_trips", "sessions")},
         "load_average": os.getloadavg(),
     }
 

@@ -195,8 +195,9 @@ def _run_headless(ctl, args) -> int:
         except (RigError, OSError) as exc:
             print(f"frictionlab run: error: {exc}", file=sys.stderr)
             return 1
-        while not ctl.wait(0.25):
-            pass
+        # block without periodic wake-ups (a woken main thread takes the GIL); signal
+        # handlers still run, in this thread, and ask the loop to stop
+        ctl.wait()
     finally:
         if ctl.running:
             ctl.stop("signal")

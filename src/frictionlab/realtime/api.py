@@ -184,7 +184,11 @@ class RealtimeController:
             self.last_stats = None
             if self._writer is not None:
                 self._writer.write_meta(self._meta())
-                prio = (lambda: try_realtime_priority(10)) if self.realtime else None
+                # the writer shares the loop's CPU: holding the GIL, it is preempted by
+                # the loop and hands the GIL over at once, whereas on another CPU that
+                # is busy (or paused by the host) it could keep the loop waiting
+                prio = ((lambda: try_realtime_priority(10, self.cpu)) if self.realtime
+                        else None)
                 self._writer.start(prio)
             self._event("start", backend=self.backend_name)
             return loop

@@ -555,29 +555,20 @@ def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,
         reply = emulator.control(msg)
         if not reply.get("ok"):
             raise ValueError(reply.get("error"))
-    def serve():
-        if realtime:
-            note = try_realtime_priority(40, cpu)
-            if note:
-                print(f"frictionlab rig-sim: {note}", file=sys.stderr)
-        try:
-            if serial_device:
-                import serial
+    # serve in the main thread: a single-threaded process never waits for the GIL
+    # (another thread holding it on a busy or paused CPU would silence the rig)
+    if realtime:
+        note = try_realtime_priority(40, cpu)
+        if note:
+            print(f"frictionlab rig-sim: {note}", file=sys.stderr)
+    if serial_device:
+        import serial
 
-                port_ = serial.serial_for_url(serial_device, baudrate=1_000_000, timeout=0)
-                if announce:
-                    announce({"listening": f"serial://{serial_device}"})
-                serve_stream(emulator, port_.fileno(), stop)
-            else:
-                serve_udp(emulator, host, port, stop,
-                          ready=lambda a: announce and announce(
-                              {"listening": f"udp://{a[0]}:{a[1]}", "host": a[0],
-                               "port": a[1]}))
-        finally:
-            stop.set()
-
-    th = threading.Thread(target=serve, name="rig-sim", daemon=True)
-    th.start()
-    while not stop.wait(0.5):
-        pass
-    th.join(timeout=2.0)
+        port_ = serial.serial_for_url(serial_device, baudrate=1_000_000, timeout=0)
+        if announce:
+            announce({"listening": f"serial://{serial_device}"})
+        serve_stream(emulator, port_.fileno(), stop)
+    else:
+        serve_udp(emulator, host, port, stop,
+                  ready=lambda a: announce and announce(
+                      {"listening": f"udp://{a[0]}:{a[1]}", "host": a[0], "port": a[1]}))
