@@ -5,6 +5,7 @@ The tests share one server and one page and run in file order (the last one pres
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import expect
 
-from frictionlab.design import design
+from frictionlab.design import PRESETS, design
 
 from .conftest import ConsoleProcess, wait_until
 
@@ -169,6 +170,25 @@ def test_invalid_entries_refused_beside_the_field(console, page):
     assert st["design"]["spec"] == before["spec"]
 
 
+def test_kalman_filter_panel_applies_only_on_apply(page):
+    k_before = gains(page, "K")
+    field = page.locator("#observer-observer_omega1")
+    field.fill("25")
+    # not applied until Apply: the gains stay (the status keeps arriving meanwhile)
+    n = ui(page, "frames")
+    wait_until(lambda: ui(page, "frames") >= n + 10, what="10 more frames")
+    np.testing.assert_array_equal(gains(page, "K"), k_before)
+    assert field.input_value() == "25"
+    page.locator("#observer-apply").click()
+    expect(page.locator("#observer-msg")).to_have_text("applied")
+    want = design(dataclasses.replace(PRESETS["fast"], observer_omega1=25.0))
+    wait_until(lambda: status(page)["design"]["spec"]["observer_omega1"] == 25.0,
+               what="observer_omega1 = 25 in effect")
+    np.testing.assert_allclose(gains(page, "K"), want.K, rtol=1e-3)
+    np.testing.assert_allclose(gains(page, "L"), want.L, rtol=1e-3)
+    expect(page.locator("#setup")).to_contain_text("design custom")
+
+
 def test_fast_and_slow_change_the_gains(page):
     fast, slow = design("fast"), design("slow")
     np.testing.assert_allclose(gains(page, "L"), fast.L, rtol=1e-3)
@@ -234,6 +254,25 @@ def test_compensation_shrinks_the_limit_cycle(page):
     # on again for the rest of the tests: the pendulum then rests near upright
     button.click()
     expect(button).to_have_text("Compensating")
+
+
+def test_friction_type_and_model_parameters(page):
+    ensure_running(page)
+    page.select_option("#friction-type", "classical")
+    expect(page.locator("#friction-msg")).to_have_text("friction type classical")
+    expect(page.locator("#friction-sigma0")).to_have_count(0)
+    stiction = page.locator("#friction-stiction")
+    expect(stiction).to_be_visible()
+    stiction.fill("2.1")
+    page.locator("#friction-apply").click()
+    expect(page.locator("#friction-msg")).to_have_text("applied")
+    comp = status(page)["compensation"]
+    assert comp["kind"] == "classical" and comp["enabled"]
+    assert comp["params"]["stiction"] == 2.1
+    # each model keeps its own parameters
+    page.select_option("#friction-type", "lugre")
+    expect(page.locator("#friction-sigma0")).to_have_value("300")
+    assert status(page)["compensation"]["params"]["stiction"] == 2.3
 
 
 def test_push_disturbs_the_simulated_pendulum(page):
