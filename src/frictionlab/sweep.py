@@ -280,6 +280,12 @@ def _warm_up() -> None:
     run_features(build_config(), 2.0)
 
 
+#: Set only in the environment of the forkserver this module starts: importing
+#: the module there (a preload) also loads the compiled simulator, so that pool
+#: workers fork with it in memory instead of each loading (or compiling) it.
+_FORKSERVER_WARM_ENV = "FRICTIONLAB_SWEEP_FORKSERVER_WARM"
+
+
 def _exit_with(parent) -> None:
     parent.join()  # returns when the parent's end of the pipe closes
     os._exit(1)
@@ -315,9 +321,16 @@ def _get_pool(workers: int):
     with _lock:
         ex = _pools.get(workers)
         if ex is None:
+            from multiprocessing import forkserver
+
             ctx = multiprocessing.get_context("forkserver")
-            # the forkserver imports the simulator once; workers fork from it
-            ctx.set_forkserver_preload(["frictionlab.sweep", "frictionlab.simulation"])
+            # the forkserver imports and warms the simulator once; workers fork from it
+            ctx.set_forkserver_preload(["frictionlab.sweep"])
+            os.environ[_FORKSERVER_WARM_ENV] = "1"
+            try:
+                forkserver.ensure_running()
+            finally:
+                del os.environ[_FORKSERVER_WARM_ENV]
             ex = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pool_worker_init)
             _pools[workers] = ex
         return ex
@@ -415,6 +428,12 @@ def shutdown() -> None:
 
 
 atexit.register(shutdown)
+
+if os.environ.pop(_FORKSERVER_WARM_ENV, None) == "1":  # this is the pool's forkserver
+    try:
+        _warm_up()
+    except Exception:  # the workers then warm up themselves
+        pass
 
 
 def _check_dask_address(dask: str) -> None:
