@@ -144,8 +144,10 @@ def wait_until(predicate, timeout: float = 30.0, interval: float = 0.1, what: st
         time.sleep(interval)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser():
+    """Chromium for one test module (Playwright's sync API runs an event loop of its own:
+    it is stopped before the rest of the suite runs)."""
     if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
         raise AssertionError("chromium is missing: run scripts/install-system-deps as root "
                              "(apt-get install -y chromium)")

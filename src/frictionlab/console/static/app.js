@@ -122,7 +122,7 @@
       const input = panel && panel.inputs[name];
       if (input) { setError(input, e.message); shown = true; }
     }
-    setMsg(msgId, "refused: " + ((data && data.detail) || "invalid input") + (shown ? "" : ""), true);
+    setMsg(msgId, shown ? "refused: see the marked fields" : "refused: " + ((data && data.detail) || "invalid input"), true);
   }
 
   // --- panels ---------------------------------------------------------------------------
