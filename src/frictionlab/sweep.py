@@ -22,15 +22,16 @@ Backends (chosen by :func:`evaluate`'s ``workers`` and ``dask``):
 
 * in-process (``workers=1``, or ``workers=None`` for a sweep of under about
   half a second of serial work);
-* a local process pool (``workers=N``; ``None``: all cores).  Workers start
-  from a ``forkserver`` that has already imported the simulator, and load the
-  numba-compiled code from its on-disk cache once; the pool is kept for the
-  life of the process so repeated calls (identification, tuning) pay the
+* a local process pool (``workers=N``; ``None``: all cores).  Workers fork
+  from a ``forkserver`` that has imported the package and loaded the
+  numba-compiled simulator (from its on-disk cache) once; the pool is kept for
+  the life of the process so repeated calls (identification, tuning) pay the
   start-up once.  :func:`shutdown` closes it (also at exit);
 * Dask distributed: ``dask="local"`` starts a ``LocalCluster`` (one
-  single-threaded worker process per core, or ``workers``), ``dask="tcp://
-  HOST:PORT"`` connects to a running scheduler whose workers have
-  ``frictionlab`` installed.  Clients are kept like the pool.
+  single-threaded worker process per core, or ``workers``; settings in
+  :func:`_local_dask_config`), ``dask="tcp://HOST:PORT"`` connects to a
+  running scheduler whose workers have ``frictionlab`` installed.  Clients
+  are kept like the pool.
 
 Output files
 ------------
