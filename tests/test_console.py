@@ -425,3 +425,36 @@ def test_stop_while_recording_asks_for_the_name(app_and_controller, tmp_path):
     r = client.post("/api/record/name", json={"name": "after_stop"})
     assert r.status_code == 200 and r.json()["rows"] >= 20
     assert np.loadtxt(tmp_path / "after_stop.dat").shape == (r.json()["rows"], 10)
+
+
+def test_a_run_ending_by_itself_while_recording_asks_for_the_name(app_and_controller, tmp_path):
+    client, ctl, _ = app_and_controller
+    assert client.post("/api/start", json={}).status_code == 200
+    assert client.post("/api/record/start", json={}).status_code == 200
+    ctl.stop("angle_limit")  # as the loop's safety check would
+    assert ctl.wait(5.0)
+    st = client.get("/api/status").json()
+    assert st["stop_reason"] == "angle_limit" and not st["recording"]
+    assert st["console"]["pending_recording"]
+    r = client.post("/api/record/name", json={"name": "before_the_fall"})
+    assert r.status_code == 200
+    assert (tmp_path / "before_the_fall.dat").is_file()
+    assert not client.get("/api/status").json()["console"]["pending_recording"]
+
+
+def test_guard_refuses_a_websocket_without_the_token(app_and_controller):
+    from starlette.testclient import WebSocketDenialResponse
+
+    _client, ctl, _ = app_and_controller
+    token = "a-long-enough-token"
+    app = create_app(ctl, token)
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        with pytest.raises(WebSocketDenialResponse) as exc:
+            client.websocket_connect("ws://127.0.0.1:8000/ws").__enter__()
+        assert exc.value.status_code == 401
+        with pytest.raises(WebSocketDenialResponse) as exc:
+            client.websocket_connect(f"ws://127.0.0.1:8000/ws?token={token}",
+                                     headers={"Origin": "http://evil.example"}).__enter__()
+        assert exc.value.status_code == 403
+        with client.websocket_connect(f"ws://127.0.0.1:8000/ws?token={token}") as ws:
+            assert ws.receive_json()["type"] == "samples"

@@ -37,6 +37,7 @@ import json
 import logging
 import math
 import re
+import threading
 import time
 from concurrent.futures import TimeoutError as FutureTimeout
 from contextlib import asynccontextmanager
@@ -207,6 +208,8 @@ class _Console:
         self.pending: dict | None = None   # stopped recording awaiting its name
         self.saved: dict | None = None     # the last named recording
         self.exited = False
+        self.was_recording = False         # as of the last status
+        self.lock = threading.Lock()
 
 
 def _error(status: int, message: str, field: str | None = None) -> HTTPException:
@@ -264,6 +267,13 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
 
     def full_status() -> dict:
         st = dict(controller.status())
+        with console.lock:
+            if console.was_recording and not st.get("running") and console.pending is None:
+                # the run ended (a safety stop, say) while recording: the recording was
+                # closed under an automatic name; ask the page for its name
+                with contextlib.suppress(RuntimeError, ValueError, OSError):
+                    _pending(controller.record_stop(None))
+            console.was_recording = bool(st.get("recording"))
         st["console"] = {
             "limit_cycle": hub.figures,
             "clients": len(hub.clients),
@@ -357,13 +367,9 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
 
     @app.post("/api/stop")
     def stop(body: dict | None = None):
-        was_recording = bool(controller.status().get("recording"))
         controller.stop("user")
         controller.wait(2.0)
-        if was_recording and not controller.running:
-            # the run closed the recording under an automatic name: ask for the name
-            with contextlib.suppress(RuntimeError, ValueError, OSError):
-                _pending(controller.record_stop(None))
+        # a recording running at the stop now waits for its name (see full_status)
         return {"ok": True, "status": full_status()}
 
     @app.post("/api/exit")
