@@ -162,8 +162,12 @@ def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
     dask = evaluate(base, points, duration=10, dask="local", workers=2)
     assert pool == serial
     assert dask == pool
+    # the cluster's workers run without Dask's malloc trim threshold (see _local_dask_config)
+    client = _get_dask("local", 2)
+    trim = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+    assert len(trim) == 2 and set(trim.values()) == {None}
     # joining a running scheduler by address (here the LocalCluster's own)
-    address = _get_dask("local", 2).scheduler.address
+    address = client.scheduler.address
     assert address.startswith("tcp://")
     assert evaluate(base, points[:2], duration=10, dask=address) == pool[:2]
     assert [r["friction.coulomb"] for r in pool] == list(TABLE2_FC)
