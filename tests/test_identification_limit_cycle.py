@@ -196,3 +196,14 @@ def test_experiment_may_not_set_a_fitted_key():
                                                "features": {"period": 1.0}}]})
     with pytest.raises(ConfigError, match="being fitted"):
         fit_limit_cycle(exps, ["friction.coulomb"], evaluate=lambda *a, **k: [])
+
+
+def test_a_broken_backend_raises_instead_of_fitting_penalties():
+    exps = parse_experiments({"experiments": [{"design": "fast",
+                                               "features": {"period": 1.0}}]})
+
+    def broken(base, points, **kw):
+        return [{**p, "status": "error", "error": "worker failed: boom"} for p in points]
+
+    with pytest.raises(RuntimeError, match="boom"):
+        fit_limit_cycle(exps, ["friction.coulomb"], evaluate=broken, maxiter=1, popsize=2)

@@ -290,7 +290,8 @@ def register_cli(sub) -> None:
     q.add_argument("--window", type=float, default=20.0,
                    help="features over the last S seconds (default 20)")
     q.add_argument("--workers", type=int, default=None,
-                   help="parallel workers (default: all cores; 1 = in-process)")
+                   help="parallel workers of the sweep engine (default: its choice - "
+                        "in-process for small batches, else all cores; 1 = in-process)")
     q.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="evaluate on a Dask cluster")
     q.add_argument("--seed", type=int, default=0, help="seed of the global search")

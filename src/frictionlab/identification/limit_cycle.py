@@ -477,6 +477,9 @@ class LimitCycleProblem:
             if progress is not None:
                 kw["progress"] = progress
             rows = self._evaluate(self.base, pts, **kw)
+            if rows and all(r.get("status") == "error" for r in rows):
+                # a broken backend, not a bad parameter set: do not fit penalties
+                raise RuntimeError(f"every simulation of the batch failed: {rows[0].get('error')}")
             self.nfev += len(todo_unique)
             ne = len(self.experiments)
             for j, k in enumerate(todo_unique):
