@@ -1006,6 +1006,8 @@ def _plan(args):
         if not args.force:
             raise UsageError(f"--out {args.out} exists; use --resume to continue it or "
                              "--force to overwrite it")
+    if args.dask is not None and points:
+        _get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any output
     return base, varies, points, duration, out
 
 
