@@ -4,6 +4,7 @@ import csv
 import io
 import itertools
 import json
+import math
 import os
 import re
 import signal
@@ -23,8 +24,11 @@ from frictionlab.limit_cycles import FEATURES
 from frictionlab.reference import TABLE2
 from frictionlab.simulation import run_features
 from frictionlab.sweep import (
+    MAX_CHUNK,
+    MIN_TAIL_CHUNK,
     SweepFile,
     _get_dask,
+    _guided_chunks,
     columns,
     evaluate,
     make_points,
@@ -126,6 +130,20 @@ def test_grid_is_the_cartesian_product_and_oat_varies_one_key_at_a_time():
 # ---------------------------------------------------------------------------
 # engine
 # ---------------------------------------------------------------------------
+
+
+@settings(max_examples=80, deadline=None)
+@given(n=st.integers(1, 5000), workers=st.integers(1, 64))
+def test_default_chunks_cover_every_point_once_and_shrink_at_the_end(n, workers):
+    chunks = _guided_chunks(n, workers)
+    assert [i for c in chunks for i in c] == list(range(n))  # in order, each once
+    sizes = [len(c) for c in chunks]
+    # at most 50 points and at most a quarter of a worker's share per chunk
+    assert min(sizes) >= 1 and max(sizes) <= min(MAX_CHUNK, math.ceil(n / (4 * workers)))
+    assert sizes == sorted(sizes, reverse=True)
+    # the last chunk is small whenever the sweep is long enough to allow it
+    if n >= 4 * workers * MIN_TAIL_CHUNK:
+        assert sizes[-1] <= MIN_TAIL_CHUNK
 
 
 def test_serial_rows_are_run_features_and_failures_are_rows():

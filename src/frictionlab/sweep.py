@@ -12,8 +12,9 @@ Engine
 :func:`evaluate` maps a list of points (``{key: value}`` dicts applied to a
 base :class:`~frictionlab.config.Config`) to result rows, in order.  The unit
 of work is :func:`frictionlab.simulation.run_features`.  Points are shipped in
-chunks (by default up to 50 points, at least 4 chunks per worker) so that the
-compiled simulator, not task scheduling, dominates.  A point whose
+chunks (by default at most 50 points and a quarter of a worker's share,
+shrinking towards the end so the workers finish together) so that the compiled
+simulator, not task scheduling, dominates.  A point whose
 configuration is invalid or whose simulation raises becomes a row with status
 ``"error"`` and an ``error`` message; a worker that dies turns its chunk into
 such rows.  A sweep never crashes because of one point.
@@ -84,6 +85,8 @@ STATUSES = ("limit_cycle", "settled", "fell", "error")
 
 #: Largest number of points per task.
 MAX_CHUNK = 50
+#: Smallest task of the shrinking tail of a sweep (default chunking).
+MIN_TAIL_CHUNK = 4
 #: ``workers=None`` runs a sweep in-process when its serial work (points x ticks
 #: x substeps) is below this (about half a second of simulation).
 TINY_WORK = 5_000_000
@@ -451,6 +454,20 @@ def _chunks(n: int, size: int) -> list[range]:
     return [range(i, min(i + size, n)) for i in range(0, n, size)]
 
 
+def _guided_chunks(n: int, workers: int) -> list[range]:
+    """Chunks of at most :data:`MAX_CHUNK` and ``ceil(n / (4 workers))`` points,
+    shrinking towards the end of the sweep (to ``remaining / (2 workers)``, not
+    below :data:`MIN_TAIL_CHUNK`) so that the workers finish together."""
+    size = max(1, min(MAX_CHUNK, math.ceil(n / (4 * workers))))
+    out, i = [], 0
+    while i < n:
+        rest = n - i
+        m = min(size, max(MIN_TAIL_CHUNK, math.ceil(rest / (2 * workers))), rest)
+        out.append(range(i, i + m))
+        i += m
+    return out
+
+
 def iter_evaluate(
     base: Config,
     points: Sequence[Mapping[str, Any]],
@@ -484,8 +501,7 @@ def iter_evaluate(
         serial = n_workers == 1 or (
             workers is None and _serial_work(base, n, duration) < TINY_WORK)
         backend = "serial" if serial else "pool"
-    size = chunk_size or max(1, min(MAX_CHUNK, math.ceil(n / (4 * n_workers))))
-    chunks = _chunks(n, size)
+    chunks = _chunks(n, chunk_size) if chunk_size else _guided_chunks(n, n_workers)
 
     if backend == "serial":
         for idx in chunks:
@@ -570,7 +586,8 @@ def evaluate(
     progress : callable, optional
         Called as ``progress(done, total)`` (points) after every chunk.
     chunk_size : int, optional
-        Points per task (default: up to 50, at least 4 tasks per worker).
+        Points per task (default: at most 50 and a quarter of a worker's
+        share, shrinking towards the end of the sweep).
 
     Returns
     -------
@@ -949,7 +966,8 @@ def register_cli(sub) -> None:
     p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="run on Dask: start a LocalCluster, or join a running scheduler")
     p.add_argument("--chunk-size", type=int, default=None,
-                   help="parameter sets per task (default: up to 50, >= 4 tasks per worker)")
+                   help="parameter sets per task (default: at most 50 and a quarter of a "
+                        "worker's share, smaller at the end)")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="results, FILE.csv (crash-safe, written as it goes) or FILE.parquet")
     p.add_argument("--resume", action="store_true",
