@@ -13,6 +13,19 @@ Inverted Pendulum" (Lund, 1996).  The public API:
 * simulation and analysis: :func:`simulate`, :func:`simulate_config`,
   :class:`Trajectory`, :func:`features`, :func:`trajectory_features`
 * rig conversions: :class:`RigScaling`
+
+The larger capabilities are subpackages with their own curated ``__all__``,
+imported on demand so that ``import frictionlab`` stays light:
+
+* :mod:`frictionlab.sweep`: many parameter sets through the process pool or
+  Dask (:func:`frictionlab.sweep.evaluate`)
+* :mod:`frictionlab.identification`: limit-cycle fits
+  (:func:`frictionlab.identification.fit_limit_cycle`) and the simple
+  experiments of Appendices A, B.4 and E
+* :mod:`frictionlab.compensation`: the compensators of Sec. 6 and their tuning
+* :mod:`frictionlab.realtime`: the 200 Hz loop, rig backends and logging
+  (:class:`frictionlab.realtime.RealtimeController`)
+* :mod:`frictionlab.console`: the operator console (FastAPI)
 """
 
 from . import _numba_cache  # noqa: F401  (must precede every numba import)

@@ -41,7 +41,16 @@ import numpy as np
 from numba import njit
 
 from .config import Config, build_config
-from .controller import NS, S_ARMDOT, S_X1, S_X2, S_ZHAT, Controller, controller_step
+from .controller import (
+    DEFAULT_ERROR_SIGNAL,
+    NS,
+    S_ARMDOT,
+    S_X1,
+    S_X2,
+    S_ZHAT,
+    Controller,
+    controller_step,
+)
 from .design import design as make_design
 from .friction import KINDS, LUGRE, NONE, lugre_force, lugre_step_exact, static_force
 from .plant import accelerations_sc
@@ -304,7 +313,7 @@ def _quanta(cfg: Config) -> np.ndarray:
     return np.zeros(3)
 
 
-def make_controller(cfg: Config, error_signal: str = "velocity_innovation") -> Controller:
+def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Controller:
     """The controller a configuration describes."""
     d = make_design(cfg.design, cfg.plant)
     return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal)

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import Config, ConfigError
-from ..controller import ERROR_SIGNALS, Controller
+from ..controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
 from ..design import PRESETS, Design, DesignSpec, design, preset
 from ..friction import FrictionParams
 
@@ -85,7 +85,7 @@ class ControlParams:
     cp: np.ndarray = field(repr=False)
 
     @classmethod
-    def from_config(cls, cfg: Config, error_signal: str = "velocity_innovation"
+    def from_config(cls, cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL
                     ) -> ControlParams:
         """The initial snapshot of a run (``cfg.compensation_kind`` none: off, LuGre selected)."""
         enabled = cfg.compensation_kind != "none"
