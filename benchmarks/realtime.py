@@ -11,6 +11,13 @@ What it does, per run:
    --duration S --json`` and reads the INTERFACE statistics it prints and
    the fuller ones of the run's JSON sidecar.
 
+Before each run, with the other core already busy, a plain periodic timer
+(``host_timer``: a 5 ms period, SCHED_FIFO 50 where permitted, pinned to the
+loop's CPU, sleeping to 300 us before each deadline and spinning to it, as
+the loop does, and nothing else) measures what the host itself allows at
+that moment: its wake-up jitter and missed periods are the floor under the
+loop's figures (``--baseline 0`` skips it).
+
 Figures per run (INTERFACE.md's, plus): ``missed_fraction`` (missed /
 scheduled ticks), ``max_stall_ms`` and ``unaccounted_stalls_over_50ms``
 (stalls longer than 50 ms not covered by the host's steal time),
@@ -59,7 +66,49 @@ def _busy(cpus: set[int]) -> subprocess.Popen | None:
     return subprocess.Popen([sys.executable, "-c", code])
 
 
-def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str]) -> dict:
+_TIMER = r"""
+import json, os, sys, time
+cpu, seconds = int(sys.argv[1]), float(sys.argv[2])
+os.sched_setaffinity(0, {cpu})
+try:
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+except (PermissionError, AttributeError):
+    pass
+h, warm, now = 5_000_000, 300_000, time.monotonic_ns
+n = int(seconds / 0.005)
+lates, missed, k, t0 = [], 0, 0, now() + h
+while k < n:
+    d = t0 + k * h
+    r = d - warm - now()
+    if r > 0:
+        time.sleep(r / 1e9)
+    while now() < d:
+        pass
+    late = now() - d
+    if late >= h:
+        missed += late // h
+        k += late // h
+        late %= h
+    lates.append(late)
+    k += 1
+lates.sort()
+q = lambda p: lates[min(len(lates) - 1, int(p * len(lates)))] / 1e6
+print(json.dumps({"seconds": seconds, "jitter_ms": {"p50": q(0.5), "p99": q(0.99),
+      "max": lates[-1] / 1e6}, "missed_fraction": missed / n}))
+"""
+
+
+def host_timer(cpu: int, seconds: float) -> dict | None:
+    """The host's own periodic-timer floor (see the module docstring)."""
+    if seconds <= 0:
+        return None
+    out = subprocess.run([sys.executable, "-c", _TIMER, str(cpu), str(seconds)],
+                         capture_output=True, text=True, timeout=seconds + 60, check=True)
+    return json.loads(out.stdout)
+
+
+def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str],
+            baseline: float = 0.0) -> dict:
     rig = subprocess.Popen([*CLI, "rig-sim", "--port", "0", "--json"], stdout=subprocess.PIPE,
                            stderr=subprocess.DEVNULL, text=True)
     hog = None
@@ -71,6 +120,7 @@ def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str]) -> dic
         allowed = os.sched_getaffinity(0)
         loop_cpu = max(allowed)
         hog = _busy(allowed - {loop_cpu}) if busy else None
+        floor = host_timer(loop_cpu, baseline)
         out = subprocess.run([*CLI, "run", "--headless", "--json", "--duration", str(duration),
                               "--backend", f"udp://127.0.0.1:{port}", "--log-dir",
                               str(log_dir), *extra], capture_output=True, text=True,
@@ -108,6 +158,7 @@ def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str]) -> dic
         "rig_sim": {k: rig_status.get(k) for k in ("samples", "commands", "bad_frames",
                                                    "watchdog_trips", "sessions")},
         "load_average": os.getloadavg(),
+        "host_timer": floor,
     }
 
 
@@ -127,6 +178,8 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=120.0, help="seconds per run (120)")
     ap.add_argument("--runs", type=int, default=1, help="number of runs (1)")
     ap.add_argument("--no-busy", action="store_true", help="leave the other core idle")
+    ap.add_argument("--baseline", type=float, default=20.0, help="seconds of the plain "
+                    "host timer before each run (20; 0 = skip)")
     ap.add_argument("--log-dir", default=None, help="keep the logs here (default: a temp dir)")
     ap.add_argument("run_args", nargs="*", help="extra arguments for frictionlab run "
                     "(after --)")
@@ -135,7 +188,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="frictionlab-rt-bench-") as tmp:
         log_dir = Path(args.log_dir or tmp)
         for i in range(args.runs):
-            run = one_run(args.duration, not args.no_busy, log_dir, args.run_args)
+            run = one_run(args.duration, not args.no_busy, log_dir, args.run_args,
+                          args.baseline)
             run["targets_met"] = targets_met(run)
             runs.append(run)
             j, c, r = run["jitter_ms"], run["compute_us"], run["rig_us"]
@@ -150,6 +204,11 @@ def main(argv=None) -> int:
                   f"> 50 ms: {run['unaccounted_stalls_over_50ms']}), dropped log samples "
                   f"{run['dropped_log_samples']}, rig timeouts {run['rig_timeouts']}; "
                   f"targets: {run['targets_met']}", file=sys.stderr)
+            if run["host_timer"]:
+                ht = run["host_timer"]
+                print(f"  host timer alone ({ht['seconds']:g} s before the run): jitter p99 "
+                      f"{ht['jitter_ms']['p99']:.3f} ms, max {ht['jitter_ms']['max']:.3f} ms, "
+                      f"missed {100 * ht['missed_fraction']:.3f} %", file=sys.stderr)
             if args.log_dir is None:
                 run["log"] = None  # deleted with the temporary directory
     ok = all(all(r["targets_met"].values()) for r in runs)

@@ -108,6 +108,60 @@ def test_framed_rig_checks_sequence_numbers(cfg):
         rig.sample(3, clock.now_ns() + 2_500_000)
 
 
+class _PausingTransport(DirectTransport):
+    """The first wait for a reply overshoots its deadline (a host pause of ``pause_ms``)
+    while the emulator, sharing the paused CPU, has not yet answered."""
+
+    def __init__(self, emulator, clock, pause_ms):
+        super().__init__(emulator, clock)
+        self.pause_ns = int(pause_ms * 1e6)
+        self.held: list[bytes] = []
+
+    def send(self, data):
+        super().send(data)
+        if self.pause_ns:
+            self.held, self._replies = list(self._replies), type(self._replies)()
+
+    def recv(self, deadline_ns):
+        if self.pause_ns:
+            self.clock.advance(deadline_ns - self.clock.now_ns() + self.pause_ns)
+            self.pause_ns = 0
+            self._replies.extend(self.held)  # the rig runs once the CPU is back
+            return None
+        return super().recv(deadline_ns)
+
+
+@pytest.mark.parametrize("pause_ms", [0.5, 20.0])
+def test_a_host_pause_during_the_wait_is_not_a_silent_rig(cfg, pause_ms):
+    clock = FakeClock()
+    emu = RigEmulator(cfg, clock)
+    transport = _PausingTransport(emu, clock, 0.0)
+    rig = FramedRig(transport, "direct", clock=clock)
+    rig.open()
+    transport.pause_ns = int(pause_ms * 1e6)
+    reading = rig.sample(0, clock.now_ns() + 2_500_000)
+    if pause_ms * 1e6 > rig.pause_ns:   # overshoot beyond pause_ns: the reply gets its grace
+        assert reading is not None and rig.paused_waits == 1
+    else:                               # a short overshoot is an ordinary timeout
+        assert reading is None and rig.paused_waits == 0
+        assert rig.sample(1, clock.now_ns() + 2_500_000) is not None  # late reply discarded
+        assert rig.late_replies == 1
+
+
+def test_a_silent_rig_still_times_out_after_a_pause(cfg):
+    clock = FakeClock()
+    emu = RigEmulator(cfg, clock)
+    transport = _PausingTransport(emu, clock, 0.0)
+    rig = FramedRig(transport, "direct", clock=clock)
+    rig.open()
+    emu.control({"cmd": "fault", "silent": -1})
+    transport.pause_ns = 20_000_000
+    deadline = clock.now_ns() + 2_500_000
+    assert rig.sample(0, deadline) is None
+    assert rig.paused_waits == 1
+    assert clock.now_ns() >= deadline + 20_000_000 + rig.grace_ns  # waited out the grace
+
+
 def test_open_rig_parses_backends(cfg):
     assert isinstance(open_rig("sim", cfg), SimRig)
     for bad in ("tcp://x:1", "udp://nohost", "serial://", "bogus"):

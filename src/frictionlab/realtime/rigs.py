@@ -378,11 +378,37 @@ class FramedRig(Rig):
     in ``late_replies``; any other mismatch - a sequence number already
     answered (duplicate, stale) or one never requested (out of order) - is a
     :class:`BadReading`, as is a frame failing its CRC or length checks.
+
+    Host pauses: when the wait for a reply ends more than ``pause_ns`` after
+    its deadline, the process was not running when the deadline passed (the
+    host paused the virtual CPU, or a higher-priority thread held it), and
+    the rig - an emulator sharing the CPU, or the kernel's receive path - had
+    no chance to answer in the meantime.  Such a wait gets ``grace_ns`` more
+    (once) before it counts as no reply, so that one pause is not mistaken
+    for a silent rig.  A rig that really is silent still times out, only
+    ``grace_ns`` later.
+
+    Parameters
+    ----------
+    transport : UdpTransport or SerialTransport or DirectTransport
+    name : str
+        The backend as the user wrote it (for messages).
+    hello_timeout : float
+        Seconds to wait for the rig's HELLO_ACK in :meth:`open`.
+    clock : object with ``now_ns()``, optional
+        The time source (default the monotonic clock).
+    pause_ns, grace_ns : int
+        See "Host pauses" above (defaults 1 ms and 1 ms).
     """
 
-    def __init__(self, transport, name: str, hello_timeout: float = 1.0):
+    def __init__(self, transport, name: str, hello_timeout: float = 1.0, clock=None,
+                 pause_ns: int = 1_000_000, grace_ns: int = 1_000_000):
         self.tx = transport
         self.name = name
+        self._now = time.monotonic_ns if clock is None else clock.now_ns
+        self.pause_ns = pause_ns
+        self.grace_ns = grace_ns
+        self.paused_waits = 0
         self.hello_timeout = hello_timeout
         self.late_replies = 0
         self.ignored = 0
@@ -436,9 +462,17 @@ class FramedRig(Rig):
         seq = k & _MASK
         self.tx.send(P.sample_frame(seq))
         recv = self.tx.recv
+        graced = False
         while True:
             msg = recv(deadline_ns)
             if msg is None:
+                now = self._now()
+                if not graced and now - deadline_ns > self.pause_ns:
+                    # the wait outlived its deadline: a pause, not the rig (see class doc)
+                    graced = True
+                    self.paused_waits += 1
+                    deadline_ns = now + self.grace_ns
+                    continue
                 self._timed_out.append(seq)
                 return None
             if isinstance(msg, FrameError):
@@ -490,7 +524,8 @@ class FramedRig(Rig):
             raise RigError(f"rig refused the push: {reply.get('error')}")
 
     def counters(self) -> dict:
-        return {"late_replies": self.late_replies, "ignored_frames": self.ignored}
+        return {"late_replies": self.late_replies, "ignored_frames": self.ignored,
+                "paused_waits": self.paused_waits}
 
 
 def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
