@@ -228,7 +228,7 @@ def test_invalid_change_is_refused_and_nothing_changes(cfg):
 def test_loop_with_emulated_rig_balances_and_logs_raw_values(cfg):
     clock = FakeClock()
     emu = RigEmulator(cfg, clock)
-    rig = FramedRig(DirectTransport(emu, clock), "direct")
+    rig = FramedRig(DirectTransport(emu, clock), "direct", clock=clock)
     loop, samples = run_loop(cfg, clock, rig=rig, duration=3.0, safety=Safety())
     assert loop.stop_reason == "duration"
     assert loop.rig_timeouts == 0 and loop.missed == 0

@@ -97,7 +97,7 @@ def test_emulator_rejects_unknown_faults(cfg):
 def test_framed_rig_checks_sequence_numbers(cfg):
     clock = FakeClock()
     emu = RigEmulator(cfg, clock)
-    rig = FramedRig(DirectTransport(emu, clock), "direct")
+    rig = FramedRig(DirectTransport(emu, clock), "direct", clock=clock)
     rig.open()
     assert rig.sample(0, clock.now_ns() + 2_500_000) is not None
     emu.control({"cmd": "fault", "drop": 1})

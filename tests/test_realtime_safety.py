@@ -33,7 +33,7 @@ def run_with_emulator(cfg, tmp_path, faults=None, *, after=T_FAULT, transport=No
     clock = FakeClock()
     emu = RigEmulator(cfg, clock)
     tx = transport(emu, clock) if transport else DirectTransport(emu, clock)
-    rig = FramedRig(tx, "direct")
+    rig = FramedRig(tx, "direct", clock=clock)
     ctl = RealtimeController(cfg, rig, log_dir=tmp_path, clock=clock, duration=duration,
                              safety=safety, realtime=False, manage_gc=False)
     if faults:
@@ -175,7 +175,7 @@ def test_exception_in_the_tick_stops_the_motor(cfg, tmp_path):
 def test_signal_stops_within_one_tick(cfg, tmp_path, how):
     clock = FakeClock()
     emu = RigEmulator(cfg, clock)
-    ctl = RealtimeController(cfg, FramedRig(DirectTransport(emu, clock), "direct"),
+    ctl = RealtimeController(cfg, FramedRig(DirectTransport(emu, clock), "direct", clock=clock),
                              log_dir=tmp_path, clock=clock, duration=3.0, realtime=False,
                              manage_gc=False)
 
