@@ -458,3 +458,19 @@ def test_guard_refuses_a_websocket_without_the_token(app_and_controller):
         assert exc.value.status_code == 403
         with client.websocket_connect(f"ws://127.0.0.1:8000/ws?token={token}") as ws:
             assert ws.receive_json()["type"] == "samples"
+
+
+def test_closing_line_names_the_stop_reason_and_the_log():
+    from frictionlab.console.server import _summary
+
+    class Ctl:
+        def __init__(self, st):
+            self.st = st
+
+        def status(self):
+            return self.st
+
+    line = _summary(Ctl({"stop_reason": "signal", "ticks": 1413, "missed": 2,
+                         "log": "runs/run-1.csv"}))
+    assert line == " (signal; 1413 ticks, 2 missed; log runs/run-1.csv)"
+    assert _summary(Ctl({"stop_reason": None, "ticks": 0})) == " (the loop did not run)"

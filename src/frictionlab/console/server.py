@@ -162,4 +162,18 @@ def serve(controller, host: str = "127.0.0.1", port: int = 8000, token: str | No
         if controller.running:
             controller.stop("signal" if server.signalled else "exit")
             controller.wait(10.0)
-    print("frictionlab console: stopped", file=out, flush=True)
+    print(f"frictionlab console: stopped{_summary(controller)}", file=out, flush=True)
+
+
+def _summary(controller) -> str:
+    """`` (reason; ticks, missed; log PATH)`` of the last run, for the closing line."""
+    try:
+        st = controller.status()
+    except Exception:  # the closing line must never fail
+        return ""
+    if not st.get("ticks"):
+        return " (the loop did not run)"
+    text = f" ({st.get('stop_reason')}; {st['ticks']} ticks, {st.get('missed', 0)} missed"
+    if st.get("log"):
+        text += f"; log {st['log']}"
+    return text + ")"
