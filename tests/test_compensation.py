@@ -427,3 +427,18 @@ def test_compare_cli_reports_chatter_and_reduction(tmp_path):
     rc, out, err = run_cli("compensate", "compare", "--compensation", "lugre",
                            "--duration", "-1", "--json")
     assert rc == 2 and out == "" and "--duration" in err
+
+
+def test_reduction_divides_by_at_least_one_adc_quantum():
+    ch = comp.ChatterMetrics(0.0, 0.0)
+    base = {"peak_to_peak": 0.3}
+
+    def ratio(pp, status="limit_cycle"):
+        return comp.Comparison(status, {"peak_to_peak": pp}, ch, "limit_cycle", base,
+                               ch).reduction
+
+    assert ratio(0.03) == pytest.approx(10.0)
+    # a cycle that died out completely: limited by what the rig could measure
+    assert ratio(0.0) == pytest.approx(0.3 / comp.PEAK_TO_PEAK_FLOOR)
+    assert ratio(1e-18) == ratio(0.0) < 300
+    assert ratio(math.nan) is None and ratio(0.03, "fell") is None

@@ -76,6 +76,13 @@ from .controller import (
     compensator_force,
 )
 from .friction import COULOMB, LUGRE, STRIBECK, FrictionParams
+from .rig import RigScaling
+
+#: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
+#: pendulum-angle ADC (12 bits, App. B), about 1.5 mrad.  A compensated run whose
+#: limit cycle dies out completely (no noise, no quantization) would otherwise
+#: report a ratio of 1e17; the rig could not measure anything below one quantum.
+PEAK_TO_PEAK_FLOOR = RigScaling().quanta()[0]
 
 __all__ = [
     "COMPENSATORS",
@@ -314,13 +321,16 @@ class Comparison:
 
     @property
     def reduction(self) -> float | None:
-        """Peak-to-peak without / with compensation (None if undefined)."""
+        """Peak-to-peak without / with compensation (None if undefined).
+
+        The compensated peak-to-peak counts as at least :data:`PEAK_TO_PEAK_FLOOR`.
+        """
         a = self.baseline_features.get("peak_to_peak")
         b = self.features.get("peak_to_peak")
-        if (a is None or b is None or b <= 0 or self.status == "fell"
+        if (a is None or not (b is not None and b >= 0) or self.status == "fell"
                 or self.baseline_status == "fell"):
             return None
-        return a / b
+        return a / max(b, PEAK_TO_PEAK_FLOOR)
 
     def as_dict(self) -> dict[str, Any]:
         return {"status": self.status, "features": self.features,
@@ -419,10 +429,10 @@ class TuneResult:
 
     @property
     def reduction(self) -> float | None:
-        """Baseline peak-to-peak / tuned peak-to-peak."""
-        if self.baseline_peak_to_peak is None or not self.peak_to_peak > 0:
+        """Baseline peak-to-peak / tuned peak-to-peak (at least :data:`PEAK_TO_PEAK_FLOOR`)."""
+        if self.baseline_peak_to_peak is None or not self.peak_to_peak >= 0:
             return None
-        return self.baseline_peak_to_peak / self.peak_to_peak
+        return self.baseline_peak_to_peak / max(self.peak_to_peak, PEAK_TO_PEAK_FLOOR)
 
     def as_dict(self) -> dict[str, Any]:
         return {"best": self.best, "peak_to_peak": self.peak_to_peak, "score": self.score,
