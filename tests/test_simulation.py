@@ -124,6 +124,17 @@ def test_same_seed_same_trajectory_bit_for_bit():
     assert not np.array_equal(a.data, c.data)
 
 
+def test_progress_reporting_does_not_change_the_run():
+    # the CLI reports progress on long runs by simulating in chunks: the noisy
+    # trajectory must be the one the unchunked run gives, bit for bit
+    cfg = build_config("fast", "lugre", sets=["sim.noise=0.002", "sim.seed=7"])
+    fractions = []
+    a = simulate_config(cfg, 5.0)
+    b = simulate_config(cfg, 5.0, progress=fractions.append)
+    assert len(fractions) > 10 and fractions[-1] == 1.0
+    assert np.array_equal(a.data, b.data)
+
+
 def test_noise_and_quantization_enter_only_measurements():
     cfg = build_config("fast", "classical", sets=["sim.noise=0.01", "sim.seed=1"])
     traj = simulate_config(cfg, 2.0)

@@ -138,10 +138,12 @@ def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fa
 
     ``x`` (plant state) and ``s`` (controller state) are advanced in place.
     Row k of ``out`` receives the signals of tick k when ``record`` is true.
+    The noise generator is seeded with ``seed`` unless it is negative (a
+    continuation chunk of the same run keeps drawing from the same stream).
     """
     h = gp[11]
     noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
-    if noisy:
+    if noisy and seed >= 0:
         np.random.seed(seed)
     relay = 0.0
     w0 = gp[8]
@@ -364,14 +366,15 @@ def simulate_config(
         done, status = _run(x, n, cfg.sim.substeps, pp, fkind, fp, gp, cp, s, noise,
                             cfg.sim.seed, q, cfg.sim.fall_angle, out, record)
     else:
-        # chunks of whole ticks; the RNG is re-seeded per chunk from the seed and
-        # the chunk index, so chunked runs stay reproducible
+        # chunks of whole ticks; only the first seeds the noise, the others go on
+        # drawing from the same stream, so a chunked run is the unchunked one bit
+        # for bit (nothing else draws from numba's generator in between)
         chunk = max(1, n // 50)
         done, status = 0, 0
         while done < n and status == 0:
             m = min(chunk, n - done)
             view = out[done:done + m] if record else out
-            seed = cfg.sim.seed + 7919 * (done // chunk)
+            seed = cfg.sim.seed if done == 0 else -1
             d, status = _run(x, m, cfg.sim.substeps, pp, fkind, fp, gp, cp, s, noise, seed, q,
                              cfg.sim.fall_angle, view, record)
             done += d
