@@ -29,9 +29,12 @@ def test_cli_design_reproduces_appendix_d(name):
     # rather than rounds the slow design's k3 (0.0525155 printed as 0.05251):
     # there the allowance is one unit in the last printed digit.
     np.testing.assert_allclose(out["L"], L_ref, rtol=1e-5)
-    last_digit = [1e-0, 1e-4, 1e-5, 1e-5]
-    for k, ref, ulp in zip(out["K"], K_ref, last_digit, strict=True):
-        assert abs(k - ref) <= max(1e-4 * abs(ref), ulp), (k, ref)
+    for i, (k, ref) in enumerate(zip(out["K"], K_ref, strict=True)):
+        allowed = 1e-4 * abs(ref)
+        if name == "slow" and i == 2:
+            assert 0 <= k - ref < 1e-5, (k, ref)  # truncated, not rounded
+        else:
+            assert abs(k - ref) <= allowed, (i, k, ref)
     ach = np.array([complex(*p) for p in out["poles"]])
     req = np.array([complex(*p) for p in out["requested_poles"]])
     assert np.max(np.abs(ach - req)) < 1e-9

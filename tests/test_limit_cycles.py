@@ -9,18 +9,23 @@ from scipy.signal import find_peaks
 from frictionlab.limit_cycles import _segment_peaks, features
 
 
-def double_hump(t, period=1.0, p1=0.15, p2=0.17, dip=0.02):
-    """A cycle whose positive half has two maxima (heights ~p1, ~p2) and a valley."""
-    ph = (t / period) % 1.0
-    y = np.sin(2 * np.pi * ph)
-    pos = ph < 0.5
-    x = ph[pos] / 0.5  # 0..1 over the positive half
-    hump1 = p1 * np.exp(-((x - 0.3) / 0.12) ** 2)
-    hump2 = p2 * np.exp(-((x - 0.7) / 0.12) ** 2)
-    base = (p1 - dip) * np.sin(np.pi * x) ** 0.5
-    y[pos] = np.maximum(np.maximum(hump1, hump2), base * (x > 0) * (x < 1))
-    y[~pos] = -y[pos][: (~pos).sum()] if (~pos).sum() <= pos.sum() else y[~pos]
-    return y
+def half_cycles(shapes, n=400):
+    """A signal made of positive half-cycles with the given maxima, each between
+    two negative half-sines of height 0.1; each shape is ``(p1,)`` (one
+    maximum) or ``(p1, valley, p2)`` (two maxima and the minimum between)."""
+    x = np.linspace(0.0, 1.0, n, endpoint=False)[1:]
+    env = np.sin(np.pi * x)
+    parts = [-0.1 * env]
+    for shape in shapes:
+        if len(shape) == 1:
+            pos = shape[0] * env
+        else:
+            p1, va, p2 = shape
+            # piecewise linear through (0.3, p1), (0.5, valley), (0.7, p2)
+            pos = np.interp(x, [0.0, 0.3, 0.5, 0.7, 1.0], [0.0, p1, va, p2, 0.0])
+        parts += [[0.0], pos, [0.0], -0.1 * env]
+    y = np.concatenate(parts)
+    return np.arange(len(y)) * 0.002, y
 
 
 def test_sine_period_and_single_peak():
@@ -74,6 +79,37 @@ def test_settled_and_window():
     assert features(t, y2, window=20).peak_to_peak == pytest.approx(0.6, rel=1e-3)
     with pytest.raises(ValueError):
         features(t, y2, window=-1)
+
+
+def test_mixed_half_cycles_and_mirrored_figures():
+    # half-cycles with two maxima and with one, alternating: peak1 averages
+    # over all of them, peak2 and valley over the two-maximum ones only
+    shapes = [(0.15, 0.12, 0.17), (0.13,)] * 6
+    t, y = half_cycles(shapes)
+    f = features(t, y, window=t[-1])
+    assert f.status == "limit_cycle"
+    assert f.peak1 == pytest.approx(0.14, rel=1e-3)
+    assert f.peak2 == pytest.approx(0.17, rel=1e-3)
+    assert f.valley == pytest.approx(0.12, rel=1e-3)
+    assert f.neg_peak1 == pytest.approx(0.1, rel=1e-3)
+    assert f.neg_peak2 is None and f.neg_valley is None
+    # the mirrored signal swaps the positive and negative figures
+    g = features(t, -y, window=t[-1])
+    assert g.neg_peak1 == pytest.approx(f.peak1, rel=1e-6)
+    assert g.neg_peak2 == pytest.approx(f.peak2, rel=1e-6)
+    assert g.neg_valley == pytest.approx(f.valley, rel=1e-6)
+    assert g.peak1 == pytest.approx(0.1, rel=1e-3) and g.peak2 is None
+
+
+def test_short_window_on_a_large_oscillation_is_not_settled():
+    # a window shorter than one period (the slow design's 3.3 s cycle in a 2.5 s
+    # window): not enough crossings for a period, but clearly not at rest
+    t = np.arange(0, 5, 0.005)
+    y = 0.15 * np.sin(2 * np.pi * t / 3.3)
+    f = features(t, y)
+    assert f.status == "limit_cycle"
+    assert f.period is None
+    assert f.peak_to_peak > 0.1
 
 
 @settings(max_examples=200, deadline=None)

@@ -90,15 +90,16 @@ class Validated:
                 raise ValueError(
                     f"{name} must be a number, got {value!r}; allowed range {range_text(meta)}"
                 )
+            if isinstance(value, float) and math.isnan(value):
+                raise ValueError(f"{name} is NaN; allowed range {range_text(meta)}")
             if meta["integer"]:
-                if float(value) != int(value):
-                    raise ValueError(f"{name} must be an integer, got {value!r}")
+                if not math.isfinite(value) or float(value) != int(value):
+                    raise ValueError(f"{name} must be an integer, got {value!r}; "
+                                     f"allowed range {range_text(meta)}")
                 object.__setattr__(self, f.name, int(value))
             else:
                 object.__setattr__(self, f.name, float(value))
                 value = float(value)
-            if isinstance(value, float) and math.isnan(value):
-                raise ValueError(f"{name} is NaN; allowed range {range_text(meta)}")
             lo, hi = meta["lo"], meta["hi"]
             bad = False
             if lo is not None and (value < lo or (meta["lo_open"] and value == lo)):

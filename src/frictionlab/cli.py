@@ -23,6 +23,27 @@ class UsageError(Exception):
     """Bad input: exit status 2."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def check_output_path(path: str | None, exts: tuple[str, ...], option: str) -> None:
+    """Refuse, before any work, an output file with a wrong extension or whose
+    directory does not exist."""
+    import os
+
+    if not path:
+        return
+    if not path.endswith(exts):
+        raise UsageError(f"{option} {path}: extension must be one of {', '.join(exts)}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise UsageError(f"{option} {path}: directory {folder} does not exist")
+
+
 def _clean(obj):
     """JSON-safe copy: NaN/inf become null."""
     if isinstance(obj, float):
@@ -135,14 +156,16 @@ def simulate_result(cfg: Config, duration: float | None, window: float | None,
 
 def cmd_simulate(args) -> int:
     cfg = config_from_args(args)
-    if args.duration is not None and not args.duration > 0:
-        raise UsageError(f"--duration must be > 0, got {args.duration}")
+    if args.duration is not None:
+        try:
+            cfg = cfg.with_values({"sim.duration": args.duration})
+        except ConfigError as exc:
+            raise UsageError(f"--duration: {exc}") from None
     if args.window is not None and not args.window > 0:
         raise UsageError(f"--window must be > 0, got {args.window}")
-    for path, exts in ((args.save, (".dat", ".csv")), (args.plot, (".png", ".pdf", ".svg"))):
-        if path and not path.endswith(exts):
-            raise UsageError(f"{path}: extension must be one of {', '.join(exts)}")
-    duration = args.duration if args.duration is not None else cfg.sim.duration
+    check_output_path(args.save, (".dat", ".csv"), "--save")
+    check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    duration = cfg.sim.duration
     long_run = duration > 200 or args.progress
     with progress_bar("simulating", long_run) as upd:
         traj, feats, status = simulate_result(cfg, duration, args.window,
@@ -195,7 +218,7 @@ def cmd_keys(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="frictionlab",
         description="Rotary inverted pendulum with arm friction: design, simulate, sweep, "
                     "identify, compensate, and run the real-time controller.",

@@ -26,8 +26,9 @@ is first smoothed by a 9-sample centred moving average (45 ms at h = 5 ms),
 which also removes the upward bias noise gives a raw maximum.
 
 ``status`` is ``"fell"`` when the run fell, ``"settled"`` when the angle's
-peak-to-peak over the window is below ``settle_tol`` or fewer than two
-upward crossings occur, else ``"limit_cycle"``.
+peak-to-peak over the window is below ``settle_tol``, else ``"limit_cycle"``
+(with ``period`` ``None`` when the window holds fewer than two upward
+crossings, e.g. a window shorter than the slow design's 3.3 s cycle).
 """
 
 from __future__ import annotations
@@ -277,7 +278,7 @@ def features(
         p1 = p2 = va = n1 = n2 = nv = []
         period = None
         status = "fell"
-    elif ptp < settle_tol or len(up_t) < 2:
+    elif ptp < settle_tol:
         status = "settled"
     else:
         status = "limit_cycle"

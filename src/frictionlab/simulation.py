@@ -77,6 +77,10 @@ NC = len(COLUMNS)
 
 STATUS = ("ok", "fell")
 
+#: Longest recorded run in ticks: the longest ``sim.duration`` (1e5 s) at
+#: h = 5 ms, 2.4 GiB of signals.
+MAX_TICKS = 20_000_000
+
 
 @njit(cache=True)
 def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
@@ -132,11 +136,12 @@ def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
 
 
 @njit(cache=True)
-def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fall_angle,
-         out, record):
-    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code).
+def _run(x, relay, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta,
+         fall_angle, out, record):
+    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, relay).
 
-    ``x`` (plant state) and ``s`` (controller state) are advanced in place.
+    ``x`` (plant state) and ``s`` (controller state) are advanced in place;
+    ``relay`` is the plant's Coulomb relay state at the start, returned at the end.
     Row k of ``out`` receives the signals of tick k when ``record`` is true.
     The noise generator is seeded with ``seed`` unless it is negative (a
     continuation chunk of the same run keeps drawing from the same stream).
@@ -145,7 +150,6 @@ def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fa
     noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
     if noisy and seed >= 0:
         np.random.seed(seed)
-    relay = 0.0
     w0 = gp[8]
     for k in range(n_ticks):
         th_m = x[0]
@@ -184,8 +188,8 @@ def _run(x, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta, fa
         if record:
             out[k, 15] = f_mean
         if not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
-            return k + 1, 1
-    return n_ticks, 0
+            return k + 1, 1, relay
+    return n_ticks, 0, relay
 
 
 @dataclass(frozen=True)
@@ -348,10 +352,18 @@ def simulate_config(
     duration = cfg.sim.duration if duration is None else float(duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"duration must be > 0 s, got {duration}")
-    ctrl = controller or make_controller(cfg)
-    gp, cp = ctrl.pack()
     h = cfg.design.h
     n = round(duration / h)
+    if n < 1:
+        raise ValueError(f"duration {duration:g} s is shorter than one sampling period "
+                         f"(design.h = {h:g} s)")
+    if record and n > MAX_TICKS:
+        raise ValueError(f"duration {duration:g} s at design.h = {h:g} s is {n:,} ticks; "
+                         f"a recorded run holds at most {MAX_TICKS:,} "
+                         f"({MAX_TICKS * NC * 8 / 2**30:.1f} GiB): shorten the duration "
+                         "or raise design.h")
+    ctrl = controller or make_controller(cfg)
+    gp, cp = ctrl.pack()
     x = np.zeros(5)
     x[0] = cfg.sim.initial_angle
     s = ctrl.init(cfg.sim.initial_angle)
@@ -363,20 +375,20 @@ def simulate_config(
     pp = _pack_plant(cfg)
     q = _quanta(cfg)
     if progress is None:
-        done, status = _run(x, n, cfg.sim.substeps, pp, fkind, fp, gp, cp, s, noise,
-                            cfg.sim.seed, q, cfg.sim.fall_angle, out, record)
+        done, status, _ = _run(x, 0.0, n, cfg.sim.substeps, pp, fkind, fp, gp, cp, s, noise,
+                               cfg.sim.seed, q, cfg.sim.fall_angle, out, record)
     else:
         # chunks of whole ticks; only the first seeds the noise, the others go on
         # drawing from the same stream, so a chunked run is the unchunked one bit
         # for bit (nothing else draws from numba's generator in between)
         chunk = max(1, n // 50)
-        done, status = 0, 0
+        done, status, relay = 0, 0, 0.0
         while done < n and status == 0:
             m = min(chunk, n - done)
             view = out[done:done + m] if record else out
             seed = cfg.sim.seed if done == 0 else -1
-            d, status = _run(x, m, cfg.sim.substeps, pp, fkind, fp, gp, cp, s, noise, seed, q,
-                             cfg.sim.fall_angle, view, record)
+            d, status, relay = _run(x, relay, m, cfg.sim.substeps, pp, fkind, fp, gp, cp, s,
+                                    noise, seed, q, cfg.sim.fall_angle, view, record)
             done += d
             progress(done / n)
     data = out[:done] if record else out[:0]
