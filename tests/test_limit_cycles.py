@@ -110,6 +110,14 @@ def test_short_window_on_a_large_oscillation_is_not_settled():
     assert f.status == "limit_cycle"
     assert f.period is None
     assert f.peak_to_peak > 0.1
+    # with measurement noise of 0.002 rad the same is true; but a slow wander of
+    # a few noise levels without any cycle (what compensation leaves) is rest
+    rng = np.random.default_rng(1)
+    noisy = y + rng.normal(0, 0.002, t.size)
+    assert features(t, noisy, noise=0.002).status == "limit_cycle"
+    wander = 0.006 * np.sin(2 * np.pi * t / 7.0) + rng.normal(0, 0.002, t.size)
+    g = features(t, wander, noise=0.002)
+    assert g.peak_to_peak > 2e-3 and g.status == "settled"
 
 
 @settings(max_examples=200, deadline=None)

@@ -38,7 +38,8 @@ def check_output_path(path: str | None, exts: tuple[str, ...], option: str) -> N
     if not path:
         return
     if not path.endswith(exts):
-        raise UsageError(f"{option} {path}: extension must be one of {', '.join(exts)}")
+        names = ", ".join(exts[:-1]) + " or " + exts[-1] if len(exts) > 1 else exts[0]
+        raise UsageError(f"{option} {path}: the extension must be {names}")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise UsageError(f"{option} {path}: directory {folder} does not exist")

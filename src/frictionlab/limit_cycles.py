@@ -25,10 +25,13 @@ same reason.  With a known measurement-noise level (``noise > 0``) the angle
 is first smoothed by a 9-sample centred moving average (45 ms at h = 5 ms),
 which also removes the upward bias noise gives a raw maximum.
 
-``status`` is ``"fell"`` when the run fell, ``"settled"`` when the angle's
-peak-to-peak over the window is below ``settle_tol``, else ``"limit_cycle"``
-(with ``period`` ``None`` when the window holds fewer than two upward
-crossings, e.g. a window shorter than the slow design's 3.3 s cycle).
+``status`` is ``"fell"`` when the run fell; ``"settled"`` when the angle's
+peak-to-peak over the window is below ``settle_tol``, or when the window holds
+no cycle (fewer than two upward crossings) and the peak-to-peak is below 10
+noise standard deviations (the wander measurement noise drives through a loop
+whose limit cycle compensation has removed); else ``"limit_cycle"``, with
+``period`` ``None`` when the window holds fewer than two upward crossings (a
+window shorter than the slow design's 3.3 s cycle, say).
 """
 
 from __future__ import annotations
@@ -278,7 +281,8 @@ def features(
         p1 = p2 = va = n1 = n2 = nv = []
         period = None
         status = "fell"
-    elif ptp < settle_tol:
+    elif ptp < settle_tol or (len(up_t) < 2 and ptp < 10.0 * noise):
+        # at rest, or no cycle and no more motion than the noise drives
         status = "settled"
     else:
         status = "limit_cycle"

@@ -987,7 +987,7 @@ def _plan(args):
     """Everything checked before any work: (base, varies, points, duration, file)."""
     import sys
 
-    from .cli import UsageError, config_from_args
+    from .cli import UsageError, check_output_path, config_from_args
     from .config import inert_keys
 
     base = config_from_args(args)
@@ -1000,8 +1000,15 @@ def _plan(args):
         print(f"frictionlab sweep: note: varying {key} has no effect with the "
               f"{base.friction_kind!r} plant friction and the {base.compensation_kind!r} "
               "compensator", file=sys.stderr)
-    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
-        raise UsageError(f"--duration must be > 0, got {args.duration}")
+    keys = [k for k, _ in varies]
+    if args.duration is not None:
+        if "sim.duration" in keys:
+            raise UsageError("give the run length either by --duration or by "
+                             "--vary sim.duration, not both")
+        try:
+            base = base.with_values({"sim.duration": args.duration})
+        except ConfigError as exc:
+            raise UsageError(f"--duration: {exc}") from None
     if args.window is not None and not (args.window > 0 and math.isfinite(args.window)):
         raise UsageError(f"--window must be > 0, got {args.window}")
     if args.workers is not None and args.workers < 1:
@@ -1010,12 +1017,12 @@ def _plan(args):
         raise UsageError(f"--chunk-size must be >= 1, got {args.chunk_size}")
     if args.dask is not None:
         _check_dask_address(args.dask)
-    if args.plot and not args.plot.endswith((".png", ".pdf", ".svg")):
-        raise UsageError(f"--plot {args.plot}: extension must be .png, .pdf or .svg")
+    check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    check_output_path(args.out, (".csv", ".parquet"), "--out")
     if args.resume and args.force:
         raise UsageError("--resume and --force exclude each other")
-    duration = base.sim.duration if args.duration is None else args.duration
-    keys = [k for k, _ in varies]
+    # each point runs for its own sim.duration (varied, or the base's)
+    duration = None if "sim.duration" in keys else base.sim.duration
     base_flat = base.as_flat_dict()
     meta = {"keys": keys, "mode": args.mode, "duration": duration, "window": args.window,
             "base": base_flat, "vary": {k: v for k, v in varies}}

@@ -74,7 +74,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from ..config import _CLASSES, Config, ConfigError, build_config, valid_keys
+from ..config import _CLASSES, Config, ConfigError, build_config, parse_assignment, valid_keys
 from ..limit_cycles import FEATURES
 
 __all__ = [
@@ -362,11 +362,19 @@ class LimitCycleProblem:
         # one configuration per experiment; all are expressed as points on the
         # first one, so a whole population is a single batch
         configs = []
+        common = [k for k, _ in (parse_assignment(a) if isinstance(a, str) else a
+                                 for a in sets)]
+        if "sim.duration" in common:
+            raise ConfigError("sim.duration: the length of the fit's runs is --duration "
+                              f"(here {self.duration:g} s)")
         for exp in self.experiments:
             for key in exp.sets:
                 if key in self.keys:
                     raise ConfigError(f"experiment {exp.label!r} sets {key}, which is being "
                                       "fitted")
+                if key == "sim.duration":
+                    raise ConfigError(f"experiment {exp.label!r} sets sim.duration: every run "
+                                      f"of the fit lasts --duration ({self.duration:g} s)")
             configs.append(build_config(design=exp.design, friction=friction,
                                         sets=[*sets, *exp.sets.items()]))
         self.configs = configs
