@@ -126,6 +126,20 @@ def main_table() -> None:
                       f"**{fmt(res.reduction, '.1f')}x** |")
 
 
+def free_plant_table() -> None:
+    print("\n### Nothing to compensate: friction-free plant\n")
+    print("| design | compensator | status without | p-p without | status with | p-p with | "
+          "T with | reversals/s |")
+    print("|---" * 8 + "|")
+    for design in ("fast", "slow"):
+        for cname in COMPENSATORS:
+            res = compare(build_config(design, "none", cname, sets=[NOISE]), DUR, WIN)
+            print(f"| {design} | {cname} | {res.baseline_status} | "
+                  f"{fmt(res.baseline_features['peak_to_peak'])} | {res.status} | "
+                  f"{fmt(res.features['peak_to_peak'])} | {fmt(res.features['period'])} | "
+                  f"{fmt(res.chatter.reversals_per_s, '.1f')} |")
+
+
 def figures() -> None:
     for design in ("fast", "slow"):
         for cname in COMPENSATORS:
@@ -320,7 +334,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=None)
     args = ap.parse_args()
     FIG.mkdir(exist_ok=True)
-    parts = {"main": main_table, "figures": figures, "error": error_signal_table,
+    parts = {"main": main_table, "free": free_plant_table, "figures": figures,
+             "error": error_signal_table,
              "noise": noise_table, "feed": feed_table, "discretisation": discretisation,
              "tune": lambda: tuned(args.workers)}
     chosen = args.only.split(",") if args.only else list(parts)

@@ -44,9 +44,15 @@ held over the sample (:func:`frictionlab.friction.lugre_step_exact`), which is
 stable for any :math:`\sigma_0` and exact in steady sliding.  Forward Euler,
 :math:`\hat z^+ = \hat z + h\dot{\hat z}`, has the multiplier
 :math:`1 - ah` and diverges once :math:`ah > 2`, i.e. at h = 5 ms for
-:math:`\sigma_0|v|/s(v) > 400` 1/s: with :math:`\sigma_0 = 300` already at
-:math:`|v| \approx 2.6` rad/s, inside the limit cycles of Sec. 5 - the likely
-"numerical problems" of Sec. 6.3.
+:math:`\sigma_0|v|/s(v) > 400` 1/s.  With the compensator's defaults
+(:math:`F_S` 2.3, :math:`F_C` 1.55, :math:`v_S` 1) that is :math:`|v| > 2.08`
+rad/s at :math:`\sigma_0 = 300` and :math:`|v| > 0.78` rad/s at
+:math:`\sigma_0 = 1000`, inside the limit cycles of Sec. 5 (3-6 rad/s) - the
+likely "numerical problems" of Sec. 6.3.
+
+A LuGre model with :math:`F_S = F_C = 0` (on either side of the velocity) makes
+:math:`g(v) = s(v)/\sigma_0` vanish for every v and eq. (19) singular;
+:func:`check_compensator` rejects it before anything runs.
 
 Tuning
 ------
@@ -54,6 +60,11 @@ Tuning
 engine (:func:`frictionlab.sweep.evaluate`) for the smallest peak-to-peak
 of the measured pendulum angle, then re-runs the shortlist to measure control
 chatter and picks the best ``score = peak_to_peak * (1 + w * reversals/s)``.
+Chatter is a property of the friction estimate's and u's time series, which
+the sweep engine's rows (limit-cycle features only) do not carry, so the
+shortlist and the run without compensation are simulated here, as
+trajectories; the two of them a before/after figure shows are handed back
+(``return_trajectories``) rather than simulated again.
 """
 
 from __future__ import annotations
@@ -96,6 +107,7 @@ __all__ = [
     "LuGreCompensator",
     "TuneResult",
     "chatter",
+    "check_compensator",
     "check_grid",
     "compare",
     "make_compensator",
@@ -105,6 +117,40 @@ __all__ = [
 
 #: Compensators (``--compensation`` values other than ``none``).
 COMPENSATORS = ("coulomb", "classical", "lugre")
+
+
+def check_compensator(kind: str, params: FrictionParams) -> None:
+    """Reject a compensator model that the compensator cannot run.
+
+    The LuGre observer of eq. (19) divides by :math:`g(v) = s(v)/\\sigma_0`
+    with the Stribeck level :math:`s(v) = F_C + (F_S - F_C)e^{-(v/v_S)^2}`.
+    With :math:`F_S = F_C = 0` (for :math:`v \\ge 0`, or with the
+    ``*_negative`` levels for :math:`v < 0`) :math:`s` vanishes for every v
+    and the observer is singular.  The other compensators accept any valid
+    :class:`FrictionParams`.
+
+    Parameters
+    ----------
+    kind : str
+        ``none`` or one of :data:`COMPENSATORS`.
+    params : FrictionParams
+        The compensator's model (keys ``compensation.*``).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the ``compensation.*`` keys at fault.
+    """
+    if kind != "lugre":
+        return
+    fs_neg = params.stiction if params.stiction_negative is None else params.stiction_negative
+    fc_neg = params.coulomb if params.coulomb_negative is None else params.coulomb_negative
+    for side, fs, fc in (("", params.stiction, params.coulomb), ("_negative", fs_neg, fc_neg)):
+        if fs == 0 and fc == 0:
+            raise ConfigError(
+                f"compensation.stiction{side} and compensation.coulomb{side} are both 0: "
+                f"the LuGre compensator's g(v) = s(v)/sigma0 vanishes and eq. (19) is "
+                f"singular; set at least one of them > 0")
 
 
 @dataclass(frozen=True)
@@ -156,6 +202,7 @@ class Compensator:
             raise ValueError("params must be a FrictionParams")
         if not (isinstance(self.h, int | float) and math.isfinite(self.h) and 0 < self.h <= 1):
             raise ValueError(f"h must be in (0, 1] s, got {self.h!r}")
+        check_compensator(self.kind, self.params)
         object.__setattr__(self, "_cp", self.params.pack())
 
     @property
@@ -238,16 +285,44 @@ def make_compensator(kind: str, params: FrictionParams | None = None, h: float =
                      **overrides) -> Compensator:
     """Build a compensator, e.g. ``make_compensator("lugre", sigma0=1000)``.
 
-    ``overrides`` are :class:`FrictionParams` fields applied to ``params``
-    (default: the compensator's Sec. 6 settings); invalid values raise
-    ``ValueError`` naming the field.
+    Parameters
+    ----------
+    kind : {"coulomb", "classical", "lugre"}
+        The compensator.
+    params : FrictionParams, optional
+        Its model (default: the compensator's Sec. 6 settings).
+    h : float
+        Sampling period (s).
+    **overrides
+        :class:`FrictionParams` fields applied to ``params``.
+
+    Returns
+    -------
+    Compensator
+        A :class:`CoulombCompensator`, :class:`ClassicalCompensator` or
+        :class:`LuGreCompensator`.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``kind``, or an invalid value, named by its key
+        (``compensation.sigma0 = inf is out of range ...``); a model
+        :func:`check_compensator` rejects (a :class:`ConfigError`).
     """
     if kind not in _CLASSES:
         raise ValueError(f"compensator must be one of {', '.join(COMPENSATORS)}; "
                          f"got {kind!r}")
     base = params if params is not None else FrictionParams.defaults(kind, "compensation")
     if overrides:
-        base = dataclasses.replace(base, **overrides)
+        try:
+            base = dataclasses.replace(base, **overrides)
+        except ValueError as exc:
+            # FrictionParams names its fields by the plant's keys (friction.*)
+            msg = str(exc)
+            prefix = FrictionParams._prefix
+            if msg.startswith(prefix):
+                msg = "compensation." + msg[len(prefix):]
+            raise ValueError(msg) from None
     return _CLASSES[kind](base, h)
 
 
@@ -363,10 +438,23 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
     controller : Controller, optional
         A controller for the compensated run (e.g. another error signal).
     return_trajectories : bool
-        Also return the two trajectories ``(compensated, baseline)``.
+        Also return the two trajectories.
+
+    Returns
+    -------
+    Comparison or (Comparison, Trajectory, Trajectory)
+        The comparison, and with ``return_trajectories`` the compensated and
+        the baseline trajectories.
+
+    Raises
+    ------
+    ConfigError
+        No compensator, or one :func:`check_compensator` rejects (before
+        anything runs).
     """
     if cfg.compensation_kind == "none":
         raise ConfigError("compare needs a compensator (coulomb, classical or lugre)")
+    check_compensator(cfg.compensation_kind, cfg.compensation)
     traj, st, feats, ch = _run(cfg, duration, window, controller)
     base_cfg = dataclasses.replace(cfg, compensation_kind="none")
     btraj, bst, bfeats, bch = _run(base_cfg, duration, window)
@@ -446,7 +534,8 @@ class TuneResult:
 
 def check_grid(cfg: Config, grid: Sequence[tuple[str, Sequence[float]]]) -> list[dict]:
     """The grid's points, every one validated (raises :class:`ConfigError` before
-    anything runs): only ``compensation.*`` keys the compensator reads."""
+    anything runs): only ``compensation.*`` keys the compensator reads, values in
+    range, and a model :func:`check_compensator` accepts."""
     from .sweep import make_points, validate_points
 
     if cfg.compensation_kind == "none":
@@ -462,6 +551,9 @@ def check_grid(cfg: Config, grid: Sequence[tuple[str, Sequence[float]]]) -> list
                               f"compensator; it reads {', '.join(sorted(used))}")
     points = make_points(cfg, grid, "grid")
     validate_points(cfg, points)
+    for p in points:
+        c = cfg.with_values(p)
+        check_compensator(c.compensation_kind, c.compensation)
     return points
 
 
@@ -476,14 +568,18 @@ def tune(
     workers: int | None = None,
     dask: str | None = None,
     progress: Callable[[int, int], None] | None = None,
-) -> TuneResult:
+    return_trajectories: bool = False,
+):
     """Search compensator parameters that minimise the limit cycle.
 
     Stage 1 runs every grid point through :func:`frictionlab.sweep.evaluate`
     and ranks the runs that kept the pendulum up by the peak-to-peak of the
     measured pendulum angle.  Stage 2 re-runs the ``shortlist`` best (same
-    seed, so the same runs) to measure :func:`chatter` and returns the point
-    with the smallest ``peak_to_peak * (1 + chatter_weight * reversals_per_s)``.
+    seed, so the same runs) as trajectories to measure :func:`chatter`, which
+    the sweep's rows do not carry, and returns the point with the smallest
+    ``peak_to_peak * (1 + chatter_weight * reversals_per_s)``; the run without
+    compensation, for the reduction ratio and the baseline's chatter, is a
+    trajectory run too.
 
     Parameters
     ----------
@@ -501,12 +597,24 @@ def tune(
         Points re-run for the chatter measurement.
     workers, dask, progress
         Passed to :func:`frictionlab.sweep.evaluate`.
+    return_trajectories : bool
+        Also return the winner's and the baseline's trajectories (for a
+        before/after figure, without simulating them again).
+
+    Returns
+    -------
+    TuneResult or (TuneResult, Trajectory, Trajectory)
+        The result, and with ``return_trajectories`` the winner's and the
+        baseline's trajectories.
 
     Raises
     ------
     ConfigError
-        Bad grid (unknown or non-compensator keys, invalid values), bad
-        weights; raised before any simulation.
+        Bad grid (unknown or non-compensator keys, invalid values, a model
+        :func:`check_compensator` rejects), bad weights; raised before any
+        simulation.
+    RuntimeError
+        No grid point, or no shortlisted point, kept the pendulum up.
     """
     from .sweep import evaluate
 
@@ -522,30 +630,32 @@ def tune(
     ok = [(r["peak_to_peak"], i) for i, r in enumerate(rows)
           if r["status"] in ("limit_cycle", "settled") and r["peak_to_peak"] is not None]
     failed = len(rows) - len(ok)
-    _, bstatus, bfeats, bch = _run(dataclasses.replace(cfg, compensation_kind="none"),
-                                   duration, window)
     if not ok:
         raise RuntimeError(f"every one of the {len(rows)} grid points fell or failed; "
                            "widen the grid")
     ok.sort()
-    cands = []
+    cands, trajs = [], []
     for _, i in ok[:int(shortlist)]:
         p = points[i]
-        _, st, feats, ch = _run(cfg.with_values(p), duration, window)
+        traj, st, feats, ch = _run(cfg.with_values(p), duration, window)
         ptp = feats["peak_to_peak"]
         if st == "fell" or ptp is None:
             continue
         score = ptp * (1.0 + chatter_weight * ch.reversals_per_s)
         cands.append({"values": dict(p), "status": st, "peak_to_peak": ptp,
                       "chatter": ch.as_dict(), "score": score})
+        trajs.append(traj if return_trajectories else None)
     if not cands:
         raise RuntimeError("no shortlisted point kept the pendulum up when re-run")
-    cands.sort(key=lambda c: c["score"])
+    order = sorted(range(len(cands)), key=lambda j: cands[j]["score"])
+    cands = [cands[j] for j in order]
     win = cands[0]
-    return TuneResult(
+    btraj, bstatus, bfeats, bch = _run(dataclasses.replace(cfg, compensation_kind="none"),
+                                       duration, window)
+    res = TuneResult(
         best=win["values"], peak_to_peak=win["peak_to_peak"], score=win["score"],
         status=win["status"], chatter=ChatterMetrics(**win["chatter"]),
         baseline_status=bstatus,
         baseline_peak_to_peak=None if bstatus == "fell" else bfeats["peak_to_peak"],
         baseline_chatter=bch, candidates=cands, evaluated=len(rows), failed=failed)
-
+    return (res, trajs[order[0]], btraj) if return_trajectories else res

@@ -127,14 +127,13 @@ def register_cli(sub) -> None:
 
 
 def _check_run_args(args):
-    from .cli import UsageError
+    from .cli import UsageError, check_output_path
 
     if not (args.duration > 0 and math.isfinite(args.duration)):
         raise UsageError(f"--duration must be > 0, got {args.duration}")
     if args.window is not None and not (0 < args.window <= args.duration):
         raise UsageError(f"--window must be in (0, --duration], got {args.window}")
-    if args.plot and not args.plot.endswith((".png", ".pdf", ".svg")):
-        raise UsageError(f"--plot {args.plot}: extension must be .png, .pdf or .svg")
+    check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
 
 
 def cmd_compare(args) -> int:
@@ -192,16 +191,16 @@ def cmd_tune(args) -> int:
         res = tune(cfg, grid, duration=args.duration, window=args.window,
                    chatter_weight=args.chatter_weight, shortlist=args.shortlist,
                    workers=args.workers, dask=args.dask,
-                   progress=lambda done, total: upd(done / total))
+                   progress=lambda done, total: upd(done / total),
+                   return_trajectories=bool(args.plot))
+    if args.plot:
+        # the winner's and the baseline's runs from the tuning itself, not run again
+        res, traj_on, traj_off = res
+        plot_before_after(traj_off, traj_on, args.plot, args.window)
     out = {"compensation": cfg.compensation_kind, "design": args.design,
            "friction": cfg.friction_kind, **res.as_dict(),
            "seconds": round(time.perf_counter() - t0, 3)}
     if args.plot:
-        from .compensation import compare
-
-        _, traj_on, traj_off = compare(cfg.with_values(res.best), args.duration, args.window,
-                                       return_trajectories=True)
-        plot_before_after(traj_off, traj_on, args.plot, args.window)
         out["plot"] = args.plot
     if args.json:
         emit_json(out)
