@@ -89,6 +89,10 @@ class Config:
         if self.compensation_kind not in COMPENSATOR_KINDS:
             raise ConfigError(f"compensation must be one of {', '.join(COMPENSATOR_KINDS)}; "
                               f"got {self.compensation_kind!r}")
+        if self.compensation_kind != "none":
+            from .compensation import check_compensator
+
+            check_compensator(self.compensation_kind, self.compensation)
 
     def get(self, key: str) -> Any:
         section, field = _split(key)
