@@ -334,14 +334,15 @@ def lugre_step_exact(v, z, e, dt, p):
     b = v - p[P_K] * e
     x = a * dt
     if x < 1e-9:
-        z_new = z + (b - a * z) * dt
-        z_mean = z + 0.5 * (b - a * z) * dt
-    else:
-        z_ss = b / a
-        ex = np.exp(-x)
-        z_new = z_ss + (z - z_ss) * ex
-        z_mean = z_ss + (z - z_ss) * (1.0 - ex) / x
-    return z_new, z_mean, (z_new - z) / dt
+        dz = b - a * z
+        return z + dz * dt, z + 0.5 * dz * dt, dz
+    # written so that one division (by the Stribeck level) is on the critical
+    # path of the simulator's substep chain: 1/x runs alongside exp(-x), and
+    # 1/dt is loop-invariant
+    inv_x = 1.0 / x
+    z_ss = b * dt * inv_x  # b / a
+    q = (z - z_ss) * (1.0 - np.exp(-x))  # z - z_new
+    return z - q, z_ss + q * inv_x, -q * (1.0 / dt)
 
 
 # --------------------------------------------------------------------------

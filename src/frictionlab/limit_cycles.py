@@ -74,8 +74,10 @@ class LimitCycleFeatures:
         return {k: getattr(self, k) for k in FEATURES}
 
 
-def _mean(values: list[float]) -> float | None:
-    return float(np.mean(values)) if values else None
+def _mean(values: np.ndarray) -> float | None:
+    """Mean of the finite entries (the half-cycles that have the feature), or None."""
+    v = values[np.isfinite(values)]
+    return float(v.sum() / len(v)) if len(v) else None
 
 
 @njit(cache=True)
@@ -185,12 +187,12 @@ def _half_cycle_kernel(y, starts, ends, noise, rel_prominence):
     return p1, p2, va
 
 
-def _half_cycle_peaks(y: np.ndarray, starts, ends, noise: float, rel_prominence: float):
-    p1, p2, va = _half_cycle_kernel(np.ascontiguousarray(y, dtype=float),
-                                    np.asarray(starts, dtype=np.int64),
-                                    np.asarray(ends, dtype=np.int64), float(noise),
-                                    float(rel_prominence))
-    return [list(v[np.isfinite(v)]) for v in (p1, p2, va)]
+def _half_cycles(starts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pair each crossing in ``starts`` with the first crossing in ``ends`` after it
+    (both sorted sample indices); starts with no later end are dropped."""
+    j = np.searchsorted(ends, starts, side="right")
+    ok = j < len(ends)
+    return starts[ok], ends[j[ok]]
 
 
 def features(
@@ -262,23 +264,14 @@ def features(
     up_t, up_i, _dn_t, dn_i = _crossings(tw, yw, hyst)
     period = float(np.mean(np.diff(up_t))) if len(up_t) >= 2 else None
     # positive half-cycles: an upward crossing followed by the next downward one
-    pos_s, pos_e, neg_s, neg_e = [], [], [], []
-    for i in up_i:
-        later = dn_i[dn_i > i]
-        if len(later):
-            pos_s.append(i)
-            pos_e.append(int(later[0]))
-    for i in dn_i:
-        later = up_i[up_i > i]
-        if len(later):
-            neg_s.append(i)
-            neg_e.append(int(later[0]))
-    p1, p2, va = _half_cycle_peaks(yw, np.array(pos_s), np.array(pos_e), noise, rel_prominence)
-    n1, n2, nv = _half_cycle_peaks(-yw, np.array(neg_s), np.array(neg_e), noise,
-                                   rel_prominence)
+    yw = np.ascontiguousarray(yw, dtype=float)
+    p1, p2, va = _half_cycle_kernel(yw, *_half_cycles(up_i, dn_i), float(noise),
+                                    float(rel_prominence))
+    n1, n2, nv = _half_cycle_kernel(-yw, *_half_cycles(dn_i, up_i), float(noise),
+                                    float(rel_prominence))
     if fell:
         # a falling run has no cycle shape: only the extremes are meaningful
-        p1 = p2 = va = n1 = n2 = nv = []
+        p1 = p2 = va = n1 = n2 = nv = np.empty(0)
         period = None
         status = "fell"
     elif ptp < settle_tol or (len(up_t) < 2 and ptp < 10.0 * noise):
@@ -288,7 +281,7 @@ def features(
         status = "limit_cycle"
     return LimitCycleFeatures(
         status, _mean(p1), _mean(p2), _mean(va), period, max_u, max_v, ptp,
-        _mean(n1), _mean(n2), _mean(nv), len(p1),
+        _mean(n1), _mean(n2), _mean(nv), int(np.isfinite(p1).sum()),
     )
 
 

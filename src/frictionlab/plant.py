@@ -97,7 +97,7 @@ def accelerations_sc(sin_theta, cos_theta, theta_dot, arm_dot, a, omega0, zeta, 
         + arm_dot * arm_dot * sin_theta * cos_theta
         - omega0 * omega0 / g * a * cos_theta
     )
-    return theta_ddot, a / arm_length
+    return theta_ddot, a * (1.0 / arm_length)  # the reciprocal is hoisted out of loops
 
 
 @njit(cache=True)

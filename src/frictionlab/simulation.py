@@ -123,8 +123,8 @@ def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
             # rotate (sin, cos) by the small increment: the truncated series are
             # exact to rounding for |dth| < 1e-3 (next terms < 1e-18)
             d2 = dth * dth
-            sd = dth * (1.0 - d2 / 6.0)
-            cd = 1.0 - 0.5 * d2 + d2 * d2 / 24.0
+            sd = dth * (1.0 - d2 * (1.0 / 6.0))
+            cd = 1.0 - 0.5 * d2 + d2 * d2 * (1.0 / 24.0)
             sn, cs = sn * cd + cs * sd, cs * cd - sn * sd
         else:
             sn = np.sin(th)
