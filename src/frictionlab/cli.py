@@ -176,7 +176,7 @@ def cmd_simulate(args) -> int:
     if args.plot:
         from .plotting import plot_trajectory
 
-        plot_trajectory(traj, args.plot, window=args.window)
+        plot_trajectory(traj, args.plot, window=args.window, period=feats.period)
     out = {
         "status": status,
         "features": feats.interface_dict(),
@@ -249,24 +249,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_keys)
 
-    _register_optional(sub)
+    _register_subcommands(sub)
     return parser
 
 
-def _register_optional(sub) -> None:
-    """Subcommands living in other modules register themselves here."""
-    import importlib
+def _register_subcommands(sub) -> None:
+    """The subcommands that live beside the numerics they drive."""
+    from . import compensation_cli, identification, realtime_cli, sweep
 
-    for name in ("sweep", "identification", "compensation_cli", "realtime_cli"):
-        try:
-            mod = importlib.import_module(f".{name}", __package__)
-        except ModuleNotFoundError as exc:
-            if exc.name and exc.name.endswith(name):
-                continue
-            raise
-        register = getattr(mod, "register_cli", None)
-        if register is not None:
-            register(sub)
+    for mod in (sweep, identification, compensation_cli, realtime_cli):
+        mod.register_cli(sub)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -27,7 +27,6 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import place_poles
 
 from ._validation import Validated, param
 from .plant import PlantParams, linearized_model, zoh
@@ -151,6 +150,8 @@ def feedback_numeric(spec: DesignSpec, g: float, arm_length: float) -> np.ndarra
     Phi, Gamma = _design_matrices(spec, g, arm_length)
     poles = requested_poles(spec)
     if len(np.unique(np.round(poles, 12))) == len(poles):
+        from scipy.signal import place_poles  # heavy import, only when used
+
         res = place_poles(Phi, Gamma, poles)
         return np.asarray(res.gain_matrix, dtype=float).ravel()
     # repeated poles (a damping of exactly 1): Ackermann's formula, single input

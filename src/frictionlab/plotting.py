@@ -11,17 +11,33 @@ import numpy as np
 __all__ = ["plot_trajectory"]
 
 
-def plot_trajectory(traj, path: str, window: float | None = None, title: str | None = None):
+def plot_trajectory(traj, path: str, window: float | None = None, title: str | None = None,
+                    period: float | None = None):
     """The figure a reader of Sec. 5 expects (cf. Figs. 17-18).
 
-    Four panels over the analysis window: measured (and estimated) pendulum
+    Four panels over the end of the run: measured (and estimated) pendulum
     angle, measured (and estimated) arm velocity, control signal, and the
     friction force (true and, when compensating, estimated).
+
+    Parameters
+    ----------
+    traj : Trajectory
+    path : str
+        Output file (.png, .pdf, .svg).
+    window : float, optional
+        Longest span shown (s); default the last half of the run.
+    title : str, optional
+        Default: design, friction, compensation and omega0 of plant and design.
+    period : float, optional
+        The limit cycle's period: when given, the figure shows about six cycles
+        (at least 5 s) so that the cycle's shape is readable, as in the thesis.
     """
     t = traj.t
     if len(t) == 0:
         raise ValueError("empty trajectory: nothing to plot")
     span = window if window is not None else 0.5 * t[-1]
+    if period is not None and period > 0:
+        span = min(span, max(6.0 * period, 5.0))
     span = max(span, min(5.0, t[-1]))
     m = t >= t[-1] - span
     fig, axes = plt.subplots(4, 1, figsize=(9, 9), sharex=True)
@@ -49,7 +65,11 @@ def plot_trajectory(traj, path: str, window: float | None = None, title: str | N
         a.grid(alpha=0.3)
     cfg = traj.config
     if title is None and cfg is not None:
-        title = (f"{cfg.friction_kind} friction, compensation {cfg.compensation_kind}, "
+        from .design import PRESETS
+
+        name = next((k for k, v in PRESETS.items() if v == cfg.design), "custom")
+        title = (f"{name} design, {cfg.friction_kind} friction, compensation "
+                 f"{cfg.compensation_kind}, "
                  f"omega0 plant {cfg.plant.omega0:g} / design {cfg.design.omega0:g}"
                  + ("" if traj.status == "ok" else "  [FELL]"))
     if title:
