@@ -18,6 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import frictionlab.sweep as sweep_module
 from frictionlab.cli import main
 from frictionlab.config import ConfigError, build_config
 from frictionlab.limit_cycles import FEATURES
@@ -152,8 +153,8 @@ def test_serial_rows_are_run_features_and_failures_are_rows():
     calls = []
     rows = evaluate(base, points, duration=10, workers=1,
                     progress=lambda d, n: calls.append((d, n)))
-    assert [set(r) for r in rows] == [
-        {*p, "status", *FEATURES, "error"} for p in points]
+    # the point's keys, then the features, then status and error (the CSV's order)
+    assert [list(r) for r in rows] == [[*p, *FEATURES, "status", "error"] for p in points]
     direct = run_features(base.with_values(points[0]), 10)
     assert rows[0]["status"] == direct.status == "limit_cycle"
     assert rows[0]["error"] is None
@@ -212,6 +213,40 @@ def test_worker_failures_are_rows_in_the_pool():
     assert rows[0]["error"] is None and rows[2]["error"] is None
     assert rows[1]["status"] == "error" and "out of range" in rows[1]["error"]
     assert rows[0] == evaluate(base, points[:1], duration=3, workers=1)[0]
+
+
+#: The engine's own chunk function (also in a worker process that imports this module).
+_RUN_CHUNK = sweep_module._run_chunk
+
+
+def _chunk_that_kills_its_worker(base, points, duration, window):
+    """A chunk function whose worker process dies on the point F_C = 1.7.
+
+    Workers receive it by reference (this module's name), so it must live at
+    module level here.
+    """
+    if any(p.get("friction.coulomb") == 1.7 for p in points):
+        os._exit(3)
+    return _RUN_CHUNK(base, points, duration, window)
+
+
+def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
+    base = build_config("fast", "classical")
+    points = [{"friction.coulomb": v} for v in (1.3, 1.5, 1.7, 1.9)]
+    monkeypatch.setattr(sweep_module, "_run_chunk", _chunk_that_kills_its_worker)
+    rows = evaluate(base, points, duration=3, workers=2, chunk_size=1)
+    monkeypatch.undo()
+    assert [r["friction.coulomb"] for r in rows] == [1.3, 1.5, 1.7, 1.9]
+    dead = rows[2]
+    assert dead["status"] == "error" and dead["error"].startswith("worker failed: ")
+    assert "BrokenProcessPool" in dead["error"]
+    assert all(dead[f] is None for f in FEATURES)
+    # the other chunks either finished before the death or share its fate
+    for r in rows:
+        assert (r["status"], r["error"] is None) in {("limit_cycle", True), ("error", False)}
+    # the broken pool was dropped: the next sweep gets a fresh one
+    again = evaluate(base, points, duration=3, workers=2, chunk_size=1)
+    assert [r["status"] for r in again] == ["limit_cycle"] * 4
 
 
 # ---------------------------------------------------------------------------
@@ -321,6 +356,35 @@ def test_resume_refuses_a_different_setup(tmp_path):
     assert rc == 0 and json.loads(out)["rows"] == 2 and len(read_csv(path)) == 2
 
 
+def test_resume_refuses_a_file_with_the_earlier_column_order(tmp_path):
+    """Files of an earlier frictionlab (status between the keys and the
+    features) are not resumed into: exit 2, one line, the file untouched."""
+    import pyarrow.parquet as pq
+
+    keys = ["friction.coulomb"]
+    old_cols = [*keys, "status", *FEATURES, "error"]
+    args = ["--vary", "friction.coulomb=1.3,1.5", "--duration", "4", "--no-progress", "--json"]
+    for name in ("old.csv", "old.parquet"):
+        path = tmp_path / name
+        assert run_cli(*args, "--out", str(path))[0] == 0
+        if name.endswith(".csv"):
+            rows = read_csv(path)
+            with open(path, "w", newline="") as fh:
+                w = csv.DictWriter(fh, old_cols, lineterminator="\n")
+                w.writeheader()
+                w.writerows(rows)
+        else:
+            pq.write_table(pq.read_table(path).select(old_cols), path)
+        before = path.read_bytes()
+        rc, out, err = run_cli(*args, "--out", str(path), "--resume")
+        assert rc == 2 and out == ""
+        assert len(err.strip().splitlines()) == 1
+        assert "earlier frictionlab" in err and "--force" in err
+        assert path.read_bytes() == before
+        # --force starts afresh in the current order
+        assert run_cli(*args, "--out", str(path), "--force")[0] == 0
+
+
 def test_parquet_output_matches_csv(tmp_path):
     import pyarrow.parquet as pq
 
@@ -387,7 +451,9 @@ def test_json_is_one_object_and_csv_has_documented_columns(tmp_path):
     assert "| friction.coulomb | plant.omega0 |" in err  # --table goes to stderr with --json
     with open(path) as fh:
         header = fh.readline().strip().split(",")
-    assert header == ["friction.coulomb", "plant.omega0", "status", *FEATURES, "error"]
+    # INTERFACE.md: the varied keys, then the feature columns (then status, error)
+    assert header == ["friction.coulomb", "plant.omega0", *FEATURES, "status", "error"]
+    assert header == columns(["friction.coulomb", "plant.omega0"])
     rows = read_csv(path)
     assert [(r["friction.coulomb"], r["plant.omega0"]) for r in rows] == [
         ("1.3", "7.0"), ("1.3", "20.0"), ("1.5", "7.0"), ("1.5", "20.0")]
@@ -424,6 +490,51 @@ def test_table_marks_rows_that_are_not_limit_cycles():
     lines = markdown_table(rows, [("plant.omega0", [6.8, 20.0])]).splitlines()
     assert lines[0].endswith("| status |")
     assert lines[3].split("|")[2].strip() == "-" and lines[3].rstrip("| ").endswith("fell")
+
+
+def test_plot_leaves_undefined_features_out_and_marks_falls_on_the_edge(tmp_path, monkeypatch):
+    """A fallen run is no point of the line (which breaks there) but a marker
+    on the panel's bottom edge, outside the data: the y range is that of the
+    defined values, not pulled to 0."""
+    import matplotlib.figure
+
+    from frictionlab.sweep import UNDEFINED_MARKERS, plot_sweep
+
+    figures = []
+    save = matplotlib.figure.Figure.savefig
+
+    def keep(fig, *a, **k):
+        figures.append(fig)
+        return save(fig, *a, **k)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", keep)
+
+    def row(w, status, value):
+        feats = dict.fromkeys(FEATURES, value)
+        if status == "fell":  # a fall still has maxima, which are not a cycle's
+            feats.update(max_u=45.0, max_arm_velocity=30.0, peak_to_peak=2.0)
+        return {"plant.omega0": w, **feats, "status": status, "error": None}
+
+    rows = [row(6.8, "limit_cycle", 0.10), row(7.0, "limit_cycle", 0.12),
+            row(12.0, "fell", None), row(14.0, "limit_cycle", 0.11)]
+    png = tmp_path / "p.png"
+    plot_sweep(rows, [("plant.omega0", [6.8, 7.0, 12.0, 14.0])], str(png))
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (fig,) = figures
+    axes = fig.axes
+    assert len(axes) == len(FEATURES)
+    for ax, feat in zip(axes, FEATURES, strict=True):
+        line, edge = ax.get_lines()
+        y = line.get_ydata()
+        assert math.isnan(y[2]) and not any(math.isnan(v) for v in y[[0, 1, 3]])
+        # the fall: its own marker at the fall's x, on the bottom edge (axes y = 0)
+        assert edge.get_marker() == UNDEFINED_MARKERS["fell"]
+        assert list(edge.get_xdata()) == [12.0] and list(edge.get_ydata()) == [0.0]
+        assert edge.get_transform() == ax.get_xaxis_transform()
+        lo, hi = ax.get_ylim()
+        assert 0.05 < lo < 0.10 and 0.12 < hi < 0.2, (feat, lo, hi)
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any(t.startswith("fell") for t in legend)
 
 
 def test_plot_file_and_engine_does_not_import_matplotlib(tmp_path):

@@ -38,8 +38,8 @@ Output files
 ------------
 :class:`SweepFile` writes rows as chunks complete (CSV, flushed and fsynced per
 chunk), reads them back for ``--resume``, and at the end rewrites the file in
-sweep order (atomically).  Columns: the varied keys, ``status``, the seven
-features of :data:`frictionlab.limit_cycles.FEATURES`, ``error``.  A
+sweep order (atomically).  Columns: the varied keys, the seven features of
+:data:`frictionlab.limit_cycles.FEATURES`, ``status``, ``error``.  A
 ``.parquet`` output is written at the end from all rows; while the sweep runs
 the rows go to the crash-safe CSV journal ``FILE.parquet.partial.csv``.
 A sidecar ``FILE.meta.json`` records the base configuration, duration and
@@ -68,6 +68,7 @@ __all__ = [
     "MODES",
     "STATUSES",
     "SweepFile",
+    "auto_workers",
     "evaluate",
     "iter_evaluate",
     "make_points",
@@ -250,8 +251,8 @@ def _clean(v: Any) -> float | None:
 
 def _error_row(point: Mapping[str, Any], message: str) -> dict[str, Any]:
     row: dict[str, Any] = dict(point)
-    row["status"] = "error"
     row.update({name: None for name in FEATURES})
+    row["status"] = "error"
     row["error"] = message
     return row
 
@@ -269,8 +270,8 @@ def _run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: floa
             rows.append(_error_row(p, f"{type(exc).__name__}: {exc}"))
             continue
         row: dict[str, Any] = dict(p)
-        row["status"] = feats.status
         row.update({name: _clean(getattr(feats, name)) for name in FEATURES})
+        row["status"] = feats.status
         row["error"] = None
         rows.append(row)
     return rows
@@ -450,6 +451,36 @@ def _serial_work(base: Config, n_points: int, duration: float | None) -> float:
     return n_points * (d / base.design.h) * base.sim.substeps
 
 
+def auto_workers(base: Config, n_points: int, duration: float | None = None) -> int:
+    """Local processes for ``n_points`` runs of ``base`` when none are requested.
+
+    All cores, unless the serial work (points x ticks x substeps) is below
+    :data:`TINY_WORK` (about half a second), which is not worth a process
+    pool's start-up, or there is one core: then 1 (in-process).  A caller
+    that evaluates many small batches (identification: one batch per
+    generation) passes its whole job's points, because the pool is started
+    once per process and kept.
+
+    Parameters
+    ----------
+    base : Config
+        Configuration of the runs (its sampling period and substeps).
+    n_points : int
+        Number of runs.
+    duration : float, optional
+        Simulated seconds per run (default ``base.sim.duration``).
+
+    Returns
+    -------
+    int
+        The number of workers to pass as ``workers``.
+    """
+    cpus = os.cpu_count() or 1
+    if cpus == 1 or _serial_work(base, n_points, duration) < TINY_WORK:
+        return 1
+    return cpus
+
+
 def _chunks(n: int, size: int) -> list[range]:
     return [range(i, min(i + size, n)) for i in range(0, n, size)]
 
@@ -497,10 +528,8 @@ def iter_evaluate(
     if dask is not None:
         backend, n_workers = "dask", workers or os.cpu_count() or 1
     else:
-        n_workers = workers or os.cpu_count() or 1
-        serial = n_workers == 1 or (
-            workers is None and _serial_work(base, n, duration) < TINY_WORK)
-        backend = "serial" if serial else "pool"
+        n_workers = workers or auto_workers(base, n, duration)
+        backend = "serial" if n_workers == 1 else "pool"
     chunks = _chunks(n, chunk_size) if chunk_size else _guided_chunks(n, n_workers)
 
     if backend == "serial":
@@ -593,9 +622,10 @@ def evaluate(
     -------
     list of dict
         One row per point, in the order of ``points``: the point's keys and
-        values, ``status`` (``limit_cycle``/``settled``/``fell``/``error``),
-        the seven features of :data:`~frictionlab.limit_cycles.FEATURES`
-        (``None`` where undefined) and ``error`` (a message, or ``None``).
+        values, the seven features of :data:`~frictionlab.limit_cycles.FEATURES`
+        (``None`` where undefined), ``status``
+        (``limit_cycle``/``settled``/``fell``/``error``) and ``error`` (a
+        message, or ``None``).
     """
     n = len(points)
     rows: list[dict | None] = [None] * n
@@ -617,8 +647,18 @@ def evaluate(
 
 
 def columns(keys: Sequence[str]) -> list[str]:
-    """CSV columns: the varied keys, ``status``, the features, ``error``."""
-    return [*keys, "status", *FEATURES, "error"]
+    """CSV columns: the varied keys, the features, ``status``, ``error``."""
+    return [*keys, *FEATURES, "status", "error"]
+
+
+def _header_mismatch(path: str, found: Sequence[str], cols: Sequence[str]) -> ConfigError:
+    """The error for an output whose columns are not this sweep's."""
+    hint = "use another --out, or --force to overwrite"
+    if sorted(found) == sorted(cols):
+        hint = ("the same columns in another order: the file was written by an earlier "
+                "frictionlab (status before the features); " + hint)
+    return ConfigError(f"{path} has columns {','.join(found)}; this sweep writes "
+                       f"{','.join(cols)} ({hint})")
 
 
 def _fmt(v: Any) -> str:
@@ -644,9 +684,7 @@ def _parse_csv(text: str, path: str, cols: list[str]) -> list[dict[str, Any]]:
     if header is None:
         return []
     if header != cols:
-        raise ConfigError(
-            f"{path} has columns {','.join(header)}; this sweep writes {','.join(cols)} "
-            "(use another --out, or --force to overwrite)")
+        raise _header_mismatch(path, header, cols)
     rows = []
     for line_no, rec in enumerate(reader, start=2):
         if not rec:
@@ -750,9 +788,7 @@ class SweepFile:
         except Exception as exc:
             raise ConfigError(f"cannot read {self.path}: {exc}") from None
         if table.column_names != self.cols:
-            raise ConfigError(
-                f"{self.path} has columns {','.join(table.column_names)}; this sweep writes "
-                f"{','.join(self.cols)} (use another --out, or --force to overwrite)")
+            raise _header_mismatch(self.path, table.column_names, self.cols)
         return table.to_pylist()
 
     def open(self) -> None:
@@ -886,6 +922,13 @@ def markdown_table(rows: Sequence[Mapping[str, Any]],
                        _groups(rows, varies, mode, base_vals))
 
 
+#: Markers of the runs whose feature is undefined, drawn on the bottom edge of
+#: a panel (by status), and of the runs that are not limit cycles but still
+#: have a value (at the value).
+UNDEFINED_MARKERS = {"fell": "v", "settled": "s", "limit_cycle": "d", "error": "X"}
+NOT_A_CYCLE_MARKER = "x"
+
+
 def plot_sweep(rows: Sequence[Mapping[str, Any]],
                varies: Sequence[tuple[str, Sequence[float]]], path: str, mode: str = "grid",
                base_vals: Mapping[str, Any] | None = None) -> str:
@@ -893,12 +936,24 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]],
 
     ``oat`` with several keys: one column of subplots per key.  ``grid`` with
     several keys: x is the first key, one line per combination of the others.
-    Points whose status is not ``limit_cycle`` are drawn as crosses.
+    A run whose feature is undefined (``None``, or any feature of a run that
+    fell: its maxima are those of the fall, not of a cycle) has no point on
+    the line, which breaks there; it is marked on the panel's bottom edge by
+    its status (:data:`UNDEFINED_MARKERS`: a triangle for ``fell``), outside
+    the data, so the y range is that of the defined values.  A run that
+    settled but has a value is a cross at that value.  A legend at the top
+    explains the markers.
+
+    Returns
+    -------
+    str
+        ``path``.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     base_vals = base_vals or {}
     keys = [k for k, _ in varies]
@@ -906,6 +961,7 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]],
     ncol = len(groups)
     fig, axes = plt.subplots(len(FEATURES), ncol, figsize=(4.2 * ncol + 1, 13), sharex="col",
                              squeeze=False)
+    used: set[str] = set()
     for col, (xkey, grp) in enumerate(groups):
         others = [k for k in keys if k != xkey] if mode == "grid" else []
         lines: dict[tuple, list] = {}
@@ -913,23 +969,51 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]],
             lines.setdefault(tuple(r[k] for k in others), []).append(r)
         for j, feat in enumerate(FEATURES):
             ax = axes[j, col]
-            for combo, rs in lines.items():
+            edge = ax.get_xaxis_transform()  # x in data, y in axes coordinates
+            for i, (combo, rs) in enumerate(lines.items()):
                 rs = sorted(rs, key=lambda r: r[xkey])
                 x = [r[xkey] for r in rs]
-                y = [math.nan if r[feat] is None else r[feat] for r in rs]
+                y = [math.nan if r[feat] is None or r["status"] == "fell" else r[feat]
+                     for r in rs]
                 label = ", ".join(f"{k}={v:g}" for k, v in zip(others, combo, strict=True))
                 ln, = ax.plot(x, y, "o-", ms=3, label=label or None)
-                bad = [(a, b) for a, b, r in zip(x, y, rs, strict=True)
-                       if r["status"] != "limit_cycle"]
-                if bad:
-                    ax.plot([a for a, _ in bad], [0.0 if math.isnan(b) else b for _, b in bad],
-                            "x", color=ln.get_color())
+                color = ln.get_color()
+                odd = [(a, b) for a, b, r in zip(x, y, rs, strict=True)
+                       if r["status"] != "limit_cycle" and not math.isnan(b)]
+                if odd:
+                    used.add("odd")
+                    ax.plot(*zip(*odd, strict=True), NOT_A_CYCLE_MARKER, color=color, ms=7)
+                for status, marker in UNDEFINED_MARKERS.items():
+                    xs = [a for a, b, r in zip(x, y, rs, strict=True)
+                          if math.isnan(b) and r["status"] == status]
+                    if xs:
+                        used.add(status)
+                        # stacked a little per line, so that lines' marks do not hide
+                        ax.plot(xs, [0.04 * i] * len(xs), marker, color=color, ms=7,
+                                transform=edge, clip_on=False)
+            if all(r[feat] is None or r["status"] == "fell" for r in grp):
+                ax.text(0.5, 0.5, "undefined for every run", transform=ax.transAxes,
+                        ha="center", va="center", color="0.4")
+                ax.set_yticks([])
             ax.set_ylabel(feat if col == 0 else "")
             ax.grid(alpha=0.3)
             if j == 0 and others and len(lines) <= 12:
                 ax.legend(fontsize=7)
         axes[-1, col].set_xlabel(xkey)
-    fig.tight_layout()
+    explain = {"odd": (NOT_A_CYCLE_MARKER, "not a limit cycle (value drawn)"),
+               "fell": (UNDEFINED_MARKERS["fell"], "fell: no value (bottom edge)"),
+               "settled": (UNDEFINED_MARKERS["settled"], "settled: no value (bottom edge)"),
+               "limit_cycle": (UNDEFINED_MARKERS["limit_cycle"],
+                               "limit cycle without this feature (bottom edge)"),
+               "error": (UNDEFINED_MARKERS["error"], "error: no value (bottom edge)")}
+    handles = [Line2D([], [], marker=m, ls="", color="0.3", ms=7, label=text)
+               for k, (m, text) in explain.items() if k in used]
+    top = 1.0
+    if handles:
+        fig.legend(handles=handles, loc="upper center", ncol=min(3, len(handles)),
+                   fontsize=8, frameon=False)
+        top = 1.0 - 0.25 / 13 * ((len(handles) + 2) // 3 + 0.5)
+    fig.tight_layout(rect=(0, 0, 1, top))
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

@@ -114,9 +114,10 @@ def cmd_limit_cycle(args) -> int:
         sets = [*load_toml(args.config), *sets]
     # validate the whole problem (settings, bounds, run length) before any
     # output or simulation: bad input exits 2 with a single stderr line
+    constrained = not args.allow_stiction_below_coulomb
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
-                      evaluate=_never)
+                      evaluate=_never, stiction_above_coulomb=constrained)
     err = sys.stderr
     print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
           f"{', '.join(keys)} ({args.friction} friction, {args.duration:g} s runs)", file=err)
@@ -139,7 +140,8 @@ def cmd_limit_cycle(args) -> int:
             experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
             weights=weights, duration=args.duration, window=args.window,
             workers=args.workers, dask=args.dask, seed=args.seed, maxiter=args.maxiter,
-            popsize=args.popsize, rel_step=args.rel_step, progress=progress)
+            popsize=args.popsize, rel_step=args.rel_step, progress=progress,
+            stiction_above_coulomb=constrained)
     for w in result.warnings:
         print(f"warning: {w}", file=err)
     print(f"done in {result.seconds:.1f} s: {result.evaluations} parameter sets, "
@@ -197,10 +199,12 @@ def cmd_experiment(args) -> int:
             raise UsageError(f"{path}: extension must be one of {', '.join(exts)}")
     if args.log and args.save:
         raise UsageError("--save only applies to --simulate runs")
+    warnings: list[str] = []
     if args.log:
-        from .logs import read_log
+        from .logs import log_warnings, read_log
 
         log = read_log(args.log, cfg.design.h)
+        warnings += log_warnings(args.log)
         source = args.log
     else:
         if name == "stiction":
@@ -243,9 +247,11 @@ def cmd_experiment(args) -> int:
             plots.plot_free_oscillation(log, res, args.plot)
         else:
             plots.plot_control_scaling(log, res, args.plot)
-    for w in res.get("warnings", []):
+    warnings += res.get("warnings", [])
+    for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     out = dict(res)
+    out["warnings"] = warnings
     out["source"] = source
     if args.save:
         out["saved"] = args.save
@@ -290,10 +296,16 @@ def register_cli(sub) -> None:
     q.add_argument("--window", type=float, default=20.0,
                    help="features over the last S seconds (default 20)")
     q.add_argument("--workers", type=int, default=None,
-                   help="parallel workers of the sweep engine (default: its choice - "
-                        "in-process for small batches, else all cores; 1 = in-process)")
+                   help="parallel workers of the sweep engine (default: all cores, chosen "
+                        "once for the whole fit; in-process when the whole fit is under "
+                        "about half a second of simulation; 1 = in-process)")
     q.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="evaluate on a Dask cluster")
+    q.add_argument("--allow-stiction-below-coulomb", action="store_true",
+                   help="when friction.stiction and friction.coulomb (or their _negative "
+                        "pair) are both fitted, also search stiction < Coulomb level (by "
+                        "default the fit keeps stiction >= Coulomb, as the classical and "
+                        "LuGre models assume)")
     q.add_argument("--seed", type=int, default=0, help="seed of the global search")
     q.add_argument("--maxiter", type=int, default=40,
                    help="generations of differential evolution (default 40)")
@@ -352,6 +364,8 @@ def _experiment_entry(args) -> int:
         raise UsageError(f"--hold must be > 0, got {args.hold}")
     if not args.step > 0:
         raise UsageError(f"--step must be > 0, got {args.step}")
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise UsageError(f"--duration must be > 0, got {args.duration:g}")
     try:
         return cmd_experiment(args)
     except ConfigError:

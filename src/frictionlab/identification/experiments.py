@@ -242,7 +242,11 @@ def analyse_stiction(log: Any, *, input_gain: float = 1.0, arm_length: float = 0
     Stiction (per direction d): the first sample where the arm speed d
     :math:`\dot\Omega` exceeds ``v_detect`` while d u > 0 marks the breakaway;
     the stiction is the largest d u applied before it, less half the
-    staircase step (the true level lies within the last step).
+    staircase step (the true level lies within the last step).  The step is
+    the median increment between the staircase's levels.  When the arm
+    breaks away at the staircase's first level L, the log bounds the
+    stiction only from above: it lies in (0, L] (u was 0 before the
+    staircase).  The estimate is then L/2 and a warning says so.
 
     Coulomb (per direction): every run of constant u with d u > 0 below the
     breakaway level during which the arm slides in direction d faster than
@@ -259,7 +263,8 @@ def analyse_stiction(log: Any, *, input_gain: float = 1.0, arm_length: float = 0
         ``stiction``, ``coulomb`` (means of both directions) and
         ``stiction_positive``, ``stiction_negative``, ``coulomb_positive``,
         ``coulomb_negative``, ``breakaway_time_positive/negative``,
-        ``segments`` (per sliding run: direction, u, acceleration, friction).
+        ``segments`` (per sliding run: direction, u, acceleration, friction),
+        ``warnings``.
     """
     t = _time(log)
     u = _signal(log, "u")
@@ -269,6 +274,7 @@ def analyse_stiction(log: Any, *, input_gain: float = 1.0, arm_length: float = 0
     v_slide = max(0.2, 6.0 * sig) if v_slide is None else v_slide
     out: dict[str, Any] = {}
     segments = []
+    warnings = []
     for d, name in ((1.0, "positive"), (-1.0, "negative")):
         drive = d * u > 0
         moving = d * v > v_detect
@@ -283,17 +289,26 @@ def analyse_stiction(log: Any, *, input_gain: float = 1.0, arm_length: float = 0
             j -= 1
         stair = d * u[j:k + 1]
         levels = np.unique(stair)
-        steps = np.diff(levels)
-        step = float(np.median(steps)) if len(steps) else 0.0
         level = float(stair.max())
+        if len(levels) > 1:
+            step = float(np.median(np.diff(levels)))
+        else:
+            # breakaway at the first level: u rose from 0 to it in one step
+            step = level
+            warnings.append(
+                f"the arm broke away at the first level of the {name} staircase "
+                f"(u = {d * level:g}): the stiction is only known to be at most "
+                f"{input_gain * level:.4g}; reported as half of that.  Repeat with a "
+                "smaller --step")
         stiction = input_gain * (level - 0.5 * step)
         out[f"stiction_{name}"] = stiction
         out[f"breakaway_time_{name}"] = float(t[k])
-        # Coulomb: constant-u runs below the breakaway level with sliding
+        # Coulomb: constant-u runs below the breakaway level with sliding (the
+        # staircase's levels below it leave the arm at rest)
         est, wts = [], []
         for a, b in _runs(u):
             uu = float(u[a])
-            if not (d * uu > 0 and d * uu < level - 0.5 * step):
+            if not 0 < d * uu < level:
                 continue
             idx = np.arange(a + 1, b)  # the first sample may hold the push
             idx = idx[d * v[idx] > v_slide]
@@ -312,6 +327,7 @@ def analyse_stiction(log: Any, *, input_gain: float = 1.0, arm_length: float = 0
     out["stiction"] = 0.5 * (out["stiction_positive"] + out["stiction_negative"])
     out["coulomb"] = 0.5 * (out["coulomb_positive"] + out["coulomb_negative"])
     out["segments"] = segments
+    out["warnings"] = warnings
     return _ordered(out, ("stiction", "coulomb", "stiction_positive", "stiction_negative",
                           "coulomb_positive", "coulomb_negative"))
 
@@ -525,7 +541,8 @@ def analyse_free_oscillation(log: Any, *, max_amplitude: float = 0.15,
     dict
         ``omega0``, ``zeta`` (refined), ``omega0_peaks``, ``zeta_peaks``
         (steps 1-3, the thesis's method), ``period``, ``rest_angle``,
-        ``peaks`` ([t, height] of the used peaks).
+        ``peaks`` ([t, height] of the used peaks), ``warnings`` (e.g. peak
+        heights that grow instead of decaying: zeta is then 0).
     """
     t = _time(log)
     y = _signal(log, "theta_m")
@@ -556,6 +573,12 @@ def analyse_free_oscillation(log: Any, *, max_amplitude: float = 0.15,
     period = float(np.mean(np.diff(pk_t)))
     wd = 2.0 * math.pi / period
     slope, _, _ = _slope(pk_t, np.log(pk_y))
+    warnings = []
+    if slope > 0:
+        warnings.append(
+            f"the oscillation grows (peak heights rise by {100 * math.expm1(slope * period):.2g} "
+            "% per period), so it is not a free decay (is the arm held, and nothing driving "
+            "the pendulum?): zeta is reported as 0")
     sigma = max(0.0, -slope)
     w0_pk = math.hypot(wd, sigma)
     out = {"omega0_peaks": w0_pk, "zeta_peaks": sigma / w0_pk}
@@ -578,6 +601,7 @@ def analyse_free_oscillation(log: Any, *, max_amplitude: float = 0.15,
         out = {"omega0": w0_pk, "zeta": sigma / w0_pk, **out, "rest_angle": theta0}
     out["period"] = 2.0 * math.pi / (out["omega0"] * math.sqrt(max(0.0, 1 - out["zeta"] ** 2)))
     out["peaks"] = [[float(a), float(b)] for a, b in zip(pk_t, pk_y, strict=True)]
+    out["warnings"] = warnings
     return out
 
 

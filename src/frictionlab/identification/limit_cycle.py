@@ -82,6 +82,7 @@ __all__ = [
     "FLAT_RATIO",
     "FLAT_SENSITIVITY",
     "PENALTY",
+    "STICTION_PAIRS",
     "Experiment",
     "FitResult",
     "LimitCycleProblem",
@@ -101,6 +102,9 @@ FLAT_SENSITIVITY = 0.05
 FLAT_RATIO = 1e-4
 #: Relative standard error above which a parameter is reported as poorly determined.
 POOR_RELATIVE_STDERR = 0.5
+#: (Coulomb, stiction) key pairs searched with F_S >= F_C when both are fitted.
+STICTION_PAIRS = (("friction.coulomb", "friction.stiction"),
+                  ("friction.coulomb_negative", "friction.stiction_negative"))
 
 #: Default search bounds of the usual keys (the thesis's values lie well inside).
 DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
@@ -322,6 +326,10 @@ class LimitCycleProblem:
         the contract of :func:`frictionlab.sweep.evaluate` (the default).
     workers, dask
         Passed to ``evaluate``.
+    stiction_above_coulomb : bool
+        When a stiction and its Coulomb level are both fitted
+        (``friction.stiction`` and ``friction.coulomb``, or the ``_negative``
+        pair), search only F_S >= F_C (see :attr:`pairs`).
     """
 
     def __init__(
@@ -338,6 +346,7 @@ class LimitCycleProblem:
         evaluate: Evaluator | None = None,
         workers: int | None = None,
         dask: str | None = None,
+        stiction_above_coulomb: bool = True,
     ):
         if not experiments:
             raise ConfigError("no experiments to fit")
@@ -404,6 +413,11 @@ class LimitCycleProblem:
             lo.append(float(b[0]))
             hi.append(float(b[1]))
         self.lo, self.hi = np.array(lo), np.array(hi)
+        self.pairs: list[tuple[int, int]] = []
+        if stiction_above_coulomb:
+            for c_key, s_key in STICTION_PAIRS:
+                if c_key in self.keys and s_key in self.keys:
+                    self._add_pair(self.keys.index(c_key), self.keys.index(s_key))
         # residual layout: (experiment index, feature) pairs
         self.layout: list[tuple[int, str]] = []
         meas, w = [], []
@@ -418,6 +432,24 @@ class LimitCycleProblem:
         self.nfev = 0
         self._cache: dict[tuple, tuple[np.ndarray, list[dict]]] = {}
 
+    def _add_pair(self, ic: int, i_s: int) -> None:
+        """Search only F_S >= F_C for keys ``ic`` (Coulomb) and ``i_s`` (stiction).
+
+        The bounds implied by the constraint are applied (F_C <= F_S <= the
+        stiction's upper bound, F_S >= F_C >= the Coulomb's lower bound);
+        bounds that leave no F_S >= F_C are refused.
+        """
+        c_key, s_key = self.keys[ic], self.keys[i_s]
+        if self.lo[ic] >= self.hi[i_s]:
+            raise ConfigError(
+                f"bounds of {c_key} ({self.lo[ic]:g}:{self.hi[ic]:g}) and {s_key} "
+                f"({self.lo[i_s]:g}:{self.hi[i_s]:g}) leave no stiction >= Coulomb level; "
+                "widen --bounds or fit without the constraint "
+                "(--allow-stiction-below-coulomb)")
+        self.hi[ic] = min(self.hi[ic], self.hi[i_s])
+        self.lo[i_s] = max(self.lo[i_s], self.lo[ic])
+        self.pairs.append((ic, i_s))
+
     # -- coordinates ------------------------------------------------------
 
     @property
@@ -429,11 +461,46 @@ class LimitCycleProblem:
         return len(self.layout)
 
     def to_params(self, x: np.ndarray) -> np.ndarray:
-        """Normalised coordinates [0, 1] -> parameter values."""
-        return self.lo + np.clip(x, 0.0, 1.0) * (self.hi - self.lo)
+        """Normalised coordinates [0, 1] -> parameter values.
+
+        Rows of ``x`` are parameter sets (a single vector is one set).  Each
+        key maps linearly onto its bounds, except the stiction of a
+        constrained pair (:attr:`pairs`), whose coordinate spans
+        [max(its lower bound, F_C), its upper bound]: every point of the
+        unit box is a parameter set with F_S >= F_C.
+        """
+        x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
+        p = self.lo + x * (self.hi - self.lo)
+        for ic, i_s in self.pairs:
+            floor = np.maximum(self.lo[i_s], p[..., ic])
+            p[..., i_s] = floor + x[..., i_s] * (self.hi[i_s] - floor)
+        return p
 
     def to_unit(self, p: np.ndarray) -> np.ndarray:
-        return (np.asarray(p, dtype=float) - self.lo) / (self.hi - self.lo)
+        """Parameter values -> normalised coordinates (inverse of :meth:`to_params`;
+        a stiction below F_C in a constrained pair maps to F_S = F_C)."""
+        p = np.asarray(p, dtype=float)
+        x = (p - self.lo) / (self.hi - self.lo)
+        for ic, i_s in self.pairs:
+            floor = np.maximum(self.lo[i_s], p[..., ic])
+            span = self.hi[i_s] - floor
+            with np.errstate(invalid="ignore", divide="ignore"):
+                xs = np.where(span > 0, (p[..., i_s] - floor) / span, 0.0)
+            x[..., i_s] = np.clip(xs, 0.0, 1.0)
+        return x
+
+    def unit_jacobian(self, x: np.ndarray) -> np.ndarray:
+        """d(parameters)/d(normalised coordinates) at one point ``x`` (n, n)."""
+        x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
+        width = self.hi - self.lo
+        D = np.diag(width)
+        p = self.to_params(x)
+        for ic, i_s in self.pairs:
+            floor = max(self.lo[i_s], p[ic])
+            D[i_s, i_s] = self.hi[i_s] - floor
+            if p[ic] > self.lo[i_s]:
+                D[i_s, ic] = (1.0 - x[i_s]) * width[ic]
+        return D
 
     def current(self) -> np.ndarray:
         """The keys' values in the base configuration (clipped to the bounds)."""
@@ -505,22 +572,56 @@ class LimitCycleProblem:
         The step of key j is ``rel_step * |p_j|`` (at least ``rel_step`` times
         1 % of its bound width); a step leaving the bounds becomes one-sided.
         """
+        return self.line_fit(params, rel_step, (-1.0, 1.0))[0]
+
+    def line_fit(self, params: np.ndarray, rel_step: float,
+                 multiples: Sequence[float] = (-2.0, -1.0, 0.0, 1.0, 2.0),
+                 ) -> tuple[np.ndarray, float]:
+        """Jacobian by straight-line fits along each key, and the features' jitter.
+
+        Key j is set to ``p_j + k * step_j`` for every k of ``multiples``
+        (steps as in :meth:`jacobian`, clipped to the bounds; all other keys
+        at ``params``), and every residual is fitted with a straight line in
+        that key by least squares.  With ``(-1, 1)`` the slope is the
+        central difference.  With more points the slope averages over the
+        simulator's feature jitter (the sampled loop makes features
+        piecewise constant in the parameters), so that one step landing on
+        a jump does not set a column of J.
+
+        Returns
+        -------
+        J : ndarray (m, n)
+            The slopes dr/dp in parameter units.
+        jitter : float
+            Pooled variance of the residuals about their lines (weighted
+            relative-feature units): the simulator's own feature jitter at
+            the scale of the steps; 0 when the points leave no degree of
+            freedom (two per key).
+        """
         p = np.asarray(params, dtype=float)
         width = self.hi - self.lo
         step = rel_step * np.maximum(np.abs(p), 0.01 * width)
-        rows, pairs = [], []
+        offsets, rows = [], []
         for j in range(self.n):
-            up = min(p[j] + step[j], self.hi[j])
-            dn = max(p[j] - step[j], self.lo[j])
-            a, b = p.copy(), p.copy()
-            a[j], b[j] = up, dn
-            rows += [a, b]
-            pairs.append(up - dn)
+            vals = sorted({float(np.clip(p[j] + k * step[j], self.lo[j], self.hi[j]))
+                           for k in multiples})
+            offsets.append(np.array(vals) - p[j])
+            for v in vals:
+                q = p.copy()
+                q[j] = v
+                rows.append(q)
         res, _ = self.evaluate_batch(np.array(rows))
         J = np.empty((self.m, self.n))
-        for j in range(self.n):
-            J[:, j] = (res[2 * j] - res[2 * j + 1]) / pairs[j]
-        return J
+        rss, dof, at = 0.0, 0, 0
+        for j, t in enumerate(offsets):
+            r = res[at:at + len(t)]
+            at += len(t)
+            tc = t - t.mean()
+            J[:, j] = tc @ (r - r.mean(axis=0)) / (tc @ tc)
+            fit = r.mean(axis=0) + np.outer(tc, J[:, j])
+            rss += float(np.sum((r - fit) ** 2))
+            dof += (len(t) - 2) * self.m
+        return J, (rss / dof if dof > 0 else 0.0)
 
 
 def _sim_feature(row: Mapping[str, Any], name: str) -> float | None:
@@ -547,7 +648,9 @@ class FitResult:
     """Result of :func:`fit_limit_cycle`.
 
     ``residuals``/``simulated``/``measured`` are keyed by experiment label
-    then feature; residuals are relative errors (unweighted).
+    then feature; residuals are relative errors (unweighted).  ``bounds``
+    are the searched bounds (narrowed by the constraints); ``constraints``
+    names the enforced ``stiction >= coulomb`` relations.
     """
 
     keys: list[str]
@@ -566,6 +669,7 @@ class FitResult:
     generations: int
     evaluations: int
     seconds: float
+    constraints: list[str] = field(default_factory=list)
     extra: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
@@ -579,6 +683,7 @@ class FitResult:
             "measured": self.measured,
             "status": self.status,
             "bounds": {k: list(v) for k, v in self.bounds.items()},
+            "constraints": self.constraints,
             "singular_values": self.singular_values,
             "correlation": self.correlation,
             "global_search": {"cost": self.global_cost, "generations": self.generations},
@@ -587,15 +692,20 @@ class FitResult:
         }
 
 
-def _covariance(J: np.ndarray, cost: float, m: int, n: int):
-    """s^2 (J^T J)^-1 via the SVD of J; None when not estimable."""
-    if m <= n:
-        return None, f"{m} known feature(s) for {n} fitted key(s): no residual degrees " \
-                     "of freedom, standard errors not estimated"
+def _covariance(J: np.ndarray, cost: float, m: int, n: int, jitter: float = 0.0):
+    """Covariance of the estimate, or None and the reason it is not estimable.
+
+    ``nu/(nu - 2) (s^2 + jitter) (J^T J)^-1`` with ``nu = m - n`` and
+    ``s^2 = cost/nu`` (see the module docstring), via the SVD of J.
+    """
+    nu = m - n
+    if nu <= 2:
+        return None, f"{m} known feature(s) for {n} fitted key(s): {max(nu, 0)} residual " \
+                     "degree(s) of freedom, standard errors need at least 3"
     _, s, vt = np.linalg.svd(J, full_matrices=False)
     if s[0] <= 0 or s[-1] <= 1e-10 * s[0]:
         return None, "J^T J is singular at the optimum: standard errors not estimated"
-    s2 = cost / (m - n)
+    s2 = nu / (nu - 2) * (cost / nu + jitter)
     cov = s2 * (vt.T / s**2) @ vt
     return cov, None
 
@@ -650,6 +760,20 @@ def identifiability(J: np.ndarray, p: np.ndarray, keys: Sequence[str],
     return sv, warnings
 
 
+#: Most function and Jacobian evaluations of the least-squares polish.
+POLISH_NFEV = 12
+
+
+def _max_runs(prob: LimitCycleProblem, maxiter: int, popsize: int) -> int:
+    """Most simulations a fit runs: every generation of the global search
+    (the initial population and ``maxiter`` more), the polish (a residual
+    vector and a central-difference Jacobian per step) and the final
+    Jacobian, each parameter set once per experiment."""
+    members = popsize * prob.n
+    polish = (POLISH_NFEV + 1) * (2 * prob.n + 1)
+    return len(prob.experiments) * (members * (maxiter + 1) + polish)
+
+
 def fit_limit_cycle(
     experiments: Sequence[Experiment],
     keys: Sequence[str],
@@ -668,14 +792,22 @@ def fit_limit_cycle(
     rel_step: float = 0.01,
     evaluate: Evaluator | None = None,
     progress: Callable[[str, float], None] | None = None,
+    stiction_above_coulomb: bool = True,
 ) -> FitResult:
     """Fit parameter keys to measured limit-cycle features (see the module docstring).
 
     Parameters
     ----------
     experiments, keys, friction, sets, bounds, weights, duration, window,
-    workers, dask, evaluate
+    dask, evaluate, stiction_above_coulomb
         See :class:`LimitCycleProblem`.
+    workers : int, optional
+        Workers of the sweep engine.  ``None`` (without ``dask``): chosen
+        once for the whole fit by :func:`frictionlab.sweep.auto_workers`
+        from the fit's largest number of runs (all cores unless the whole
+        fit is under about half a second of serial work), not per
+        generation: a generation alone is too small to pay a pool's
+        start-up, the fit is not, and the pool is started once and kept.
     seed : int
         Seed of the global search.
     maxiter : int
@@ -699,7 +831,12 @@ def fit_limit_cycle(
         raise ConfigError(f"rel_step must be in [1e-5, 0.2], got {rel_step}")
     prob = LimitCycleProblem(experiments, keys, friction=friction, sets=sets, bounds=bounds,
                              weights=weights, duration=duration, window=window,
-                             evaluate=evaluate, workers=workers, dask=dask)
+                             evaluate=evaluate, workers=workers, dask=dask,
+                             stiction_above_coulomb=stiction_above_coulomb)
+    if workers is None and dask is None:
+        from ..sweep import auto_workers
+
+        prob.workers = auto_workers(prob.base, _max_runs(prob, maxiter, popsize), duration)
     report = progress or (lambda stage, f, c: None)
 
     def cost_vec(xt: np.ndarray) -> np.ndarray:
@@ -723,18 +860,17 @@ def fit_limit_cycle(
     report("global", 1.0, float(de.fun))
     x_best = np.clip(de.x, 0.0, 1.0)
     global_cost = float(de.fun)
-    width = prob.hi - prob.lo
 
     def fun(x):
         return prob.residuals(prob.to_params(x))
 
     def jac(x):
-        return prob.jacobian(prob.to_params(x), rel_step) * width
+        return prob.jacobian(prob.to_params(x), rel_step) @ prob.unit_jacobian(x)
 
     report("local", 0.0, global_cost)
     try:
         ls = least_squares(fun, x_best, jac=jac, bounds=(0.0, 1.0), method="trf",
-                           x_scale="jac", max_nfev=12, ftol=1e-6, xtol=1e-6)
+                           x_scale="jac", max_nfev=POLISH_NFEV, ftol=1e-6, xtol=1e-6)
         x_loc = np.clip(ls.x, 0.0, 1.0)
         if np.sum(fun(x_loc) ** 2) < np.sum(fun(x_best) ** 2):
             x_best = x_loc
@@ -746,9 +882,9 @@ def fit_limit_cycle(
     r = res[0]
     rows = rows_list[0]
     cost = float(np.sum(r**2))
-    J = prob.jacobian(p, rel_step)
+    J, jitter = prob.line_fit(p, rel_step)
     warnings: list[str] = []
-    cov, why = _covariance(J, cost, prob.m, prob.n)
+    cov, why = _covariance(J, cost, prob.m, prob.n, jitter)
     if why:
         warnings.append(why)
     stderr: dict[str, float | None] = {}
@@ -769,7 +905,17 @@ def fit_limit_cycle(
             warnings.append(f"{k} is poorly determined: standard error {se:.3g} "
                             f"({100 * se / abs(v):.0f} % of the estimate)")
     tol = 1e-3
-    for k, v, lo, hi in zip(prob.keys, p, prob.lo, prob.hi, strict=True):
+    at_constraint = set()
+    for ic, i_s in prob.pairs:
+        if p[i_s] - p[ic] <= tol * (prob.hi[i_s] - prob.lo[i_s]):
+            at_constraint.add(i_s)
+            warnings.append(
+                f"{prob.keys[i_s]} = {prob.keys[ic]} = {p[ic]:.4g}: the estimate is at the "
+                "constraint stiction >= Coulomb level, which the fit enforces (the features "
+                "would prefer a lower stiction); --allow-stiction-below-coulomb lifts it")
+    for i, (k, v, lo, hi) in enumerate(zip(prob.keys, p, prob.lo, prob.hi, strict=True)):
+        if i in at_constraint:
+            continue
         if v <= lo + tol * (hi - lo) or v >= hi - tol * (hi - lo):
             warnings.append(f"{k} = {v:.4g} is at its search bound [{lo:g}, {hi:g}]: "
                             "widen --bounds or treat the estimate with care")
@@ -809,6 +955,7 @@ def fit_limit_cycle(
         generations=int(de.nit),
         evaluations=prob.nfev,
         seconds=time.perf_counter() - t0,
+        constraints=[f"{prob.keys[i_s]} >= {prob.keys[ic]}" for ic, i_s in prob.pairs],
         extra={"configs": prob.configs},
     )
 
