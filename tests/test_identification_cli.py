@@ -59,6 +59,27 @@ def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
     assert "warnings" in full and "singular_values" in full
 
 
+@pytest.mark.timeout(300)
+def test_limit_cycle_on_a_dask_localcluster_gives_the_pool_estimate(capsys, measured):
+    from frictionlab.sweep import shutdown
+
+    argv = ["identify", "limit-cycle", "--measured", str(measured), "--fit", "friction.coulomb",
+            "--bounds", "friction.coulomb=1.2:1.6", "--duration", str(DURATION), "--window",
+            str(WINDOW), "--maxiter", "2", "--popsize", "3", "--workers", "2", "--quiet",
+            "--json"]
+    try:
+        rc, out, _ = _run(capsys, argv)
+        assert rc == 0
+        pool = json.loads(out)
+        rc, out, _ = _run(capsys, [*argv, "--dask", "local"])
+        assert rc == 0
+        dask = json.loads(out)
+    finally:
+        shutdown()
+    assert dask == pool
+    assert abs(pool["estimate"]["friction.coulomb"] - 1.4) < 0.05
+
+
 def test_limit_cycle_text_output(capsys, measured):
     rc, out, _ = _run(capsys, [
         "identify", "limit-cycle", "--measured", str(measured), "--fit", "friction.coulomb",
@@ -88,6 +109,9 @@ GOOD = {"experiments": [{"design": "fast", "features": {"period": 1.0, "peak1": 
     (GOOD, ["--fit", "sim.substeps"], "real-valued"),
     (GOOD, ["--weights", "peak7=2"], "unknown feature"),
     (GOOD, ["--set", "plant.omega0=-3"], "omega0"),
+    (GOOD, ["--fit", "friction.coulomb,friction.stiction", "--bounds",
+            "friction.coulomb=2:3", "--bounds", "friction.stiction=0.5:1.5"],
+     "no stiction >= Coulomb"),
     ("{not json", [], "not valid JSON"),
 ])
 def test_limit_cycle_infeasible_input_exits_2(capsys, tmp_path, measured, extra, match):
@@ -138,15 +162,61 @@ def test_experiment_simulate_save_then_log(capsys, tmp_path, name, sets, expect)
     assert plot.read_bytes()[:4] == b"\x89PNG"
 
 
-def test_stribeck_experiment_cli(capsys):
-    rc, out, _ = _run(capsys, ["identify", "experiment", "stribeck", "--json",
-                               "--references", "0.3,0.6,1,2,4,8,12", "--hold", "1",
-                               "--set", "friction.coulomb=1.4", "--set", "friction.viscous=0.06"])
+def test_stribeck_experiment_cli_and_its_log(capsys, tmp_path):
+    """--simulate --save, then --log on the saved file: the same estimates."""
+    save = tmp_path / "stribeck.csv"
+    argv = ["identify", "experiment", "stribeck", "--json", "--references",
+            "0.3,0.6,1,2,4,8,12", "--hold", "1", "--set", "friction.coulomb=1.4",
+            "--set", "friction.viscous=0.06"]
+    rc, out, _ = _run(capsys, [*argv, "--save", str(save)])
     assert rc == 0
     r = json.loads(out)
     assert abs(r["coulomb"] - 1.4) < 0.05 * 1.4
     assert abs(r["viscous"] - 0.06) < 0.2 * 0.06
     assert {"coulomb", "viscous", "stribeck_velocity"} <= set(r)
+    rc, out, _ = _run(capsys, ["identify", "experiment", "stribeck", "--log", str(save),
+                               "--json"])
+    assert rc == 0
+    logged = json.loads(out)
+    assert logged["source"] == str(save)
+    for key in ("coulomb", "viscous", "stribeck_velocity", "stiction"):
+        assert logged[key] == pytest.approx(r[key], rel=1e-5), key
+    assert len(logged["points"]) == len(r["points"])
+
+
+def test_free_oscillation_dat_log_round_trip_and_missed_ticks(capsys, tmp_path):
+    """A .dat log (no time column) gives the simulated estimates; when its
+    run's sidecar reports missed ticks the command warns and says use .csv."""
+    dat = tmp_path / "swing.dat"
+    sets = ["--set", "plant.omega0=7.1", "--set", "plant.zeta=0.06"]
+    rc, out, _ = _run(capsys, ["identify", "experiment", "free-oscillation", *sets,
+                               "--save", str(dat), "--json"])
+    assert rc == 0
+    sim = json.loads(out)
+    rc, out, err = _run(capsys, ["identify", "experiment", "free-oscillation", "--log",
+                                 str(dat), "--json"])
+    assert rc == 0 and "warning" not in err
+    logged = json.loads(out)
+    for key in ("omega0", "zeta", "omega0_peaks", "zeta_peaks"):
+        assert logged[key] == pytest.approx(sim[key], rel=1e-5), key
+    assert logged["warnings"] == []
+    (tmp_path / "swing.json").write_text(json.dumps({"stats": {"missed": 4}}))
+    rc, out, err = _run(capsys, ["identify", "experiment", "free-oscillation", "--log",
+                                 str(dat), "--json"])
+    assert rc == 0
+    assert "warning: swing.dat: its run reports 4 missed tick(s)" in err and ".csv" in err
+    assert len(json.loads(out)["warnings"]) == 1
+
+
+def test_stiction_with_one_staircase_level_warns(capsys):
+    rc, out, err = _run(capsys, ["identify", "experiment", "stiction", "--simulate",
+                                 "--step", "0.5", "--set", "friction.stiction=0.1",
+                                 "--set", "friction.coulomb=0.08", "--json"])
+    assert rc == 0
+    r = json.loads(out)
+    assert r["stiction"] == pytest.approx(0.25)
+    assert err.count("warning: the arm broke away at the first level") == 2
+    assert len(r["warnings"]) == 2
 
 
 @pytest.mark.parametrize("argv, match", [
@@ -155,11 +225,22 @@ def test_stribeck_experiment_cli(capsys):
     (["stribeck", "--references", "a,b"], "not a number"),
     (["stiction", "--hold", "0"], "--hold"),
     (["stiction", "--set", "friction.coulomb=-1"], "coulomb"),
+    (["free-oscillation", "--duration", "-1"], "--duration must be > 0"),
+    (["free-oscillation", "--duration", "0"], "--duration must be > 0"),
 ])
 def test_experiment_bad_input_exits_2(capsys, argv, match):
     rc, out, err = _run(capsys, ["identify", "experiment", *argv, "--json"])
     assert rc == 2 and out == ""
-    assert match in err
+    assert match in err and len(err.strip().splitlines()) == 1
+
+
+def test_empty_log_is_one_line(capsys, tmp_path):
+    p = tmp_path / "empty.csv"
+    p.write_text("t,u,arm_dot_m\n")
+    rc, out, err = _run(capsys, ["identify", "experiment", "stiction", "--log", str(p)])
+    assert rc == 2 and out == ""
+    assert err.strip().splitlines() == [
+        f"frictionlab identify: error: {p}: the log has no samples"]
 
 
 def test_experiment_log_lacking_a_signal_exits_2(capsys, tmp_path):

@@ -4,6 +4,7 @@ simulated rig, on saved logs, and on synthetic signals."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from hypothesis import strategies as st
 from frictionlab.config import build_config
 from frictionlab.identification import experiments as ex
 from frictionlab.identification.experiments import IdentificationError
-from frictionlab.identification.logs import read_log
+from frictionlab.identification.logs import log_warnings, read_log
 
 # a plant whose parameters all differ from the thesis defaults
 TRUE = {"friction.stiction": 2.1, "friction.coulomb": 1.35, "friction.viscous": 0.05,
@@ -52,11 +53,26 @@ def scaling_log():
 
 def test_stiction_and_coulomb_recovered(stiction_log):
     r = ex.analyse_stiction(stiction_log, input_gain=TRUE["plant.input_gain"])
+    assert r["warnings"] == []
     for d in ("", "_positive", "_negative"):
         assert _close(r["stiction" + d], TRUE["friction.stiction"], 0.05), r
         assert _close(r["coulomb" + d], TRUE["friction.coulomb"], 0.05), r
     assert r["breakaway_time_positive"] < r["breakaway_time_negative"]
     assert {s["direction"] for s in r["segments"]} == {"positive", "negative"}
+
+
+def test_stiction_staircase_broken_at_its_first_level_is_an_upper_bound():
+    """One level (the step is larger than the stiction): the log only bounds
+    the stiction from above; the estimate is half the level, with a warning."""
+    cfg = build_config(friction="classical", sets=[("friction.stiction", 0.1),
+                                                   ("friction.coulomb", 0.08)])
+    r = ex.analyse_stiction(ex.simulate_stiction(cfg, step=0.5))
+    assert r["stiction_positive"] == pytest.approx(0.25)
+    assert r["stiction_negative"] == pytest.approx(0.25)
+    assert len(r["warnings"]) == 2
+    assert all("first level" in w and "at most 0.5" in w for w in r["warnings"])
+    # the Coulomb runs (30-90 % of the breakaway u) still count
+    assert _close(r["coulomb"], 0.08, 0.05)
 
 
 def test_stiction_sees_asymmetric_friction():
@@ -126,6 +142,17 @@ def test_free_oscillation_analysis_on_eq22(omega0, zeta, amp, phase):
     assert r["rest_angle"] == pytest.approx(3.18, abs=1e-3)
 
 
+def test_free_oscillation_that_grows_warns_instead_of_clipping_silently():
+    h = 0.005
+    t = np.arange(0, 10.0, h)
+    theta = 3.18 + 0.03 * np.exp(0.05 * t) * np.cos(7.0 * t)
+    r = ex.analyse_free_oscillation({"t": t, "theta_m": theta})
+    assert r["zeta_peaks"] == 0.0
+    assert len(r["warnings"]) == 1 and "grows" in r["warnings"][0]
+    decaying = 3.18 + 0.03 * np.exp(-0.3 * t) * np.cos(7.0 * t)
+    assert ex.analyse_free_oscillation({"t": t, "theta_m": decaying})["warnings"] == []
+
+
 @pytest.mark.parametrize("ext", [".csv", ".dat"])
 def test_saved_log_gives_the_same_estimates(tmp_path, stiction_log, scaling_log, ext):
     for log, analyse in ((stiction_log, ex.analyse_stiction),
@@ -148,16 +175,41 @@ def test_log_without_the_needed_signal(tmp_path):
         ex.analyse_free_oscillation(read_log(path))
 
 
+def test_dat_log_warns_when_its_run_missed_ticks(tmp_path, oscillation_log):
+    import json
+
+    dat = tmp_path / "run1.dat"
+    oscillation_log.save(dat)
+    assert log_warnings(dat) == []  # no sidecar: nothing known
+    sidecar = tmp_path / "run1.json"
+    sidecar.write_text(json.dumps({"stats": {"missed": 0}, "dropped_log_samples": 0}))
+    assert log_warnings(dat) == []
+    sidecar.write_text(json.dumps({"stats": {"missed": 3}, "dropped_log_samples": 0}))
+    (w,) = log_warnings(dat)
+    assert "3 missed tick(s)" in w and "run1.csv" in w
+    sidecar.write_text(json.dumps({"stats": {"missed": 2}, "dropped_log_samples": 5}))
+    (w,) = log_warnings(dat)
+    assert "2 missed tick(s) and 5 dropped log sample(s)" in w
+    sidecar.write_text("{not json")
+    assert log_warnings(dat) == []
+    # a .csv has its time column
+    oscillation_log.save(tmp_path / "run1.csv")
+    assert log_warnings(tmp_path / "run1.csv") == []
+
+
 @pytest.mark.parametrize("text, match", [
     ("", "empty"),
+    ("t,u\n", "no samples"),
     ("t,u\n1,2,3\n", "columns"),
     ("t,u\n1,a\n", "malformed"),
 ])
 def test_read_log_rejects(tmp_path, text, match):
     path = tmp_path / "bad.csv"
     path.write_text(text)
-    with pytest.raises(ValueError, match=match):
-        read_log(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the error alone, no numpy warning before it
+        with pytest.raises(ValueError, match=match):
+            read_log(path)
     with pytest.raises(ValueError, match="extension"):
         read_log(tmp_path / "bad.txt")
 

@@ -57,7 +57,7 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import closing
+from contextlib import closing, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -341,6 +341,40 @@ def _get_pool(workers: int):
         return ex
 
 
+@contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM while a process pool starts and takes its tasks.
+
+    A worker that forks from the forkserver unpickles its pool's queues
+    after its parent has moved on; a parent interrupted in that window (in
+    the middle of ``submit``, before the pool's manager thread exists)
+    exits without waiting for the worker and unlinks the queues' semaphores,
+    and the worker prints a ``SemLock`` traceback.  Held here, the signal is
+    delivered once the pool is complete, so that :func:`shutdown` at exit
+    waits for the workers.  Outside the main thread (where handlers cannot
+    be set) this does nothing.
+    """
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: held.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if held:
+            handler = previous[held[0]]
+            if callable(handler):
+                handler(held[0], None)
+            elif handler == signal.SIG_DFL:
+                os.kill(os.getpid(), held[0])
+
+
 def _drop_pool(workers: int, ex) -> None:
     with _lock:
         if _pools.get(workers) is ex:
@@ -541,9 +575,10 @@ def iter_evaluate(
         from concurrent.futures import as_completed
         from concurrent.futures.process import BrokenProcessPool
 
-        ex = _get_pool(n_workers)
-        futs = {ex.submit(_run_chunk, base, [pts[i] for i in idx], duration, window): idx
-                for idx in chunks}
+        with _interrupts_deferred():
+            ex = _get_pool(n_workers)
+            futs = {ex.submit(_run_chunk, base, [pts[i] for i in idx], duration, window): idx
+                    for idx in chunks}
         try:
             for fut in as_completed(futs):
                 idx = futs[fut]

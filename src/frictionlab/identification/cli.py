@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import sys
 
 from ..cli import UsageError, _add_config_args, emit_json, progress_bar
@@ -124,24 +125,31 @@ def cmd_limit_cycle(args) -> int:
     tty = err.isatty()
     last = [-1]
 
-    with progress_bar("fitting", tty and not args.quiet) as upd:
-        def progress(stage: str, frac: float, cost: float) -> None:
-            upd(0.9 * frac if stage == "global" else 0.9 + 0.1 * frac)
-            if tty or args.quiet:
-                return
-            # not a terminal (a log file): a line per 10 % of the global search
-            step = int(10 * frac) if stage == "global" else 10 + int(frac)
-            if step > last[0]:
-                last[0] = step
-                what = ("global search" if stage == "global" else "least-squares polish")
-                print(f"{what}: {100 * frac:3.0f} %, best cost {cost:.4g}", file=err)
+    def on_term(signum, frame):
+        raise KeyboardInterrupt  # main() says "interrupted" in one line, exit 130
 
-        result = fit_limit_cycle(
-            experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
-            weights=weights, duration=args.duration, window=args.window,
-            workers=args.workers, dask=args.dask, seed=args.seed, maxiter=args.maxiter,
-            popsize=args.popsize, rel_step=args.rel_step, progress=progress,
-            stiction_above_coulomb=constrained)
+    previous = signal.signal(signal.SIGTERM, on_term)
+    try:
+        with progress_bar("fitting", tty and not args.quiet) as upd:
+            def progress(stage: str, frac: float, cost: float) -> None:
+                upd(0.9 * frac if stage == "global" else 0.9 + 0.1 * frac)
+                if tty or args.quiet:
+                    return
+                # not a terminal (a log file): a line per 10 % of the global search
+                step = int(10 * frac) if stage == "global" else 10 + int(frac)
+                if step > last[0]:
+                    last[0] = step
+                    what = ("global search" if stage == "global" else "least-squares polish")
+                    print(f"{what}: {100 * frac:3.0f} %, best cost {cost:.4g}", file=err)
+
+            result = fit_limit_cycle(
+                experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
+                weights=weights, duration=args.duration, window=args.window,
+                workers=args.workers, dask=args.dask, seed=args.seed, maxiter=args.maxiter,
+                popsize=args.popsize, rel_step=args.rel_step, progress=progress,
+                stiction_above_coulomb=constrained)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     for w in result.warnings:
         print(f"warning: {w}", file=err)
     print(f"done in {result.seconds:.1f} s: {result.evaluations} parameter sets, "

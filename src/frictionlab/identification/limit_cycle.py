@@ -31,7 +31,10 @@ Search
    (in coordinates normalised to [0, 1]); each generation's population is
    evaluated in one batch through :func:`frictionlab.sweep.evaluate` (all
    experiments of all members in one call, so a process pool or a Dask
-   cluster works on the whole generation).
+   cluster works on the whole generation).  The engine's workers are chosen
+   once for the whole fit (:func:`frictionlab.sweep.auto_workers` on the
+   fit's largest number of runs): a generation alone is too small to pay
+   for a process pool, the fit is not, and the pool is kept.
 2. Local: :func:`scipy.optimize.least_squares` (trust region reflective,
    within the bounds) from the best point, with a central-difference
    Jacobian whose relative step (default 1 %) lies well above the
@@ -40,12 +43,47 @@ Search
    locked to the 5 ms sampling moves in steps of a few ms).  The 2n
    perturbed points of one Jacobian are again one batch.
 
+Stiction above Coulomb
+----------------------
+The classical (eq. 17) and LuGre (eq. 18) models take the static friction
+to be at least the kinetic one, :math:`F_S \ge F_C` (Sec. 4: "the static
+friction force is larger than the kinetic friction force").  When a
+stiction and its Coulomb level are both fitted (:data:`STICTION_PAIRS`), the
+search covers only that region, by construction rather than by a penalty:
+the stiction's normalised coordinate spans
+:math:`[\max(F_S^{lo}, F_C), F_S^{hi}]`, so every point of the unit box is
+feasible and the global search wastes no member (bounds narrowed
+accordingly: :math:`F_C \le F_S^{hi}`, :math:`F_S \ge F_C^{lo}`).  An
+estimate on the constraint is warned about.  ``stiction_above_coulomb=False``
+lifts it.
+
 Uncertainty and identifiability
 -------------------------------
 With J the Jacobian of the residuals at the optimum (m residuals, n keys),
-the covariance is estimated as :math:`s^2 (J^T J)^{-1}`, with the residual
-variance :math:`s^2 = C/(m - n)`.  With m <= n, or a singular :math:`J^T J`,
-no standard error is reported (``None``) and a warning says why.
+the covariance is estimated as
+
+.. math::
+
+    \frac{\nu}{\nu - 2}\,(s^2 + s_j^2)\,(J^T J)^{-1},
+    \qquad s^2 = C/\nu, \quad \nu = m - n.
+
+* J comes from straight-line fits of each residual through the optimum and
+  the points 1 and 2 steps (``rel_step``) to either side of it along each
+  key (:meth:`LimitCycleProblem.line_fit`), not from one central difference:
+  a single step can land on a jump of the piecewise-constant features and
+  set a column of J several times too steep, which made the standard error
+  of that key several times too small.
+* :math:`s_j^2` is the simulator's own feature jitter: the pooled variance
+  of the residuals about those lines.  It limits how well even noise-free
+  features determine the parameters, and the optimiser partly fits it away
+  from :math:`C`.
+* :math:`\nu/(\nu - 2)`: with :math:`s^2` estimated from :math:`\nu`
+  degrees of freedom, the standardised error is Student-t distributed, and
+  this factor makes the reported value its standard deviation (the
+  marginal posterior standard deviation under a flat prior on the
+  parameters and on :math:`\log\sigma`).  With :math:`\nu \le 2` that
+  variance is infinite: no standard error is reported (``None``), as with a
+  singular :math:`J^T J`, and a warning says why.
 
 The identifiability check takes the singular value decomposition of the
 Jacobian scaled to relative parameter changes, :math:`J\,\mathrm{diag}(|p|)`:
@@ -330,6 +368,14 @@ class LimitCycleProblem:
         When a stiction and its Coulomb level are both fitted
         (``friction.stiction`` and ``friction.coulomb``, or the ``_negative``
         pair), search only F_S >= F_C (see :attr:`pairs`).
+
+    Attributes
+    ----------
+    lo, hi : ndarray
+        The searched bounds of the keys (narrowed by the constraints).
+    pairs : list of (int, int)
+        Indices (Coulomb, stiction) into ``keys`` of the pairs searched
+        with stiction >= Coulomb level.
     """
 
     def __init__(
