@@ -813,10 +813,11 @@ POLISH_NFEV = 12
 def _max_runs(prob: LimitCycleProblem, maxiter: int, popsize: int) -> int:
     """Most simulations a fit runs: every generation of the global search
     (the initial population and ``maxiter`` more), the polish (a residual
-    vector and a central-difference Jacobian per step) and the final
-    Jacobian, each parameter set once per experiment."""
+    vector and a central-difference Jacobian per step), and the optimum
+    with the 4 points per key of :meth:`LimitCycleProblem.line_fit`, each
+    parameter set once per experiment."""
     members = popsize * prob.n
-    polish = (POLISH_NFEV + 1) * (2 * prob.n + 1)
+    polish = POLISH_NFEV * (2 * prob.n + 1) + 4 * prob.n + 1
     return len(prob.experiments) * (members * (maxiter + 1) + polish)
 
 
@@ -957,8 +958,9 @@ def fit_limit_cycle(
             at_constraint.add(i_s)
             warnings.append(
                 f"{prob.keys[i_s]} = {prob.keys[ic]} = {p[ic]:.4g}: the estimate is at the "
-                "constraint stiction >= Coulomb level, which the fit enforces (the features "
-                "would prefer a lower stiction); --allow-stiction-below-coulomb lifts it")
+                "constraint stiction >= Coulomb level, which the fit enforces (the "
+                "unconstrained optimum may lie below it); --allow-stiction-below-coulomb "
+                "lifts it")
     for i, (k, v, lo, hi) in enumerate(zip(prob.keys, p, prob.lo, prob.hi, strict=True)):
         if i in at_constraint:
             continue
