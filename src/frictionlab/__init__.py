@@ -6,7 +6,8 @@ Inverted Pendulum" (Lund, 1996).  The public API:
 * parameters: :class:`PlantParams`, :class:`DesignSpec`, :class:`FrictionParams`,
   :class:`SimParams`, :class:`Config`, :func:`build_config`
 * physics: :func:`rhs` (eq. 6), :func:`linearize`, :func:`zoh`
-* friction: :func:`make_model`, :class:`FrictionModel`
+* friction: :func:`make_model`, :class:`FrictionModel` (one subclass per model:
+  :mod:`frictionlab.friction`)
 * design: :func:`design`, :func:`preset`
 * observers and controller: :class:`PendulumObserver`, :class:`ArmObserver`,
   :class:`Controller`

@@ -53,8 +53,14 @@ Models
 
 The pure force laws are numba-compiled functions over a packed parameter
 vector (:meth:`FrictionParams.pack`) so that the simulator, the observers and
-the real-time loop share them.  The Python classes returned by
-:func:`make_model` wrap the same functions for interactive use and tests.
+the real-time loop share them.  For interactive use each model is also a
+small frozen object wrapping the same functions (:func:`make_model` returns
+one): :class:`NoFriction`, :class:`Viscous`, :class:`Coulomb` (``init`` and
+``force(v, s) -> (F, s)``), :class:`Classical` and :class:`Stribeck`
+(``force(v, fe)``), :class:`LuGre` (``init``, ``dz``, ``force`` and the exact
+``step(z, v, dt) -> (F_mean, z)``).  Their parameters are one validated
+:class:`FrictionParams` (the ``friction.*`` / ``compensation.*`` keys); each
+model reads the fields listed above.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -70,8 +77,15 @@ from ._validation import Validated, param
 
 __all__ = [
     "KINDS",
+    "MODELS",
+    "Classical",
+    "Coulomb",
     "FrictionModel",
     "FrictionParams",
+    "LuGre",
+    "NoFriction",
+    "Stribeck",
+    "Viscous",
     "classical_force",
     "coulomb_relay",
     "lugre_dz",
@@ -346,72 +360,149 @@ def lugre_step_exact(v, z, e, dt, p):
 
 
 # --------------------------------------------------------------------------
-# Python objects
+# Python objects: one small frozen object per model
 # --------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class FrictionModel:
-    """A friction model: its kind, parameters, and pure force law.
+    """Base of the friction models: a kind and its (validated) parameters.
 
-    Stateful models keep no state inside: the relay state ``s`` (Coulomb)
-    and the bristle deflection ``z`` (LuGre) are passed in and returned.
+    Each model is a frozen dataclass with a pure force law over the compiled
+    functions above; stateful models keep no state inside: the relay state
+    ``s`` (Coulomb) and the bristle deflection ``z`` (LuGre) are passed in
+    and returned (``init`` gives their initial value).  Build one with
+    :func:`make_model`.
     """
 
-    kind: str
     params: FrictionParams = dataclasses.field(default_factory=FrictionParams)
-
-    def __post_init__(self) -> None:
-        _check_kind(self.kind)
+    kind: ClassVar[str] = "none"
+    has_state: ClassVar[bool] = False
 
     @property
     def code(self) -> int:
+        """The model's integer code (index in :data:`KINDS`)."""
         return KINDS.index(self.kind)
 
-    @property
-    def has_state(self) -> bool:
-        return self.kind in ("coulomb", "lugre")
-
-    def force(self, v: float, fe: float = 0.0, state: float = 0.0, e: float = 0.0):
-        """Friction force.
-
-        Parameters
-        ----------
-        v : float
-            Arm velocity (rad/s).
-        fe : float
-            External force in units of u (classical models only).
-        state : float
-            Relay state s (Coulomb) or bristle deflection z (LuGre).
-        e : float
-            Observer error of eq. (19) (LuGre only).
-
-        Returns
-        -------
-        (F, state_or_rate)
-            For the Coulomb relay the new relay state; for LuGre the bristle
-            rate dz/dt; otherwise the input ``state`` unchanged.
-        """
-        p = self.params.pack()
-        if self.kind == "lugre":
-            dz = lugre_dz(v, state, e, p)
-            return lugre_force(v, state, dz, p), dz
-        return static_force(self.code, v, fe, state, p)
+    def _p(self) -> np.ndarray:
+        return self.params.pack()
 
     def steady_state(self, v: float) -> float:
-        """Friction in steady sliding at constant velocity ``v`` (the Stribeck curve
-        for LuGre and the ``stribeck`` model)."""
-        p = self.params.pack()
-        if self.kind in ("lugre", "stribeck"):
-            return float(stribeck_curve(v, p)) if self.kind == "lugre" else float(
-                stribeck_classical_force(v, 0.0, p))
-        f, _ = static_force(self.code, v, 0.0, float(np.sign(v)), p)
+        """Friction in steady sliding at constant velocity ``v``."""
+        f, _ = static_force(self.code, v, 0.0, float(np.sign(v)), self._p())
         return float(f)
 
 
+@dataclass(frozen=True)
+class NoFriction(FrictionModel):
+    """No friction (``none``)."""
+
+    def force(self, v: float) -> float:
+        """Always 0."""
+        return 0.0
+
+
+@dataclass(frozen=True)
+class Viscous(FrictionModel):
+    """Viscous friction :math:`F = F_v v` (``F_v^-`` for v < 0 when given)."""
+
+    kind: ClassVar[str] = "viscous"
+
+    def force(self, v: float) -> float:
+        """Friction at arm velocity ``v`` (rad/s), in m/s^2."""
+        return float(static_force(VISCOUS, v, 0.0, 0.0, self._p())[0])
+
+
+@dataclass(frozen=True)
+class Coulomb(FrictionModel):
+    """Coulomb relay with hysteresis :math:`\\pm\\varepsilon` (Sec. 6.1)."""
+
+    kind: ClassVar[str] = "coulomb"
+    has_state: ClassVar[bool] = True
+
+    def init(self) -> float:
+        """Initial relay state (0: not yet switched)."""
+        return 0.0
+
+    def force(self, v: float, s: float) -> tuple[float, float]:
+        """``(F, s_new)``: friction at velocity ``v`` after relay state ``s``."""
+        f, s_new = coulomb_relay(v, s, self._p())
+        return float(f), float(s_new)
+
+
+@dataclass(frozen=True)
+class Classical(FrictionModel):
+    """Stiction + Coulomb friction, eq. (17), with a zero-velocity band."""
+
+    kind: ClassVar[str] = "classical"
+
+    def force(self, v: float, fe: float) -> float:
+        """Friction at velocity ``v`` under the applied force ``fe`` (units of u)."""
+        return float(classical_force(v, fe, self._p()))
+
+
+@dataclass(frozen=True)
+class Stribeck(FrictionModel):
+    """The classical model's implementation form with Stribeck decay (Sec. 6.2)."""
+
+    kind: ClassVar[str] = "stribeck"
+
+    def force(self, v: float, fe: float) -> float:
+        """Friction at velocity ``v`` under the applied force ``fe`` (units of u)."""
+        return float(stribeck_classical_force(v, fe, self._p()))
+
+
+@dataclass(frozen=True)
+class LuGre(FrictionModel):
+    """The LuGre model, eq. (18), with the observer correction of eq. (19)."""
+
+    kind: ClassVar[str] = "lugre"
+    has_state: ClassVar[bool] = True
+
+    def init(self) -> float:
+        """Initial bristle deflection (relaxed)."""
+        return 0.0
+
+    def dz(self, v: float, z: float, e: float = 0.0) -> float:
+        """Bristle rate :math:`\\dot z` (eq. 18; ``e`` enters with gain k, eq. 19)."""
+        return float(lugre_dz(v, z, e, self._p()))
+
+    def force(self, v: float, z: float, e: float = 0.0) -> float:
+        """Friction :math:`\\sigma_0 z + \\sigma_1\\dot z + F_v v` at state ``z``."""
+        p = self._p()
+        return float(lugre_force(v, z, lugre_dz(v, z, e, p), p))
+
+    def step(self, z: float, v: float, dt: float, e: float = 0.0) -> tuple[float, float]:
+        """``(F_mean, z_new)`` over ``dt`` with ``v`` and ``e`` held: the exact
+        bristle update (:func:`lugre_step_exact`) and the mean friction."""
+        p = self._p()
+        z_new, z_mean, dz_mean = lugre_step_exact(v, z, e, dt, p)
+        return float(lugre_force(v, z_mean, dz_mean, p)), float(z_new)
+
+    def steady_state(self, v: float) -> float:
+        """The Stribeck curve :math:`s(v)\\,\\mathrm{sgn}(v) + F_v v`."""
+        return float(stribeck_curve(v, self._p()))
+
+
+#: The model class of each kind.
+MODELS: dict[str, type[FrictionModel]] = {
+    m.kind: m for m in (NoFriction, Viscous, Coulomb, Classical, Stribeck, LuGre)}
+
+
 def make_model(kind: str, params: FrictionParams | None = None, **overrides) -> FrictionModel:
-    """Build a friction model, e.g. ``make_model("lugre", sigma0=300)``."""
+    """Build a friction model, e.g. ``make_model("lugre", sigma0=300)``.
+
+    Parameters
+    ----------
+    kind : str
+        One of :data:`KINDS`.
+    params : FrictionParams, optional
+        Base parameters (default: the thesis values).
+    **overrides
+        Fields of :class:`FrictionParams` to change (validated).
+    """
+    _check_kind(kind)
     base = params if params is not None else FrictionParams()
     if overrides:
         base = dataclasses.replace(base, **overrides)
-    return FrictionModel(kind, base)
+    return MODELS[kind](base)
