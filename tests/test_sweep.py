@@ -33,10 +33,10 @@ from frictionlab.sweep import (
     columns,
     evaluate,
     make_points,
-    markdown_table,
     parse_vary,
     shutdown,
 )
+from frictionlab.sweep_cli import UNDEFINED_MARKERS, markdown_table, plot_sweep
 
 BAND = "friction.zero_velocity_band=0.03"
 TABLE2_FC = tuple(TABLE2)  # 1.1, 1.3, 1.5, 1.7, 1.9
@@ -498,8 +498,6 @@ def test_plot_leaves_undefined_features_out_and_marks_falls_on_the_edge(tmp_path
     defined values, not pulled to 0."""
     import matplotlib.figure
 
-    from frictionlab.sweep import UNDEFINED_MARKERS, plot_sweep
-
     figures = []
     save = matplotlib.figure.Figure.savefig
 
@@ -537,14 +535,41 @@ def test_plot_leaves_undefined_features_out_and_marks_falls_on_the_edge(tmp_path
     assert any(t.startswith("fell") for t in legend)
 
 
-def test_plot_file_and_engine_does_not_import_matplotlib(tmp_path):
+def test_plot_file(tmp_path):
     png = tmp_path / "s.png"
     rc, out, _ = run_cli("--vary", "friction.coulomb=1.1,1.5", "--vary", "plant.omega0=6.8,7.5",
                          "--duration", "5", "--out", str(tmp_path / "p.csv"),
                          "--plot", str(png), "--json", "--no-progress")
     assert rc == 0 and json.loads(out)["rows"] == 4
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    probe = subprocess.run(
-        [sys.executable, "-c", "import sys, frictionlab.sweep; print('matplotlib' in sys.modules)"],
-        capture_output=True, text=True, timeout=120)
-    assert probe.stdout.strip() == "False"
+
+
+#: What the engine must not import: the command line, plotting, terminal output.
+EDGE_MODULES = ("frictionlab.cli", "frictionlab.sweep_cli", "matplotlib", "rich")
+
+
+def test_engine_imports_no_cli_plotting_or_terminal_code():
+    """frictionlab.sweep is numerics and files: no import of the CLI, matplotlib or
+    rich anywhere in its source (also inside functions), and none at run time."""
+    import ast
+
+    tree = ast.parse(Path(sweep_module.__file__).read_text(encoding="utf-8"))
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = ".".join(filter(None, ["frictionlab" if node.level else "", node.module]))
+            imported.add(base)
+            imported.update(f"{base}.{a.name}" for a in node.names)
+    bad = {m for m in imported for edge in EDGE_MODULES
+           if m == edge or m.startswith(edge + ".")}
+    assert not bad, bad
+    code = ("import sys, frictionlab.sweep as s\n"
+            "from frictionlab.config import build_config\n"
+            "s.evaluate(build_config(), [{'friction.coulomb': 1.3}], duration=2, workers=1)\n"
+            f"print([m for m in {EDGE_MODULES!r} if m in sys.modules])")
+    probe = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           timeout=120)
+    assert probe.returncode == 0, probe.stderr
+    assert probe.stdout.strip() == "[]"

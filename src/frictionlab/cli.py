@@ -255,9 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _register_subcommands(sub) -> None:
     """The subcommands that live beside the numerics they drive."""
-    from . import compensation_cli, identification, realtime_cli, sweep
+    from . import compensation_cli, identification, realtime_cli, sweep_cli
 
-    for mod in (sweep, identification, compensation_cli, realtime_cli):
+    for mod in (sweep_cli, identification, compensation_cli, realtime_cli):
         mod.register_cli(sub)
 
 
