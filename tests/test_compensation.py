@@ -28,6 +28,7 @@ from frictionlab.config import PLANT_FRICTION_KINDS, ConfigError, build_config
 from frictionlab.controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
 from frictionlab.design import design as make_design
 from frictionlab.friction import FrictionParams, stribeck_curve, stribeck_level
+from frictionlab.limit_cycles import FEATURES
 from frictionlab.simulation import simulate_config
 
 DUR, WIN = 30.0, 15.0
@@ -411,7 +412,7 @@ def test_tune_validates_before_evaluating(monkeypatch):
 def small_tune():
     cfg = build_config("fast", "classical", "coulomb", sets=[NOISE])
     grid = [("compensation.hysteresis", [0.0, 0.05])]
-    return cfg, tune(cfg, grid, duration=20.0, workers=1, shortlist=2)
+    return cfg, tune(cfg, grid, duration=20.0, workers=1)
 
 
 def test_tune_picks_the_best_penalised_point(small_tune):
@@ -438,50 +439,124 @@ def test_tune_without_penalty_prefers_smallest_limit_cycle(small_tune):
     assert res.best == best["values"]
 
 
-def test_tune_ranks_the_grid_through_the_sweep_engine(monkeypatch):
-    """Stage 1 is one call of frictionlab.sweep.evaluate with every grid point and the
-    caller's workers/dask; the ranking uses its rows (here doctored: the point with the
-    smaller limit cycle is reported as fallen, so it must lose)."""
+def test_tune_matches_an_independent_computation():
+    """Every grid point and the baseline computed here with simulate_config and
+    chatter (what tune re-ran in-process before the engine carried chatter):
+    tune's result is the same, exactly."""
+    from frictionlab.limit_cycles import trajectory_features
+
+    cfg = build_config("fast", "classical", "coulomb", sets=[NOISE])
+    grid = [("compensation.hysteresis", [0.0, 0.02, 0.05]), ("compensation.coulomb", [1.3, 1.7])]
+    dur, win = 20.0, 8.0
+
+    def run(c):
+        traj = simulate_config(c, dur)
+        feats = trajectory_features(traj, win)
+        status = "fell" if traj.status == "fell" else feats.status
+        return status, feats.peak_to_peak, chatter(traj, win)
+
+    expected = []
+    for eps in (0.0, 0.02, 0.05):
+        for fc in (1.3, 1.7):
+            values = {"compensation.hysteresis": eps, "compensation.coulomb": fc}
+            status, ptp, ch = run(cfg.with_values(values))
+            assert status in ("limit_cycle", "settled") and ptp is not None
+            expected.append({"values": values, "status": status, "peak_to_peak": ptp,
+                             "chatter": ch.as_dict(),
+                             "score": ptp * (1 + 0.05 * ch.reversals_per_s)})
+    expected.sort(key=lambda c: c["score"])
+    b_status, b_ptp, b_ch = run(dataclasses.replace(cfg, compensation_kind="none"))
+
+    res = tune(cfg, grid, duration=dur, window=win, workers=1)
+    assert res.candidates == expected
+    assert res.best == expected[0]["values"]
+    assert (res.peak_to_peak, res.score) == (expected[0]["peak_to_peak"], expected[0]["score"])
+    assert res.chatter.as_dict() == expected[0]["chatter"]
+    assert (res.baseline_status, res.baseline_peak_to_peak) == (b_status, b_ptp)
+    assert res.baseline_chatter == b_ch
+    assert (res.evaluated, res.failed) == (6, 0)
+    # the pool gives the same result
+    assert tune(cfg, grid, duration=dur, window=win, workers=2) == res
+
+
+def test_tune_ranks_the_grid_and_the_baseline_from_the_engine_rows(monkeypatch):
+    """Two calls of frictionlab.sweep.evaluate (the grid, then the loop without
+    compensation), both with the caller's workers/dask and reduced by
+    features_and_chatter; the ranking, the chatter and the baseline come from
+    their rows (here doctored) and nothing is simulated outside them."""
+    import frictionlab.simulation
     import frictionlab.sweep as sweep
 
-    real = sweep.evaluate
-    calls = []
+    real_eval, real_sim = sweep.evaluate, frictionlab.simulation.simulate_config
+    calls, outside = [], []
+    inside = [False]
 
     def spy(base, points, **kw):
         calls.append((base, [dict(p) for p in points], kw))
-        rows = real(base, points, **kw)
-        calls.append([r["peak_to_peak"] for r in rows])
+        inside[0] = True
+        try:
+            rows = real_eval(base, points, **kw)
+        finally:
+            inside[0] = False
         for r in rows:
-            if r["compensation.hysteresis"] == 0.0:
-                r["status"] = "fell"
+            if r.get("compensation.hysteresis") == 0.0:
+                r["status"] = "fell"  # the smaller limit cycle, reported as fallen: it loses
+            elif "compensation.hysteresis" in r:
+                r["reversals_per_s"], r["u_roughness"] = 40.0, 0.5
+            else:
+                r["peak_to_peak"], r["reversals_per_s"], r["u_roughness"] = 1.25, 7.0, 0.25
         return rows
 
+    def counting_simulate(*a, **k):
+        if not inside[0]:
+            outside.append(a)
+        return real_sim(*a, **k)
+
     monkeypatch.setattr(sweep, "evaluate", spy)
+    monkeypatch.setattr(frictionlab.simulation, "simulate_config", counting_simulate)
     cfg = build_config("fast", "classical", "coulomb", sets=[NOISE])
+    progress = []
     res = tune(cfg, [("compensation.hysteresis", [0.0, 0.05])], duration=20.0, workers=1,
-               chatter_weight=0.0)
-    assert len(calls) == 2  # one evaluate call, and its true peak-to-peaks
-    (base, points, kw), (ptp0, ptp5) = calls
-    assert base == cfg
-    assert points == [{"compensation.hysteresis": 0.0}, {"compensation.hysteresis": 0.05}]
-    assert kw["workers"] == 1 and kw["dask"] is None and kw["duration"] == 20.0
-    assert ptp0 < ptp5  # undoctored, eps = 0 would win at chatter_weight 0
+               progress=lambda d, n: progress.append((d, n)))
+    assert not outside
+    (grid_base, grid_points, grid_kw), (b_base, b_points, b_kw) = calls
+    assert grid_base == cfg
+    assert grid_points == [{"compensation.hysteresis": 0.0}, {"compensation.hysteresis": 0.05}]
+    assert b_base == dataclasses.replace(cfg, compensation_kind="none") and b_points == [{}]
+    for kw in (grid_kw, b_kw):
+        assert kw["workers"] == 1 and kw["dask"] is None and kw["duration"] == 20.0
+        assert kw["reduce"] is comp.features_and_chatter
     assert res.evaluated == 2 and res.failed == 1
     assert [c["values"] for c in res.candidates] == [{"compensation.hysteresis": 0.05}]
     assert res.best == {"compensation.hysteresis": 0.05}
+    assert res.chatter == comp.ChatterMetrics(40.0, 0.5)
+    assert res.score == pytest.approx(res.peak_to_peak * (1 + 0.05 * 40.0))
+    assert res.baseline_peak_to_peak == 1.25
+    assert res.baseline_chatter == comp.ChatterMetrics(7.0, 0.25)
+    assert progress[-1] == (3, 3) and [d for d, _ in progress] == sorted(d for d, _ in progress)
 
 
-def test_tune_returns_the_plotted_runs_instead_of_rerunning_them(small_tune):
+def test_tune_returns_the_winners_and_the_baselines_runs(small_tune):
     cfg, res = small_tune
     again, traj_on, traj_off = tune(cfg, [("compensation.hysteresis", [0.0, 0.05])],
-                                    duration=20.0, workers=1, shortlist=2,
-                                    return_trajectories=True)
+                                    duration=20.0, workers=1, return_trajectories=True)
     assert again == res
     best = cfg.with_values(res.best)
     np.testing.assert_array_equal(traj_on["u"], simulate_config(best, 20.0)["u"])
     off = dataclasses.replace(cfg, compensation_kind="none")
     np.testing.assert_array_equal(traj_off["u"], simulate_config(off, 20.0)["u"])
     assert np.all(traj_off["friction_hat"] == 0.0)
+    assert chatter(traj_on).as_dict() == res.candidates[0]["chatter"]
+
+
+def test_features_and_chatter_is_the_default_row_plus_chatter():
+    from frictionlab.sweep import reduce_features
+
+    cfg = build_config("fast", "lugre", "lugre", sets=[NOISE])
+    row = comp.features_and_chatter(cfg, 10.0, None)
+    assert {k: row[k] for k in ("status", *FEATURES)} == reduce_features(cfg, 10.0, None)
+    traj = simulate_config(cfg, 10.0)
+    assert {k: row[k] for k in ("reversals_per_s", "u_roughness")} == chatter(traj).as_dict()
 
 
 def test_tune_cli_json_and_plot(tmp_path):
@@ -500,6 +575,13 @@ def test_tune_cli_json_and_plot(tmp_path):
     assert res["reduction"] > 1.0
     assert set(res["chatter"]) == {"reversals_per_s", "u_roughness"}
     assert png.stat().st_size > 10_000
+    # the fields docs/compensation.md lists; candidates: every point that stayed up
+    assert list(res) == ["compensation", "design", "friction", "best", "peak_to_peak", "score",
+                         "status", "chatter", "baseline_status", "baseline_peak_to_peak",
+                         "baseline_chatter", "reduction", "candidates", "evaluated", "failed",
+                         "seconds", "plot"]
+    assert len(res["candidates"]) == res["evaluated"] - res["failed"] == 2
+    assert res["plot"] == str(png)
 
 
 @pytest.mark.parametrize("plant", PLANT_FRICTION_KINDS)

@@ -21,9 +21,9 @@ from hypothesis import strategies as st
 import frictionlab.sweep as sweep_module
 from frictionlab.cli import main
 from frictionlab.config import ConfigError, build_config
-from frictionlab.limit_cycles import FEATURES
+from frictionlab.limit_cycles import FEATURES, trajectory_features
 from frictionlab.reference import TABLE2
-from frictionlab.simulation import run_features
+from frictionlab.simulation import run_features, simulate_config
 from frictionlab.sweep import (
     MAX_CHUNK,
     MIN_TAIL_CHUNK,
@@ -34,6 +34,7 @@ from frictionlab.sweep import (
     evaluate,
     make_points,
     parse_vary,
+    reduce_features,
     shutdown,
 )
 from frictionlab.sweep_cli import UNDEFINED_MARKERS, markdown_table, plot_sweep
@@ -215,11 +216,74 @@ def test_worker_failures_are_rows_in_the_pool():
     assert rows[0] == evaluate(base, points[:1], duration=3, workers=1)[0]
 
 
+def _reduce_with_final_arm_angle(cfg, duration, window):
+    """A reduction with an extra column (top level here: the pool gets it by reference)."""
+    traj = simulate_config(cfg, duration)
+    feats = trajectory_features(traj, window)
+    return {**feats.interface_dict(), "status": feats.status,
+            "final_arm_angle": float(traj["arm"][-1])}
+
+
+def _reduce_that_fails_above_1_6(cfg, duration, window):
+    if cfg.get("friction.coulomb") > 1.6:
+        raise RuntimeError("no reduction above F_C 1.6")
+    return reduce_features(cfg, duration, window)
+
+
+def _reduce_without_status(cfg, duration, window):
+    return dict.fromkeys(FEATURES, 0.0)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_reduce_hook_replaces_the_feature_reduction(workers):
+    """A caller's reduce runs for every point (in-process and in the pool): its
+    features and status make the row, its extra columns follow error."""
+    base = build_config("fast", "classical", sets=[BAND])
+    points = [{"friction.coulomb": v} for v in (1.3, 1.5, 1.7)]
+    rows = evaluate(base, points, duration=5, window=3, workers=workers, chunk_size=1,
+                    reduce=_reduce_with_final_arm_angle)
+    plain = evaluate(base, points, duration=5, window=3, workers=1)
+    for p, row, ref in zip(points, rows, plain, strict=True):
+        assert list(row) == [*p, *FEATURES, "status", "error", "final_arm_angle"]
+        assert {k: row[k] for k in ref} == ref  # the default reduction's row, exactly
+        traj = simulate_config(base.with_values(p), 5)
+        assert row["final_arm_angle"] == float(traj["arm"][-1])
+    # the default reduction is reduce_features
+    assert evaluate(base, points[:1], duration=5, window=3, workers=workers,
+                    reduce=reduce_features) == plain[:1]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_reduce_that_raises_gives_an_error_row(workers):
+    base = build_config("fast", "classical")
+    points = [{"friction.coulomb": v} for v in (1.3, 1.7)]
+    rows = evaluate(base, points, duration=3, workers=workers, chunk_size=1,
+                    reduce=_reduce_that_fails_above_1_6)
+    assert rows[0] == evaluate(base, points[:1], duration=3, workers=1)[0]
+    assert rows[1]["status"] == "error"
+    assert rows[1]["error"] == "RuntimeError: no reduction above F_C 1.6"
+    assert all(rows[1][f] is None for f in FEATURES)
+    # a result without a status is an error row too, naming what is missing
+    (row,) = evaluate(base, points[:1], duration=3, workers=workers,
+                      reduce=_reduce_without_status)
+    assert row["status"] == "error" and "status" in row["error"]
+
+
+def test_a_reduce_the_workers_cannot_receive_is_refused_before_any_run(monkeypatch):
+    ran = []
+    monkeypatch.setattr(sweep_module, "_run_chunk", lambda *a: ran.append(a))
+    base = build_config("fast", "classical")
+    for bad in (lambda cfg, d, w: {}, "reduce_features"):
+        with pytest.raises(TypeError, match="reduce must be"):
+            evaluate(base, [{"friction.coulomb": 1.3}], duration=3, workers=1, reduce=bad)
+    assert not ran
+
+
 #: The engine's own chunk function (also in a worker process that imports this module).
 _RUN_CHUNK = sweep_module._run_chunk
 
 
-def _chunk_that_kills_its_worker(base, points, duration, window):
+def _chunk_that_kills_its_worker(base, points, duration, window, reduce):
     """A chunk function whose worker process dies on the point F_C = 1.7.
 
     Workers receive it by reference (this module's name), so it must live at
@@ -227,7 +291,7 @@ def _chunk_that_kills_its_worker(base, points, duration, window):
     """
     if any(p.get("friction.coulomb") == 1.7 for p in points):
         os._exit(3)
-    return _RUN_CHUNK(base, points, duration, window)
+    return _RUN_CHUNK(base, points, duration, window, reduce)
 
 
 def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):

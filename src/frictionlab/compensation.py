@@ -56,15 +56,14 @@ A LuGre model with :math:`F_S = F_C = 0` (on either side of the velocity) makes
 
 Tuning
 ------
-:func:`tune` searches a grid of ``compensation.*`` values through the sweep
-engine (:func:`frictionlab.sweep.evaluate`) for the smallest peak-to-peak
-of the measured pendulum angle, then re-runs the shortlist to measure control
-chatter and picks the best ``score = peak_to_peak * (1 + w * reversals/s)``.
-Chatter is a property of the friction estimate's and u's time series, which
-the sweep engine's rows (limit-cycle features only) do not carry, so the
-shortlist and the run without compensation are simulated here, as
-trajectories; the two of them a before/after figure shows are handed back
-(``return_trajectories``) rather than simulated again.
+:func:`tune` runs a grid of ``compensation.*`` values, and the loop without
+compensation, through the sweep engine (:func:`frictionlab.sweep.evaluate`)
+and picks the point with the smallest ``score = peak_to_peak * (1 + w *
+reversals/s)`` (peak-to-peak of the measured pendulum angle).  Chatter is a
+property of the friction estimate's and u's time series, so the engine
+reduces each run with :func:`features_and_chatter`, in its workers, instead
+of to its limit-cycle features alone: every point's row carries both, and no
+run is repeated to rank it.
 """
 
 from __future__ import annotations
@@ -110,6 +109,7 @@ __all__ = [
     "check_compensator",
     "check_grid",
     "compare",
+    "features_and_chatter",
     "make_compensator",
     "reversals",
     "tune",
@@ -425,6 +425,31 @@ def _run(cfg: Config, duration: float | None, window: float | None, controller=N
     return traj, status, feats.interface_dict(), chatter(traj, window)
 
 
+def features_and_chatter(cfg: Config, duration: float | None,
+                         window: float | None) -> dict[str, Any]:
+    """One run reduced to its limit-cycle features and its :func:`chatter`.
+
+    The sweep engine's ``reduce`` for :func:`tune` (it runs in the engine's
+    workers, so it lives at module level).
+
+    Parameters
+    ----------
+    cfg : Config
+        The run's configuration.
+    duration, window : float or None
+        As for :func:`frictionlab.simulation.run_features`.
+
+    Returns
+    -------
+    dict
+        ``status``, the seven features of
+        :data:`frictionlab.limit_cycles.FEATURES`, and the fields of
+        :class:`ChatterMetrics` (``reversals_per_s``, ``u_roughness``).
+    """
+    _, status, feats, ch = _run(cfg, duration, window)
+    return {**feats, "status": status, **ch.as_dict()}
+
+
 def compare(cfg: Config, duration: float | None = None, window: float | None = None, *,
             controller=None, return_trajectories: bool = False):
     """Run ``cfg`` with its compensator and with ``compensation = none``.
@@ -498,7 +523,8 @@ class TuneResult:
     baseline_status, baseline_peak_to_peak, baseline_chatter
         The same loop without compensation.
     candidates : list of dict
-        The re-run shortlist: values, peak_to_peak, chatter, score (best first).
+        Every grid point that kept the pendulum up, best first: values,
+        status, peak_to_peak, chatter, score.
     evaluated, failed : int
         Grid points run, and those that fell or errored.
     """
@@ -564,7 +590,6 @@ def tune(
     duration: float | None = None,
     window: float | None = None,
     chatter_weight: float = 0.05,
-    shortlist: int = 8,
     workers: int | None = None,
     dask: str | None = None,
     progress: Callable[[int, int], None] | None = None,
@@ -572,14 +597,15 @@ def tune(
 ):
     """Search compensator parameters that minimise the limit cycle.
 
-    Stage 1 runs every grid point through :func:`frictionlab.sweep.evaluate`
-    and ranks the runs that kept the pendulum up by the peak-to-peak of the
-    measured pendulum angle.  Stage 2 re-runs the ``shortlist`` best (same
-    seed, so the same runs) as trajectories to measure :func:`chatter`, which
-    the sweep's rows do not carry, and returns the point with the smallest
-    ``peak_to_peak * (1 + chatter_weight * reversals_per_s)``; the run without
-    compensation, for the reduction ratio and the baseline's chatter, is a
-    trajectory run too.
+    Every grid point, and then the loop without compensation (for the
+    reduction ratio and the baseline's chatter), runs through
+    :func:`frictionlab.sweep.evaluate` with :func:`features_and_chatter` as
+    the reduction, so that each row carries the peak-to-peak of the measured
+    pendulum angle and the :func:`chatter`.  Of the points that kept the
+    pendulum up (``limit_cycle`` or ``settled`` with a peak-to-peak), the one
+    with the smallest ``peak_to_peak * (1 + chatter_weight *
+    reversals_per_s)`` wins; ties go to the smaller peak-to-peak, then to the
+    earlier grid point.
 
     Parameters
     ----------
@@ -593,13 +619,16 @@ def tune(
         Per run (defaults: ``sim.duration``; the last half).
     chatter_weight : float
         Penalty weight w (s): 20 reversals/s double the score at w = 0.05.
-    shortlist : int
-        Points re-run for the chatter measurement.
-    workers, dask, progress
-        Passed to :func:`frictionlab.sweep.evaluate`.
+    workers, dask
+        Passed to both :func:`frictionlab.sweep.evaluate` calls.
+    progress : callable, optional
+        Called as ``progress(done, total)``: runs done of the grid's points
+        and the baseline.
     return_trajectories : bool
         Also return the winner's and the baseline's trajectories (for a
-        before/after figure, without simulating them again).
+        before/after figure; the two runs are simulated once more,
+        in-process, and are the runs the rows describe: the simulator is
+        deterministic).
 
     Returns
     -------
@@ -614,48 +643,57 @@ def tune(
         :func:`check_compensator` rejects), bad weights; raised before any
         simulation.
     RuntimeError
-        No grid point, or no shortlisted point, kept the pendulum up.
+        No grid point kept the pendulum up, or the run without compensation
+        failed (an engine error row).
     """
     from .sweep import evaluate
 
     if not (isinstance(chatter_weight, int | float) and math.isfinite(chatter_weight)
             and chatter_weight >= 0):
         raise ConfigError(f"chatter weight must be >= 0, got {chatter_weight!r}")
-    if isinstance(shortlist, bool) or int(shortlist) != shortlist or shortlist < 1:
-        raise ConfigError(f"shortlist must be an integer >= 1, got {shortlist!r}")
     grid = list(grid) if grid is not None else DEFAULT_GRIDS.get(cfg.compensation_kind, [])
     points = check_grid(cfg, grid)
-    rows = evaluate(cfg, points, duration=duration, window=window, workers=workers,
-                    dask=dask, progress=progress)
-    ok = [(r["peak_to_peak"], i) for i, r in enumerate(rows)
-          if r["status"] in ("limit_cycle", "settled") and r["peak_to_peak"] is not None]
-    failed = len(rows) - len(ok)
-    if not ok:
+    total = len(points) + 1
+
+    def report(done: int, _: int) -> None:
+        if progress is not None:
+            progress(done, total)
+
+    run = {"duration": duration, "window": window, "workers": workers, "dask": dask,
+           "reduce": features_and_chatter}
+    rows = evaluate(cfg, points, progress=report, **run)
+    base_cfg = dataclasses.replace(cfg, compensation_kind="none")
+    (brow,) = evaluate(base_cfg, [{}], progress=lambda d, n: report(total, total), **run)
+    if brow["status"] == "error":
+        raise RuntimeError(f"the run without compensation failed: {brow['error']}")
+    cands = []
+    for p, r in zip(points, rows, strict=True):
+        if r["status"] not in ("limit_cycle", "settled") or r["peak_to_peak"] is None:
+            continue
+        ch = _row_chatter(r)
+        cands.append({"values": dict(p), "status": r["status"],
+                      "peak_to_peak": r["peak_to_peak"], "chatter": ch.as_dict(),
+                      "score": r["peak_to_peak"] * (1.0 + chatter_weight * ch.reversals_per_s)})
+    if not cands:
         raise RuntimeError(f"every one of the {len(rows)} grid points fell or failed; "
                            "widen the grid")
-    ok.sort()
-    cands, trajs = [], []
-    for _, i in ok[:int(shortlist)]:
-        p = points[i]
-        traj, st, feats, ch = _run(cfg.with_values(p), duration, window)
-        ptp = feats["peak_to_peak"]
-        if st == "fell" or ptp is None:
-            continue
-        score = ptp * (1.0 + chatter_weight * ch.reversals_per_s)
-        cands.append({"values": dict(p), "status": st, "peak_to_peak": ptp,
-                      "chatter": ch.as_dict(), "score": score})
-        trajs.append(traj if return_trajectories else None)
-    if not cands:
-        raise RuntimeError("no shortlisted point kept the pendulum up when re-run")
-    order = sorted(range(len(cands)), key=lambda j: cands[j]["score"])
-    cands = [cands[j] for j in order]
+    cands.sort(key=lambda c: (c["score"], c["peak_to_peak"]))  # stable: then grid order
     win = cands[0]
-    btraj, bstatus, bfeats, bch = _run(dataclasses.replace(cfg, compensation_kind="none"),
-                                       duration, window)
     res = TuneResult(
         best=win["values"], peak_to_peak=win["peak_to_peak"], score=win["score"],
         status=win["status"], chatter=ChatterMetrics(**win["chatter"]),
-        baseline_status=bstatus,
-        baseline_peak_to_peak=None if bstatus == "fell" else bfeats["peak_to_peak"],
-        baseline_chatter=bch, candidates=cands, evaluated=len(rows), failed=failed)
-    return (res, trajs[order[0]], btraj) if return_trajectories else res
+        baseline_status=brow["status"],
+        baseline_peak_to_peak=None if brow["status"] == "fell" else brow["peak_to_peak"],
+        baseline_chatter=_row_chatter(brow), candidates=cands, evaluated=len(rows),
+        failed=len(rows) - len(cands))
+    if not return_trajectories:
+        return res
+    from .simulation import simulate_config
+
+    return (res, simulate_config(cfg.with_values(res.best), duration),
+            simulate_config(base_cfg, duration))
+
+
+def _row_chatter(row: dict[str, Any]) -> ChatterMetrics:
+    """The chatter columns of a row of :func:`features_and_chatter`."""
+    return ChatterMetrics(row["reversals_per_s"], row["u_roughness"])

@@ -97,11 +97,11 @@ def register_cli(sub) -> None:
     c.set_defaults(func=cmd_compare)
     t = csub.add_parser(
         "tune", help="search compensator parameters minimising the limit cycle",
-        description="Run a grid of compensation.* values through the sweep engine, rank the "
-                    "runs by the peak-to-peak of the measured pendulum angle, re-run the "
-                    "shortlist to measure control chatter (sign reversals per second of the "
-                    "friction estimate) and report the best score peak_to_peak * (1 + W * "
-                    "reversals/s), with the reduction against no compensation.")
+        description="Run a grid of compensation.* values, and the loop without compensation, "
+                    "through the sweep engine, each run reduced to the peak-to-peak of the "
+                    "measured pendulum angle and its control chatter (sign reversals per "
+                    "second of the friction estimate); report the best score peak_to_peak * "
+                    "(1 + W * reversals/s), with the reduction against no compensation.")
     _add_config_args(t)
     t.set_defaults(compensation="lugre")
     t.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
@@ -113,8 +113,6 @@ def register_cli(sub) -> None:
                    help="analyse the last S seconds of each run (default: the last half)")
     t.add_argument("--chatter-weight", type=float, default=0.05, metavar="W",
                    help="penalty weight in s (default 0.05: 20 reversals/s double the score)")
-    t.add_argument("--shortlist", type=int, default=8,
-                   help="best points re-run to measure chatter (default 8)")
     t.add_argument("--workers", type=int, default=None,
                    help="local processes (default: all cores; 1 = in-process)")
     t.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
@@ -179,8 +177,6 @@ def cmd_tune(args) -> int:
     _check_run_args(args)
     if not (math.isfinite(args.chatter_weight) and args.chatter_weight >= 0):
         raise UsageError(f"--chatter-weight must be >= 0, got {args.chatter_weight}")
-    if args.shortlist < 1:
-        raise UsageError(f"--shortlist must be >= 1, got {args.shortlist}")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
     grid = [parse_vary(v) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]
@@ -189,12 +185,10 @@ def cmd_tune(args) -> int:
           f"{args.design} design, {cfg.friction_kind} plant friction", file=sys.stderr)
     with progress_bar(f"tune {n} points", not args.no_progress) as upd:
         res = tune(cfg, grid, duration=args.duration, window=args.window,
-                   chatter_weight=args.chatter_weight, shortlist=args.shortlist,
-                   workers=args.workers, dask=args.dask,
+                   chatter_weight=args.chatter_weight, workers=args.workers, dask=args.dask,
                    progress=lambda done, total: upd(done / total),
                    return_trajectories=bool(args.plot))
     if args.plot:
-        # the winner's and the baseline's runs from the tuning itself, not run again
         res, traj_on, traj_off = res
         plot_before_after(traj_off, traj_on, args.plot, args.window)
     out = {"compensation": cfg.compensation_kind, "design": args.design,

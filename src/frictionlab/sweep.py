@@ -13,13 +13,17 @@ Engine
 ------
 :func:`evaluate` maps a list of points (``{key: value}`` dicts applied to a
 base :class:`~frictionlab.config.Config`) to result rows, in order.  The unit
-of work is :func:`frictionlab.simulation.run_features`.  Points are shipped in
-chunks (by default at most 50 points and a quarter of a worker's share,
-shrinking towards the end so the workers finish together) so that the compiled
-simulator, not task scheduling, dominates.  A point whose
-configuration is invalid or whose simulation raises becomes a row with status
-``"error"`` and an ``error`` message; a worker that dies turns its chunk into
-such rows.  A sweep never crashes because of one point.
+of work is one closed-loop run reduced to a row: by default
+:func:`reduce_features` (:func:`frictionlab.simulation.run_features`); a
+caller that needs more of each run than its features (compensation tuning:
+the control chatter) passes its own ``reduce``, which runs in the workers
+beside the simulation so that only the row travels back.  Points are shipped
+in chunks (by default at most 50 points and a quarter of a worker's share,
+shrinking towards the end so the workers finish together) so that the
+compiled simulator, not task scheduling, dominates.  A point whose
+configuration is invalid or whose simulation (or reduction) raises becomes a
+row with status ``"error"`` and an ``error`` message; a worker that dies
+turns its chunk into such rows.  A sweep never crashes because of one point.
 
 Backends (chosen by :func:`evaluate`'s ``workers`` and ``dask``):
 
@@ -41,7 +45,8 @@ Output files
 :class:`SweepFile` writes rows as chunks complete (CSV, flushed and fsynced per
 chunk), reads them back for ``--resume``, and at the end rewrites the file in
 sweep order (atomically).  Columns: the varied keys, the seven features of
-:data:`frictionlab.limit_cycles.FEATURES`, ``status``, ``error``.  A
+:data:`frictionlab.limit_cycles.FEATURES`, ``status``, ``error`` (a
+``reduce``'s extra columns are not written).  A
 ``.parquet`` output is written at the end from all rows; while the sweep runs
 the rows go to the crash-safe CSV journal ``FILE.parquet.partial.csv``.
 A sidecar ``FILE.meta.json`` records the base configuration, duration and
@@ -74,6 +79,7 @@ __all__ = [
     "iter_evaluate",
     "make_points",
     "parse_vary",
+    "reduce_features",
     "shutdown",
     "validate_points",
 ]
@@ -256,24 +262,88 @@ def _error_row(point: Mapping[str, Any], message: str) -> dict[str, Any]:
     return row
 
 
-def _run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
-               window: float | None) -> list[dict[str, Any]]:
-    """Evaluate a chunk of points (executed in a worker process, or in-process)."""
+#: A reduction: ``reduce(cfg, duration, window) -> {"status": ..., feature: ..., ...}``.
+Reduce = Callable[[Config, float | None, float | None], Mapping[str, Any]]
+
+
+def reduce_features(cfg: Config, duration: float | None,
+                    window: float | None) -> dict[str, Any]:
+    """The default reduction of a run: its status and limit-cycle features.
+
+    Parameters
+    ----------
+    cfg : Config
+        The point's configuration.
+    duration, window : float or None
+        As for :func:`frictionlab.simulation.run_features`.
+
+    Returns
+    -------
+    dict
+        The seven features of :data:`~frictionlab.limit_cycles.FEATURES`
+        (``None`` where undefined) and ``status`` (``limit_cycle``,
+        ``settled`` or ``fell``).
+    """
     from .simulation import run_features
 
+    feats = run_features(cfg, duration, window)
+    out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
+    out["status"] = feats.status
+    return out
+
+
+def _row(point: Mapping[str, Any], result: Any) -> dict[str, Any]:
+    """A point's row from its reduction: the point, the features, status, error, extras."""
+    if not isinstance(result, Mapping):
+        raise TypeError(f"reduce returned {type(result).__name__}, not a mapping")
+    missing = [k for k in ("status", *FEATURES) if k not in result]
+    if missing:
+        raise ValueError(f"reduce returned no {', '.join(missing)}")
+    if result["status"] not in STATUSES[:-1]:
+        raise ValueError(f"reduce returned status {result['status']!r}; expected one of "
+                         f"{', '.join(STATUSES[:-1])}")
+    row: dict[str, Any] = dict(point)
+    row.update({name: _clean(result[name]) for name in FEATURES})
+    row["status"] = result["status"]
+    row["error"] = None
+    for k, v in result.items():
+        if k in FEATURES or k == "status":
+            continue
+        if k in row:
+            raise ValueError(f"reduce returned a column {k!r}, which the row has already")
+        row[k] = v
+    return row
+
+
+def _run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
+               window: float | None, reduce: Reduce | None = None) -> list[dict[str, Any]]:
+    """Evaluate a chunk of points (executed in a worker process, or in-process).
+
+    Each point's configuration is run and reduced by ``reduce`` (default
+    :func:`reduce_features`); a point whose configuration is invalid, or whose
+    run or reduction raises, is an error row.
+    """
+    reduce = reduce_features if reduce is None else reduce
     rows = []
     for p in points:
         try:
-            feats = run_features(base.with_values(p), duration, window)
+            rows.append(_row(p, reduce(base.with_values(p), duration, window)))
         except Exception as exc:
             rows.append(_error_row(p, f"{type(exc).__name__}: {exc}"))
-            continue
-        row: dict[str, Any] = dict(p)
-        row.update({name: _clean(getattr(feats, name)) for name in FEATURES})
-        row["status"] = feats.status
-        row["error"] = None
-        rows.append(row)
     return rows
+
+
+def _check_reduce(reduce: Any) -> None:
+    """A ``reduce`` must reach the workers by reference: a picklable top-level function."""
+    import pickle
+
+    if not callable(reduce):
+        raise TypeError(f"reduce must be a function, got {type(reduce).__name__}")
+    try:
+        pickle.dumps(reduce)
+    except Exception as exc:
+        raise TypeError(f"reduce must be a picklable top-level function (it runs in worker "
+                        f"processes); {reduce!r} is not: {exc}") from None
 
 
 def _warm_up() -> None:
@@ -541,6 +611,7 @@ def iter_evaluate(
     workers: int | None = None,
     dask: str | None = None,
     chunk_size: int | None = None,
+    reduce: Reduce | None = None,
 ) -> Iterator[tuple[list[int], list[dict[str, Any]]]]:
     """Evaluate ``points`` chunk by chunk, yielding ``(indices, rows)`` as chunks complete.
 
@@ -548,6 +619,8 @@ def iter_evaluate(
     the generator early cancels the chunks not yet started.
     """
     n = len(points)
+    if reduce is not None:
+        _check_reduce(reduce)
     if workers is not None and (isinstance(workers, bool) or int(workers) != workers
                                 or workers < 1):
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
@@ -567,7 +640,8 @@ def iter_evaluate(
 
     if backend == "serial":
         for idx in chunks:
-            yield list(idx), _run_chunk(base, [pts[i] for i in idx], duration, window)
+            yield list(idx), _run_chunk(base, [pts[i] for i in idx], duration, window,
+                                        reduce)
         return
 
     if backend == "pool":
@@ -576,7 +650,8 @@ def iter_evaluate(
 
         with _interrupts_deferred():
             ex = _get_pool(n_workers)
-            futs = {ex.submit(_run_chunk, base, [pts[i] for i in idx], duration, window): idx
+            futs = {ex.submit(_run_chunk, base, [pts[i] for i in idx], duration, window,
+                              reduce): idx
                     for idx in chunks}
         try:
             for fut in as_completed(futs):
@@ -597,7 +672,7 @@ def iter_evaluate(
     from distributed import as_completed as dask_completed
 
     client = _get_dask(dask, workers)
-    dfuts = [client.submit(_run_chunk, base, [pts[i] for i in idx], duration, window,
+    dfuts = [client.submit(_run_chunk, base, [pts[i] for i in idx], duration, window, reduce,
                            pure=False) for idx in chunks]
     index = {f.key: idx for f, idx in zip(dfuts, chunks, strict=True)}
     try:
@@ -628,8 +703,9 @@ def evaluate(
     dask: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     chunk_size: int | None = None,
+    reduce: Reduce | None = None,
 ) -> list[dict]:
-    """Run the closed loop for every point and reduce each run to its features.
+    """Run the closed loop for every point and reduce each run to a row.
 
     Parameters
     ----------
@@ -651,6 +727,14 @@ def evaluate(
     chunk_size : int, optional
         Points per task (default: at most 50 and a quarter of a worker's
         share, shrinking towards the end of the sweep).
+    reduce : callable, optional
+        ``reduce(cfg, duration, window) -> dict`` runs and reduces one point
+        (``cfg`` is the point's configuration) in place of
+        :func:`reduce_features`, in the workers.  It returns ``status``
+        (``limit_cycle``, ``settled`` or ``fell``) and the seven features,
+        plus any extra columns, which follow ``error`` in the row.  It must be
+        a picklable top-level function (the pool and Dask ship it by
+        reference); an exception it raises makes the point an error row.
 
     Returns
     -------
@@ -658,14 +742,25 @@ def evaluate(
         One row per point, in the order of ``points``: the point's keys and
         values, the seven features of :data:`~frictionlab.limit_cycles.FEATURES`
         (``None`` where undefined), ``status``
-        (``limit_cycle``/``settled``/``fell``/``error``) and ``error`` (a
-        message, or ``None``).
+        (``limit_cycle``/``settled``/``fell``/``error``), ``error`` (a
+        message, or ``None``) and the extra columns of ``reduce`` (absent
+        from an error row).
+
+    Raises
+    ------
+    TypeError
+        ``reduce`` is not a picklable function (before any run).
+    ValueError
+        Bad ``workers`` or ``chunk_size``.
+    ConfigError
+        Bad ``dask`` address, or a scheduler that cannot be reached.
     """
     n = len(points)
     rows: list[dict | None] = [None] * n
     done = 0
     with closing(iter_evaluate(base, points, duration=duration, window=window,
-                               workers=workers, dask=dask, chunk_size=chunk_size)) as chunks:
+                               workers=workers, dask=dask, chunk_size=chunk_size,
+                               reduce=reduce)) as chunks:
         for idx, chunk_rows in chunks:
             for i, row in zip(idx, chunk_rows, strict=True):
                 rows[i] = row
