@@ -1,12 +1,12 @@
 """Benchmark: the real-time loop's timing while the operator console streams to a browser.
 
-Starts ``frictionlab run`` (console on a free loopback port, sim backend unless
-``--backend`` says otherwise), opens the console in headless chromium (Debian's
-``/usr/bin/chromium`` driven by Playwright), lets the loop run for ``--duration``
-seconds of loop time with the plot streaming, then reads the loop's statistics
-(over the whole run, start-up and browser launch included) from ``/api/status``
-and presses Exit.  ``--no-browser`` measures the same
-without a page connected (the server still runs).
+Starts ``frictionlab run`` (console on loopback port 0, the port the kernel picked
+read from the printed address; sim backend unless ``--backend`` says otherwise),
+opens the console in headless chromium (Debian's ``/usr/bin/chromium`` driven by
+Playwright), lets the loop run for ``--duration`` seconds of loop time with the
+plot streaming, then reads the loop's statistics (over the whole run, start-up and
+browser launch included) from ``/api/status`` and presses Exit.  ``--no-browser``
+measures the same without a page connected (the server still runs).
 
 Prints the figures; the last line is JSON: the statistics of
 ``frictionlab run --headless --json`` (INTERFACE.md) plus ``console`` (frames
@@ -22,7 +22,6 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -33,12 +32,6 @@ import urllib.request
 CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic",
                  "--no-first-run", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync"]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _status(port: int) -> dict:
@@ -69,19 +62,18 @@ def main(argv=None) -> int:
         rig = subprocess.Popen([sys.executable, "-m", "frictionlab", "rig-sim", "--port", "0",
                                 "--json"], stdout=subprocess.PIPE, text=True)
         backend = f"udp://127.0.0.1:{json.loads(rig.stdout.readline())['port']}"
-    port = _free_port()
     log_dir = tempfile.mkdtemp(prefix="frictionlab-console-bench-")
     env = {k: v for k, v in os.environ.items() if k != "FRICTIONLAB_TOKEN"}
-    proc = subprocess.Popen([sys.executable, "-m", "frictionlab", "run", "--port", str(port),
+    proc = subprocess.Popen([sys.executable, "-m", "frictionlab", "run", "--port", "0",
                              "--backend", backend, "--log-dir", log_dir],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     err: list[str] = []
     threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True).start()
     url = None
     for line in proc.stdout:
-        m = re.search(r"frictionlab console: (http://\S+)", line)
+        m = re.search(r"frictionlab console: (http://127\.0\.0\.1:(\d+)/\S*)", line)
         if m:
-            url = m.group(1)
+            url, port = m.group(1), int(m.group(2))
             break
     if url is None:
         print("".join(err), file=sys.stderr)

@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -21,10 +24,12 @@ from frictionlab.config import build_config
 from frictionlab.console import console_url, create_app, serve
 from frictionlab.console.app import Hub, json_safe
 from frictionlab.console.models import (
+    COMPENSATOR_FIELDS,
     FEEDBACK_FIELDS,
     OBSERVER_FIELDS,
     CompensationRequest,
     DesignRequest,
+    FrictionModelRequest,
     PushRequest,
     RecordNameRequest,
     field_errors,
@@ -98,10 +103,26 @@ def test_compensation_request_changes_and_refusals():
         "compensation": "classical", "compensation_enabled": True}
     assert CompensationRequest(kind="lugre", enabled=False).changes()[
         "compensation_enabled"] is False
-    for body in ({}, {"enabled": "yes"}, {"kind": "stribeck"}, {"params": {"mass": 1.0}},
-                 {"params": {"sigma0": -1.0}}):
+    every = {f for fields in COMPENSATOR_FIELDS.values() for f in fields}
+    assert set(FrictionModelRequest.model_fields) == every
+    assert CompensationRequest(params={"sigma1": 3.0, "sigma0": 250.0}).changes() == {
+        "compensation_params": {"sigma0": 250.0, "sigma1": 3.0}}
+    for body in ({}, {"enabled": "yes"}, {"kind": "stribeck"}):
         with pytest.raises(ValidationError):
             CompensationRequest(**body)
+    # a refused parameter is located at params.<name>, so the page shows it beside the field
+    for params, message in (({"mass": 1.0}, "unknown field 'mass'"),
+                            ({"sigma0": -1.0}, "compensation.sigma0 = -1 is out of range"),
+                            ({"sigma0": "abc"}, "sigma0 must be a number"),
+                            ({"sigma0": None}, "sigma0 must be a number")):
+        with pytest.raises(ValidationError) as exc:
+            CompensationRequest(params=params)
+        (err,) = field_errors(exc.value)
+        assert err["field"] == f"params.{next(iter(params))}" and message in err["message"]
+    with pytest.raises(ValidationError) as exc:
+        CompensationRequest(params=[1.0])
+    assert field_errors(exc.value) == [{"field": "params",
+                                        "message": "params must be a JSON object"}]
 
 
 @pytest.mark.parametrize("kick, ok", [(0.3, True), (-3.0, True), (0.0, False), (3.5, False)])
@@ -360,7 +381,14 @@ def test_design_changes_and_refusals_through_the_api(app_and_controller):
     comp = r.json()["status"]["compensation"]
     assert comp["enabled"] and comp["kind"] == "classical" and comp["params"]["stiction"] == 2.0
     r = client.post("/api/compensation", json={"params": {"sigma1": -6}})
-    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "params"
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "params.sigma1"
+    assert "compensation.sigma1" in r.json()["errors"][0]["message"]
+    # refused by the controller (a singular LuGre compensator), located the same way
+    r = client.post("/api/compensation",
+                    json={"kind": "lugre", "params": {"stiction": 0.0, "coulomb": 0.0}})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "params.stiction"
+    comp = client.get("/api/status").json()["compensation"]
+    assert comp["kind"] == "classical" and comp["params"]["stiction"] == 2.0
     assert client.post("/api/push", json={"kick": 0.3}).status_code == 409  # not running
 
 
@@ -474,3 +502,114 @@ def test_closing_line_names_the_stop_reason_and_the_log():
                          "log": "runs/run-1.csv"}))
     assert line == " (signal; 1413 ticks, 2 missed; log runs/run-1.csv)"
     assert _summary(Ctl({"stop_reason": None, "ticks": 0})) == " (the loop did not run)"
+
+
+# --- first-call work before the loop starts -------------------------------------------------
+
+_FIRST_SESSION = r"""
+import json, queue, re, sys, threading, urllib.request
+from websockets.sync.client import connect
+from frictionlab.config import build_config
+from frictionlab.console import serve
+from frictionlab.realtime import RealtimeController
+from frictionlab.realtime import loop as loop_mod
+
+ticking = threading.Event()
+events = []
+
+
+def hook(event, args):
+    # what loads code or tables in a server thread once the loop ticks (the client, in
+    # the main thread, is not the server's business)
+    if not ticking.is_set() or threading.current_thread() is threading.main_thread():
+        return
+    if event == "exec":  # a module's code run (any import mechanism) or code generated
+        what = getattr(args[0], "co_filename", "?")
+    elif event == "import" or (event == "open" and isinstance(args[0], str)
+                               and args[0].endswith((".nbi", ".nbc", "mime.types"))):
+        what = str(args[0])
+    else:
+        return
+    events.append([threading.current_thread().name, event, what])
+
+
+sys.addaudithook(hook)
+ticks = loop_mod.Loop._ticks
+
+
+def _ticks(self):
+    ticking.set()
+    return ticks(self)
+
+
+loop_mod.Loop._ticks = _ticks
+lines = queue.Queue()
+
+
+class Out:
+    def write(self, text):
+        lines.put(text)
+
+    def flush(self):
+        pass
+
+
+ctl = RealtimeController(build_config("fast", "classical"), "sim", log_dir=sys.argv[1],
+                         realtime=False, duration=120.0)
+server = threading.Thread(target=serve, args=(ctl, "127.0.0.1", 0), kwargs={"out": Out()})
+server.start()
+while not (m := re.search(r"(http://\S+)", lines.get(timeout=60))):
+    pass
+base = m.group(1).rstrip("/")
+assert ticking.wait(60)
+
+
+def call(path, body=None):
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(base + path, data=data,
+                                 headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(req, timeout=30) as resp:
+        return resp.read()
+
+
+# a first session: the page, its files, the stream until the status shows limit-cycle
+# figures, every kind of change, a push, a recording and its download
+for path in ("/", "/static/app.js", "/static/style.css", "/static/vendor/uPlot.iife.min.js",
+             "/api/schema", "/api/status"):
+    call(path)
+with connect(base.replace("http:", "ws:") + "/ws", open_timeout=30) as ws:
+    while True:
+        msg = json.loads(ws.recv(timeout=30))
+        if msg["type"] == "status" and msg["status"]["console"]["limit_cycle"]["status"]:
+            break
+for body in ({"preset": "slow"}, {"preset": "fast"}, {"observer_omega1": 25.0}):
+    call("/api/design", body)
+for body in ({"enabled": True}, {"kind": "classical"}, {"kind": "coulomb"}, {"kind": "lugre"},
+             {"params": {"sigma0": 250.0}}):
+    call("/api/compensation", body)
+call("/api/push", {"kick": 0.2})
+call("/api/record/start", {})
+call("/api/record/stop", {})
+call("/api/record/name", {"name": "first"})
+call("/api/files/first.dat")
+call("/api/files/first.csv")
+assert json.loads(call("/api/status"))["running"]
+call("/api/exit", {})
+server.join(60)
+print(json.dumps(events))
+"""
+
+
+def test_a_first_session_loads_nothing_while_the_loop_runs(tmp_path):
+    """Everything a server thread would load on first use is loaded before the loop starts.
+
+    A fresh process (what is loaded is process-wide): ``serve`` on port 0, the
+    loop on the sim backend in real time, and a client session using every
+    part of the console.  Each import, numba kernel loaded from the cache or
+    MIME table read by a server thread once the loop ticks would hold the GIL
+    (0.01-0.3 s) and stall the loop.
+    """
+    out = subprocess.run([sys.executable, "-c", _FIRST_SESSION, str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.splitlines()[-1]) == []

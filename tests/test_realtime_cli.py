@@ -3,15 +3,17 @@
 These are the tests that cannot use a fake clock: a 10 s headless run on the
 ``sim`` backend compared with ``frictionlab simulate``, SIGKILL of a run
 against ``rig-sim`` over UDP (the log on disk must hold all but the last
-100 ms), and SIGINT/SIGTERM.  They assert on what was logged and on the
-rig's state, never on wall-clock timings.
+100 ms), and SIGINT/SIGTERM, headless and in console mode.  They assert on
+what was logged and on the rig's state, never on wall-clock timings.
 """
 
 import json
+import re
 import signal
 import subprocess
 import sys
 import time
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +48,10 @@ def rig_sim():
 def wait_for(pred, timeout=60.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        value = pred()
+        try:
+            value = pred()
+        except OSError:  # a server not answering yet
+            value = None
         if value:
             return value
         time.sleep(0.05)
@@ -161,12 +166,51 @@ def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     assert rig["u_da"] == 0.0 and rig["last_command_seq"] == meta["stop_tick"]
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_console_mode_stops_on_a_signal(tmp_path, sig):
+    # console mode (no --headless) on a free port; lockstep and a wide angle limit: a pause
+    # of this shared machine must not end the run before the signal does
+    proc = subprocess.Popen([*CLI, "run", "--port", "0", "--sim-lockstep", "--angle-limit",
+                             "1.2", "--log-dir", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stdout.readline()
+        m = re.search(r"frictionlab console: (http://127\.0\.0\.1:(\d+)/)", first)
+        assert m and int(m.group(2)) > 0, first + proc.stderr.read()
+
+        def ticking():
+            with urllib.request.urlopen(m.group(1) + "api/status", timeout=10) as resp:
+                st = json.loads(resp.read())
+            return st["running"] and st["ticks"] >= 100
+
+        wait_for(ticking)
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 0, stderr
+    closing = stdout.strip().splitlines()[-1]
+    assert closing.startswith("frictionlab console: stopped (signal; "), closing
+    csv, _ = started_log(tmp_path)
+    assert f"log {csv}" in closing
+    meta = json.loads(csv.with_suffix(".json").read_text())
+    assert meta["stop_reason"] == "signal" and not meta["running"]
+    log = read_csv_log(csv)
+    assert int(log["flags"][-1]) & STOP and log["u_da"][-1] == 0.0
+    assert int(log["tick"][-1]) == meta["stop_tick"] >= 100
+    assert not np.any(log["flags"][:-1].astype(int) & STOP)
+
+
 @pytest.mark.parametrize("argv, message", [
     (["run", "--headless", "--duration", "-1"], "--duration"),
     (["run", "--headless", "--backend", "tcp://x:1"], "backend"),
     (["run", "--headless", "--set", "design.omega1=-3"], "design.omega1"),
     (["run", "--headless", "--angle-limit", "0"], "angle-limit"),
     (["rig-sim", "--fault", "meteor=1"], "--fault"),
+    (["run", "--json"], "--json needs --headless"),
+    (["run", "--duration", "1", "--json"], "--json needs --headless"),
 ])
 def test_bad_input_exits_2_with_a_message(argv, message, capsys, tmp_path):
     assert main([*argv, "--log-dir", str(tmp_path)] if argv[0] == "run" else argv) == 2

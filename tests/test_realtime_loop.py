@@ -6,7 +6,10 @@ steps the plant in fake time.
 """
 
 import gc
+import json
 import random
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -19,7 +22,7 @@ from frictionlab.realtime.loop import Loop
 from frictionlab.realtime.params import ControlParams
 from frictionlab.realtime.rigs import FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
-from frictionlab.realtime.samples import CHANGED, MISSED, OVERRUN, START, STOP
+from frictionlab.realtime.samples import CHANGED, MISSED, NO_READING, OVERRUN, START, STOP
 
 H_NS = 5_000_000
 
@@ -206,6 +209,81 @@ def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
     # ... and not the new ones earlier or the old ones later
     u_wrong = _replay_u(samples, lambda k: before)
     assert np.max(np.abs(u_wrong[k_new:] - u_log[k_new:])) > 1e-3
+
+
+def test_a_change_is_taken_from_the_mailbox_after_a_tick_without_a_reading(cfg):
+    class Unanswered(SimRig):
+        """The rig is alive, but the readings of ticks 50-59 come too late."""
+
+        def sample(self, k, deadline_ns):
+            r = super().sample(k, deadline_ns)
+            return None if 50 <= k < 60 else r
+
+    clock = FakeClock()
+    ctl = RealtimeController(cfg, Unanswered(cfg), log_dir=None, clock=clock, duration=0.5,
+                             safety=Safety(unread_limit=20), realtime=False, manage_gc=False)
+    sub = ctl.subscribe(maxlen=1000)
+    futures = []
+    t0 = clock.now_ns() + H_NS
+    # submitted while the loop sleeps between ticks 52 and 53, neither of which has a reading
+    clock.call_at(t0 + 52 * H_NS + H_NS // 2,
+                  lambda: futures.append(ctl.submit({"design": "slow"})))
+    stats = ctl.run()
+    assert stats["stop_reason"] == "duration" and stats["changes_applied"] == 1
+    # taken after tick 53 (no reading) like after any tick: in effect from tick 54, not from
+    # the tick after the next reading (61)
+    assert futures[0].result(timeout=0) == 54
+    samples = {s.k: s for s in sub.drain() if not s.flags & STOP}
+    assert all(samples[k].flags & NO_READING for k in range(50, 60))
+    assert [k for k, s in samples.items() if s.flags & CHANGED] == [54]
+    assert ctl.status()["design"]["preset"] == "slow"
+    # from the first reading after the gap on, the slow design's gains controlled
+    before = ControlParams.from_config(cfg)
+    slow = before.apply({"design": "slow"})
+    read = [s for k, s in samples.items() if not s.flags & NO_READING]
+    u_log = np.array([s.u for s in read])
+    u_rep = _replay_u(read, lambda k: slow if k >= 54 else before)
+    np.testing.assert_allclose(u_log, u_rep, rtol=0, atol=1e-9)
+    assert abs(_replay_u(read, lambda k: before)[50] - u_log[50]) > 1e-3
+
+
+_FIRST_CHANGES = r"""
+import ctypes, json, os, sys
+from frictionlab.config import build_config
+from frictionlab.realtime import RealtimeController
+from frictionlab.realtime.osrt import _BLAS_SET_THREADS
+
+ctl = RealtimeController(build_config("fast", "classical"), "sim", log_dir=None, realtime=True)
+modules = set(sys.modules)
+for change in ({"design": "slow"}, {"design": "fast"}, {"compensation": "coulomb"},
+               {"compensation": "classical"}, {"compensation": "lugre"},
+               {"compensation_params": {"sigma0": 250.0}}, {"design": {"omega1": 5.0}}):
+    ctl.submit(change)
+threads = {}
+with open("/proc/self/maps") as fh:
+    paths = {line.split()[-1] for line in fh if "openblas" in line.lower()}
+for path in paths:
+    lib = ctypes.CDLL(path)
+    for name in _BLAS_SET_THREADS:
+        get = getattr(lib, name.replace("set_num_threads", "get_num_threads"), None)
+        if get is not None:
+            threads[os.path.basename(path)] = get()
+            break
+print(json.dumps({"new_modules": sorted(set(sys.modules) - modules), "threads": threads,
+                  "limited": ctl.blas_single_threaded}))
+"""
+
+
+def test_first_changes_import_nothing_and_blas_is_single_threaded():
+    # a fresh process: what the first change of each kind would load is loaded by then
+    out = subprocess.run([sys.executable, "-c", _FIRST_CHANGES], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout)
+    assert res["new_modules"] == []
+    # every OpenBLAS in the process (numpy's and scipy's) runs one thread
+    assert res["threads"] and set(res["threads"].values()) == {1}
+    assert sorted(res["limited"]) == sorted(res["threads"])
 
 
 def test_invalid_change_is_refused_and_nothing_changes(cfg):

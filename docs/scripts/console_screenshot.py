@@ -1,9 +1,10 @@
 """Take the README's screenshot of the operator console (docs/figures/console.png).
 
-Starts ``frictionlab run`` on a free loopback port (sim backend, fast design,
-classical friction), opens the console in headless chromium, turns on the
-estimated pendulum angle, lets the limit cycle fill the plot window and saves
-a screenshot, then presses Exit.
+Starts ``frictionlab run`` on loopback port 0 (the port the kernel picked is
+read from the printed address; sim backend, fast design, classical friction),
+opens the console in headless chromium, turns on the estimated pendulum angle,
+lets the limit cycle fill the plot window and saves a screenshot, then presses
+Exit.
 
     .venv/bin/python docs/scripts/console_screenshot.py [OUT.png]
 """
@@ -13,7 +14,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import socket
 import subprocess
 import sys
 import tempfile
@@ -32,15 +32,13 @@ OUT = Path(__file__).resolve().parents[1] / "figures" / "console.png"
 def main() -> int:
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else OUT
     out.parent.mkdir(parents=True, exist_ok=True)
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
     env = {k: v for k, v in os.environ.items() if k != "FRICTIONLAB_TOKEN"}
-    proc = subprocess.Popen([sys.executable, "-m", "frictionlab", "run", "--port", str(port),
+    proc = subprocess.Popen([sys.executable, "-m", "frictionlab", "run", "--port", "0",
                              "--log-dir", tempfile.mkdtemp(prefix="frictionlab-shot-")],
                             stdout=subprocess.PIPE, text=True, env=env)
-    url = next(m.group(1) for line in proc.stdout
-               if (m := re.search(r"frictionlab console: (http://\S+)", line)))
+    url, port = next((m.group(1), m.group(2)) for line in proc.stdout
+                     if (m := re.search(r"frictionlab console: (http://127\.0\.0\.1:(\d+)/)",
+                                        line)))
     try:
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)

@@ -1,12 +1,14 @@
 """Subcommands ``frictionlab run`` (the real-time controller) and ``frictionlab rig-sim``.
 
 ``run --headless --duration S --json`` runs the loop without the console and
-prints its statistics; without ``--headless`` it hands the controller to the
-operator console (``frictionlab.console.serve(controller, host, port,
-token)``) when that module is installed, else it says so and runs headless
-until Ctrl-C.  Exit status of ``run``: 0 when the run ended as asked
-(``duration``, ``signal``, ``user``, ``exit``), 1 after a safety stop or
-when the rig cannot be reached, 2 on bad input.
+prints its statistics (``--json`` without ``--headless`` is bad input, exit
+status 2: the console prints its address, never one JSON object); without
+``--headless`` it hands the controller to the operator console
+(``frictionlab.console.serve(controller, host, port, token)``) when that
+module is installed, else it says so and runs headless until Ctrl-C.
+Exit status of ``run``: 0 when the run ended as asked (``duration``,
+``signal``, ``user``, ``exit``), 1 after a safety stop or when the rig
+cannot be reached, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -78,7 +80,8 @@ def register_cli(sub) -> None:
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true",
-                   help="print the run's statistics as one JSON object")
+                   help="with --headless: print the run's statistics as one JSON object "
+                        "(without --headless it is refused, exit status 2)")
     p.add_argument("--log-dir", default="runs", help="where runs are logged (default ./runs)")
     _add_config_args(p)
     p.add_argument("--angle-limit", type=float, default=0.35, metavar="RAD",
@@ -131,6 +134,9 @@ def cmd_run(args) -> int:
     from .realtime import RealtimeController, Safety
     from .realtime.clock import MonotonicClock
 
+    if args.json and not args.headless:
+        raise UsageError("--json needs --headless: the console prints its address, not one "
+                         "JSON object (use --headless --duration S --json)")
     cfg = config_from_args(args)
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise UsageError(f"--duration must be > 0, got {args.duration}")

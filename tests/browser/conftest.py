@@ -14,13 +14,13 @@ import queue
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
 import urllib.request
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import pytest
 
@@ -32,19 +32,16 @@ STARTUP_TIMEOUT = 60.0
 _URL = re.compile(r"frictionlab console: (http://\S+)")
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 class ConsoleProcess:
-    """``frictionlab run`` serving the console, its printed address and its output."""
+    """``frictionlab run`` serving the console, its printed address and its output.
+
+    The server binds port 0 (the kernel picks a free one, no race with other
+    processes) and the port is read from the address it prints.
+    """
 
     def __init__(self, log_dir: Path, *args: str, env: dict | None = None):
-        self.port = free_port()
         self.log_dir = log_dir
-        cmd = [sys.executable, "-m", "frictionlab", "run", "--port", str(self.port),
+        cmd = [sys.executable, "-m", "frictionlab", "run", "--port", "0",
                "--log-dir", str(log_dir), *args]
         full_env = {k: v for k, v in os.environ.items() if k != "FRICTIONLAB_TOKEN"}
         full_env.update({"PYTHONUNBUFFERED": "1", **(env or {})})
@@ -80,6 +77,13 @@ class ConsoleProcess:
             if m:
                 self.url = m.group(1)
         return self.url
+
+    @property
+    def port(self) -> int:
+        """The port the server bound (from the printed address)."""
+        port = urlsplit(self.wait_url()).port
+        assert port, self.url
+        return port
 
     @property
     def base(self) -> str:

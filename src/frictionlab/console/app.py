@@ -26,7 +26,9 @@ The server never blocks the control tick: the loop puts each tick's sample
 into a bounded subscription and moves on; :class:`Hub` drains it on the
 server's event loop every ``frame_period`` seconds and fans the frames out
 to the connected pages, each through its own small queue from which the
-oldest frames are dropped when that page cannot keep up.
+oldest frames are dropped when that page cannot keep up.  What a server
+thread would load on first use, holding the GIL while the loop runs, is
+loaded when the server starts, before the loop does (:func:`_warm_up`).
 """
 
 from __future__ import annotations
@@ -292,7 +294,7 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
 
     @asynccontextmanager
     async def lifespan(app):
-        stream.figures(lc_window)   # compiles/loads the feature kernels before any run
+        await _warm_up(app, stream)  # before the loop starts (autostart below)
         hub.start()
         if autostart and not controller.running:
             try:
@@ -500,6 +502,51 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
 
     return Guard(app, token, loopback_only=loopback_only,
                  **({} if max_body is None else {"max_body": max_body}))
+
+
+#: Requests served once, to nobody, before the loop starts (see :func:`_warm_up`).
+_WARM_UP_PATHS = ("/", "/static/app.js", "/api/schema")
+
+
+async def _warm_up(app: FastAPI, stream: SampleStream) -> None:
+    """Do the console's one-time work now, before the loop starts.
+
+    On first use each of these loaded code or tables on a server thread,
+    holding the GIL while the loop ran (a stall of the loop): the
+    limit-cycle feature kernels (:meth:`SampleStream.warm`, 0.3 s), and
+    what the first requests load (anyio's thread pool for plain ``def``
+    routes and its file I/O for files, 10 ms; the MIME type tables).  The
+    latter are loaded by serving a few requests through ``app`` itself,
+    the responses discarded.
+    """
+    stream.warm()
+    for path in _WARM_UP_PATHS:
+        await _serve_once(app, path)
+
+
+async def _serve_once(app: FastAPI, path: str) -> None:
+    """One ``GET path`` through the ASGI ``app`` from loopback; the response is dropped."""
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
+             "method": "GET", "scheme": "http", "path": path, "raw_path": path.encode(),
+             "root_path": "", "query_string": b"", "headers": [(b"host", b"127.0.0.1")],
+             "client": ("127.0.0.1", 0), "server": ("127.0.0.1", 0)}
+
+    requested = False
+    answered = asyncio.Event()
+
+    async def receive():
+        nonlocal requested
+        if not requested:
+            requested = True
+            return {"type": "http.request", "body": b"", "more_body": False}
+        await answered.wait()  # the client "leaves" once the response is complete
+        return {"type": "http.disconnect"}
+
+    async def send(message):
+        if message["type"] == "http.response.body" and not message.get("more_body"):
+            answered.set()
+
+    await app(scope, receive, send)
 
 
 async def _drain_incoming(websocket: WebSocket) -> None:

@@ -33,6 +33,7 @@ __all__ = [
     "OBSERVER_FIELDS",
     "CompensationRequest",
     "DesignRequest",
+    "FrictionModelRequest",
     "PushRequest",
     "RecordNameRequest",
     "field_errors",
@@ -116,25 +117,43 @@ class DesignRequest(_Request):
         return {"design": self.preset if self.preset is not None else self.fields()}
 
 
+class FrictionModelRequest(_Request):
+    """Friction Model panel: new values of some compensator parameters.
+
+    A field of its own for each parameter, so that a refusal is located at
+    ``params.<name>`` (the page shows it beside that field).  A field left
+    out keeps its value; ``null`` is refused like any other non-number.
+    """
+
+    stiction: Number | None = None
+    coulomb: Number | None = None
+    viscous: Number | None = None
+    stribeck_velocity: Number | None = None
+    sigma0: Number | None = None
+    sigma1: Number | None = None
+    observer_gain: Number | None = None
+    hysteresis: Number | None = None
+
+    @field_validator(*_ALL_COMP_FIELDS)
+    @classmethod
+    def _in_range(cls, v, info):
+        if v is None:  # only an explicit null reaches here (defaults are not validated)
+            raise ValueError(f"{info.field_name} must be a number")
+        return _check(FrictionParams, info.field_name, v, "compensation.")
+
+    def values(self) -> dict[str, float]:
+        """The parameters given, by name."""
+        return {k: getattr(self, k) for k in type(self).model_fields
+                if k in self.model_fields_set}
+
+
 class CompensationRequest(_Request):
     """Compensation button, Friction Type and Friction Model panel (Sec. 7.1)."""
 
     enabled: bool | None = Field(default=None, strict=True)
     kind: Literal["coulomb", "classical", "lugre"] | None = None
-    params: dict[str, Number] | None = None
+    params: FrictionModelRequest | None = None
     error_signal: Literal[ERROR_SIGNALS] | None = None  # type: ignore[valid-type]
-
-    @field_validator("params")
-    @classmethod
-    def _params_in_range(cls, v):
-        if v is None:
-            return v
-        for name, value in v.items():
-            if name not in _ALL_COMP_FIELDS:
-                raise ValueError(f"unknown friction parameter {name!r}; known: "
-                                 f"{', '.join(_ALL_COMP_FIELDS)}")
-            _check(FrictionParams, name, value, "compensation.")
-        return v
 
     @model_validator(mode="after")
     def _something(self):
@@ -151,8 +170,8 @@ class CompensationRequest(_Request):
                 out["compensation_enabled"] = True
         if self.enabled is not None:
             out["compensation_enabled"] = self.enabled
-        if self.params:
-            out["compensation_params"] = dict(self.params)
+        if self.params is not None and self.params.values():
+            out["compensation_params"] = self.params.values()
         if self.error_signal is not None:
             out["error_signal"] = self.error_signal
         return out
@@ -190,6 +209,7 @@ class RecordNameRequest(_Request):
 
 # --- errors -----------------------------------------------------------------------------
 
+_OBJECT_TYPES = ("model_attributes_type", "model_type", "dict_type")
 _FIELD_IN_MESSAGE = re.compile(r"^(?:design|compensation|friction)\.([A-Za-z_0-9]+)")
 
 
@@ -221,9 +241,11 @@ def field_errors(exc: ValidationError | Any) -> list[dict]:
             message = f"unknown field {name!r}"
         elif kind == "missing":
             message = f"{name} is required"
-        elif kind in ("json_invalid", "model_attributes_type", "dict_type"):
+        elif kind == "json_invalid" or (not loc and kind in _OBJECT_TYPES):
             message = "the request body must be a JSON object"
             field = None
+        elif kind in _OBJECT_TYPES:  # a nested object: the friction model's parameters
+            message = f"{name} must be a JSON object"
         else:
             message = f"{name}: {err.get('msg', 'invalid')}"
         out.append({"field": field, "message": message})

@@ -175,6 +175,26 @@ class SampleStream:
         n = round(seconds / self.h) + 1
         return frame_json(_decimate(self.buffer.last(n), max_points), reset=True)
 
+    def warm(self, window: float = 5.0) -> None:
+        """Load the feature kernels now: :func:`features` of a synthetic limit cycle.
+
+        The first :meth:`figures` of a process loads
+        :func:`~frictionlab.limit_cycles.features`' compiled kernels from
+        numba's cache, about 0.3 s holding the GIL; on the server's thread
+        while the loop runs, that stalled the loop for 5-9 ms.  The synthetic
+        signals have the layout :meth:`figures` passes (contiguous float64),
+        so the real calls find the same specialisations loaded.
+
+        Parameters
+        ----------
+        window : float
+            Length of the synthetic signals (s), as in :meth:`figures`.
+        """
+        t = np.arange(round(window / self.h) + 1) * self.h
+        theta = 0.1 * np.sin(2.0 * np.pi * t)
+        features(t, theta, np.cos(2.0 * np.pi * t), np.sin(4.0 * np.pi * t),
+                 window=float(t[-1] - t[0]))
+
     def figures(self, window: float = 5.0) -> dict:
         """Running limit-cycle figures of the measured angle over the last ``window`` s.
 

@@ -18,7 +18,7 @@ from ..rig import RigScaling
 from .clock import MonotonicClock
 from .datalog import LogWriter
 from .loop import STOP_REASONS, Loop, Safety
-from .osrt import try_realtime_priority
+from .osrt import single_thread_blas, try_realtime_priority
 from .params import ControlParams
 from .rigs import Rig, open_rig
 from .samples import Subscription
@@ -49,7 +49,10 @@ class RealtimeController:
         Stop each run after this many seconds (reason ``duration``).
     realtime : bool
         Try SCHED_FIFO for the loop thread (and the log writer, at a lower
-        priority, so it cannot be preempted while holding the GIL).
+        priority, so it cannot be preempted while holding the GIL), and keep
+        the process's OpenBLAS to one thread
+        (:func:`~.osrt.single_thread_blas`: a design change then holds the
+        GIL for about 1 ms instead of up to 12).
     manage_gc : bool
         Freeze/disable the garbage collector during runs (see :mod:`.loop`).
     fsync : bool
@@ -87,6 +90,8 @@ class RealtimeController:
         if isinstance(backend, str) and backend != "sim":
             _check_backend(backend)
         self._params = ControlParams.from_config(cfg)
+        self._params.warm()
+        self.blas_single_threaded = single_thread_blas() if realtime else []
         self._lock = threading.RLock()
         self._accepting = False
         self._subs: list[Subscription] = []
@@ -415,7 +420,8 @@ class RealtimeController:
             "realtime": {"sched_fifo": bool(loop and loop.sched_fifo),
                          "note": None if loop is None else loop.rt_note,
                          "gc_policy": GC_POLICY if self.manage_gc else "default",
-                         "switch_interval_s": _SWITCH_INTERVAL},
+                         "switch_interval_s": _SWITCH_INTERVAL,
+                         "blas_single_threaded": self.blas_single_threaded},
             "events": list(self.events),
         }
 

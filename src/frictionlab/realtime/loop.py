@@ -20,8 +20,9 @@ nanoseconds on the monotonic clock, so there is no drift):
    separately; an *overrun* is a u written after the next deadline;
 6. hand the :class:`~frictionlab.realtime.samples.Sample` to the sinks
    (log writer, console subscriptions) without blocking;
-7. between ticks: apply pending parameter changes atomically (the
-   mailbox), and the scheduled housekeeping (garbage collection once a
+7. between ticks, after every tick (one without a reading too): apply
+   pending parameter changes atomically (the mailbox; in effect from the
+   next tick), and the scheduled housekeeping (garbage collection once a
    second, the host's steal time every 100 ms).
 
 Pre-warming (``prewarm_us`` > 0): on a virtual machine whose CPU sits idle
@@ -370,66 +371,65 @@ class Loop:
                 for sink in self.sinks:
                     sink(smp)
                 self.ticks += 1
-                k += 1
-                continue
-            silent = 0
-            unread = 0
-            rx_seen = rig.rx_frames
-            y, x, v = r.y, r.x, r.v
-            if not (-1.0 <= y <= 1.0 and -1.0 <= x <= 1.0 and -1.0 <= v <= 1.0):
-                raise _Stop("bad_reading", f"raw reading out of range or NaN: y={y!r}, "
-                            f"x={x!r}, v={v!r}", r)
-            if first:
-                x0 = x
-                self.x0 = x0
             else:
-                d = x - x_prev
-                if d > 1.0:
-                    wraps -= 1
-                elif d < -1.0:
-                    wraps += 1
-            x_prev = x
-            theta = ts * (y + tb)
-            arm = as_ * (x + 2.0 * wraps - x0)
-            arm_dot = vs * (v + vb)
-            if first:
-                if not abs(theta) <= safety.start_tolerance:
-                    raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the start "
-                                f"(tolerance {safety.start_tolerance} rad; no swing-up)", r)
-                s = params.controller.init(theta)
-                flags |= START
-                first = False
-            if not abs(theta) <= angle_limit:
-                raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
-                            f"{angle_limit} rad", r)
-            th_hat = s[S_X1]
-            thd_hat = w0 * s[S_X2]
-            arm_hat = s[S_ARM]
-            armd_hat = s[S_ARMDOT]
-            z_hat = s[S_ZHAT]
-            u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
-            u_da = us * u
-            if u_da > 1.0:
-                u_da = 1.0
-            elif u_da < -1.0:
-                u_da = -1.0
-            elif u_da != u_da:
-                raise _Stop("exception", "the controller produced u = NaN", r)
-            write(k, u_da)
-            t_w = now()
-            u_da_prev = u_da
-            if t_w > deadline + h_ns:
-                self.overruns += 1
-                flags |= OVERRUN
-            jit_add(late)
-            comp_add(t_w - wake - rig_ns)
-            rig_add(rig_ns)
-            smp = Sample(k, k * h, flags, theta, th_hat, thd_hat, u, arm, arm_dot, arm_hat,
-                         armd_hat, f_hat, z_hat, y, x, v, u_da, late / 1e3,
-                         (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
-            for sink in self.sinks:
-                sink(smp)
-            self.ticks += 1
+                silent = 0
+                unread = 0
+                rx_seen = rig.rx_frames
+                y, x, v = r.y, r.x, r.v
+                if not (-1.0 <= y <= 1.0 and -1.0 <= x <= 1.0 and -1.0 <= v <= 1.0):
+                    raise _Stop("bad_reading", f"raw reading out of range or NaN: y={y!r}, "
+                                f"x={x!r}, v={v!r}", r)
+                if first:
+                    x0 = x
+                    self.x0 = x0
+                else:
+                    d = x - x_prev
+                    if d > 1.0:
+                        wraps -= 1
+                    elif d < -1.0:
+                        wraps += 1
+                x_prev = x
+                theta = ts * (y + tb)
+                arm = as_ * (x + 2.0 * wraps - x0)
+                arm_dot = vs * (v + vb)
+                if first:
+                    if not abs(theta) <= safety.start_tolerance:
+                        raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the start "
+                                    f"(tolerance {safety.start_tolerance} rad; no swing-up)", r)
+                    s = params.controller.init(theta)
+                    flags |= START
+                    first = False
+                if not abs(theta) <= angle_limit:
+                    raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
+                                f"{angle_limit} rad", r)
+                th_hat = s[S_X1]
+                thd_hat = w0 * s[S_X2]
+                arm_hat = s[S_ARM]
+                armd_hat = s[S_ARMDOT]
+                z_hat = s[S_ZHAT]
+                u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
+                u_da = us * u
+                if u_da > 1.0:
+                    u_da = 1.0
+                elif u_da < -1.0:
+                    u_da = -1.0
+                elif u_da != u_da:
+                    raise _Stop("exception", "the controller produced u = NaN", r)
+                write(k, u_da)
+                t_w = now()
+                u_da_prev = u_da
+                if t_w > deadline + h_ns:
+                    self.overruns += 1
+                    flags |= OVERRUN
+                jit_add(late)
+                comp_add(t_w - wake - rig_ns)
+                rig_add(rig_ns)
+                smp = Sample(k, k * h, flags, theta, th_hat, thd_hat, u, arm, arm_dot, arm_hat,
+                             armd_hat, f_hat, z_hat, y, x, v, u_da, late / 1e3,
+                             (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
+                for sink in self.sinks:
+                    sink(smp)
+                self.ticks += 1
             # ---- between ticks ----
             if mailbox:
                 old_kind = gp[G_COMP]
@@ -441,7 +441,7 @@ class Loop:
                 gp, cp = params.gp, params.cp
                 w0 = gp[G_W0]
                 comp_flag = COMPENSATE if params.comp_enabled else 0
-                if gp[G_COMP] != old_kind:
+                if gp[G_COMP] != old_kind and s is not None:
                     s[S_RELAY] = 0.0
                     s[S_ZHAT] = 0.0
                 pending_flags = CHANGED

@@ -8,7 +8,8 @@
   emulated rig are pinned to the *same* CPU by default: a request and its
   reply then hand over on one CPU, whereas waking a process on an idle
   second CPU costs an inter-processor interrupt, which on the project's
-  virtual machine took 0.1-3 ms (see ``docs/realtime.md``).
+  virtual machine took 0.1-3 ms (see ``docs/realtime.md``);
+* the process's OpenBLAS kept to one thread (:func:`single_thread_blas`).
 """
 
 from __future__ import annotations
@@ -18,9 +19,13 @@ import ctypes.util
 import os
 import threading
 
-__all__ = ["default_cpu", "normal_priority", "try_realtime_priority"]
+__all__ = ["default_cpu", "normal_priority", "single_thread_blas", "try_realtime_priority"]
 
 _PR_SET_TIMERSLACK = 29
+#: ``openblas_set_num_threads`` under the names the OpenBLAS builds bundled with numpy and
+#: scipy export (``scipy_openblas...``) and the plain build's.
+_BLAS_SET_THREADS = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
+                     "openblas_set_num_threads64_", "openblas_set_num_threads")
 
 
 def default_cpu() -> int | None:
@@ -63,3 +68,42 @@ def normal_priority() -> None:
         os.sched_setscheduler(threading.get_native_id(), os.SCHED_OTHER, os.sched_param(0))
     except (OSError, AttributeError):
         pass
+
+
+def single_thread_blas() -> list[str]:
+    """Keep every OpenBLAS library loaded in this process to one thread.
+
+    A parameter change designs new gains (a matrix exponential, eigenvalues)
+    in a request thread that holds the GIL throughout each BLAS call.  With
+    OpenBLAS's default thread pool the call hands the work of a 5 x 5 matrix
+    to a second thread and waits for it; when that thread's CPU is busy the
+    wait (and with it the loop's wait for the GIL) lasted 4-12 ms on the
+    project's 2-CPU machine, against 0.1 ms single-threaded.  The controller's
+    matrices are tiny, so one thread costs nothing.
+
+    Returns
+    -------
+    list of str
+        File names of the libraries limited (empty where none is loaded,
+        e.g. a numpy built on another BLAS).
+    """
+    done = []
+    try:
+        with open("/proc/self/maps") as fh:
+            paths = {line.split()[-1] for line in fh if "openblas" in line.lower()}
+    except OSError:
+        return done
+    for path in sorted(paths):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in _BLAS_SET_THREADS:
+            fn = getattr(lib, name, None)
+            if fn is not None:
+                fn.argtypes = [ctypes.c_int]
+                fn.restype = None
+                fn(1)
+                done.append(os.path.basename(path))
+                break
+    return done

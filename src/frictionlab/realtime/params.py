@@ -178,6 +178,21 @@ class ControlParams:
                               f"(it is {self.cfg.design.h} s)")
         return self._build(self.cfg, spec, enabled, kind, params, error_signal)
 
+    def warm(self) -> None:
+        """Do now, off the loop, the one-time work of the first change of each kind.
+
+        Designs both presets (:func:`~frictionlab.design.design` caches its
+        results) and builds a controller for every compensator model, which
+        imports the compensation code on first use.  Done in a request
+        thread while the loop runs, this held the GIL for up to 30 ms and
+        stalled the loop; afterwards a preset or a model switch costs well
+        under 1 ms and a new custom design about 1 ms.
+        """
+        for spec in PRESETS.values():
+            design(spec, self.cfg.plant)
+        for kind in COMPENSATOR_MODELS:
+            self.apply({"compensation": kind})
+
     @property
     def preset(self) -> str | None:
         """``fast``/``slow`` if the current spec is that preset, else None."""

@@ -28,7 +28,7 @@
   // State shared with the browser tests (read-only for them).
   const ui = (window.__console = {
     frames: 0, renders: 0, lastT: null, status: null, schema: null, connected: false,
-    ended: false, frameEnds: [], xRange: null,
+    ended: false, frameEnds: [], frameWall: [], xRange: null,
   });
 
   // --- HTTP -------------------------------------------------------------------------------
@@ -266,6 +266,14 @@
   // --- plot ------------------------------------------------------------------------------------
   const data = { t: [] };
   for (const s of SIGNALS) data[s.key] = [];
+  // The plotted samples of one signal from loop time `since` on: {t: [...], v: [...]}.
+  ui.samples = (key, since) => {
+    const out = { t: [], v: [] };
+    for (let i = 0; i < data.t.length; i++) {
+      if (data.t[i] >= since) { out.t.push(data.t[i]); out.v.push(data[key][i]); }
+    }
+    return out;
+  };
   const charts = {};
   let dirty = false;
   let windowS = 10;
@@ -339,7 +347,8 @@
     ui.frames++;
     ui.lastT = tEnd;
     ui.frameEnds.push(tEnd);
-    if (ui.frameEnds.length > 200) ui.frameEnds.shift();
+    ui.frameWall.push(performance.now());   // when each frame arrived (ms, page clock)
+    if (ui.frameEnds.length > 200) { ui.frameEnds.shift(); ui.frameWall.shift(); }
     dirty = true;
   }
 
