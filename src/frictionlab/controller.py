@@ -38,8 +38,8 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from ._jit import jit
 from .design import Design
 from .friction import (
     CLASSICAL,
@@ -87,7 +87,7 @@ E_NONE, E_VEL_INNOV, E_POS_INNOV, E_ARM_VEL, E_ARM_ANGLE = range(5)
 DEFAULT_ERROR_SIGNAL = "velocity_innovation"
 
 
-@njit(cache=True)
+@jit
 def compensator_force(kind, s, cp, v, u_fb, e, h):
     """Friction estimate of the compensator (Sec. 6.1-6.3) for the coming sample.
 
@@ -128,7 +128,7 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
     return 0.0
 
 
-@njit(cache=True)
+@jit
 def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     """One controller tick; updates the state vector ``s`` in place.
 

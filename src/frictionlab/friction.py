@@ -71,8 +71,8 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from numba import njit
 
+from ._jit import jit
 from ._validation import Validated, param
 
 __all__ = [
@@ -207,7 +207,7 @@ def _check_kind(kind: str) -> int:
 # --------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@jit
 def _sgn(x):
     if x > 0.0:
         return 1.0
@@ -216,7 +216,7 @@ def _sgn(x):
     return 0.0
 
 
-@njit(cache=True)
+@jit
 def stribeck_level(v, p):
     """Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (direction-dependent)."""
     if v >= 0.0:
@@ -227,14 +227,14 @@ def stribeck_level(v, p):
     return fc + (fs - fc) * np.exp(-r * r)
 
 
-@njit(cache=True)
+@jit
 def stribeck_curve(v, p):
     """Steady-state (Stribeck) friction :math:`s(v)\\,\\mathrm{sgn}(v) + F_v v`."""
     fv = p[P_FV] if v >= 0.0 else p[P_FVN]
     return stribeck_level(v, p) * _sgn(v) + fv * v
 
 
-@njit(cache=True)
+@jit
 def coulomb_relay(v, s_prev, p):
     """Coulomb relay with hysteresis (Sec. 6.1).
 
@@ -252,7 +252,7 @@ def coulomb_relay(v, s_prev, p):
     return fc * s, s
 
 
-@njit(cache=True)
+@jit
 def classical_force(v, fe, p):
     """Stiction + Coulomb friction, eq. (17), with a zero-velocity band.
 
@@ -273,7 +273,7 @@ def classical_force(v, fe, p):
     return fs * _sgn(fe)
 
 
-@njit(cache=True)
+@jit
 def stribeck_classical_force(v, fe, p):
     """The classical model's implementation form with Stribeck decay (Sec. 6.2)."""
     band = p[P_EPS] if p[P_EPS] > 0.0 else p[P_BAND]
@@ -285,7 +285,7 @@ def stribeck_classical_force(v, fe, p):
     return stribeck_level(v, p) * _sgn(v)
 
 
-@njit(cache=True)
+@jit
 def static_force(kind, v, fe, s_prev, p):
     """Force of any static (memoryless or relay) model.
 
@@ -305,7 +305,7 @@ def static_force(kind, v, fe, s_prev, p):
     return 0.0, s_prev
 
 
-@njit(cache=True)
+@jit
 def _sigma1(v, p):
     vd = p[P_VD]
     if np.isinf(vd):
@@ -314,20 +314,20 @@ def _sigma1(v, p):
     return p[P_S1] * np.exp(-r * r)
 
 
-@njit(cache=True)
+@jit
 def lugre_dz(v, z, e, p):
     """Bristle rate :math:`\\dot z` of eq. (18)/(19) (``e`` enters with gain k)."""
     return v - abs(v) * p[P_S0] / max(stribeck_level(v, p), _TINY) * z - p[P_K] * e
 
 
-@njit(cache=True)
+@jit
 def lugre_force(v, z, dz, p):
     """LuGre friction :math:`\\sigma_0 z + \\sigma_1(v)\\dot z + F_v v`."""
     fv = p[P_FV] if v >= 0.0 else p[P_FVN]
     return p[P_S0] * z + _sigma1(v, p) * dz + fv * v
 
 
-@njit(cache=True)
+@jit
 def lugre_step_exact(v, z, e, dt, p):
     """Advance the bristle state over ``dt`` with ``v`` and ``e`` held constant.
 

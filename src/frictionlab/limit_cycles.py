@@ -40,8 +40,9 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from numba import njit
 from scipy.ndimage import uniform_filter1d
+
+from ._jit import jit
 
 __all__ = ["FEATURES", "LimitCycleFeatures", "features", "trajectory_features"]
 
@@ -80,7 +81,7 @@ def _mean(values: np.ndarray) -> float | None:
     return float(v.sum() / len(v)) if len(v) else None
 
 
-@njit(cache=True)
+@jit
 def _crossings_kernel(t, y, hyst):
     n = len(y)
     up_t = np.empty(n)
@@ -121,7 +122,7 @@ def _crossings(t: np.ndarray, y: np.ndarray, hyst: float):
                              np.ascontiguousarray(y, dtype=float), float(hyst))
 
 
-@njit(cache=True)
+@jit
 def _segment_peaks(seg, min_prominence):
     """Indices of local maxima of ``seg`` with prominence >= ``min_prominence``.
 
@@ -164,7 +165,7 @@ def _segment_peaks(seg, min_prominence):
     return peaks[:npk]
 
 
-@njit(cache=True)
+@jit
 def _half_cycle_kernel(y, starts, ends, noise, rel_prominence):
     m = len(starts)
     p1 = np.full(m, np.nan)

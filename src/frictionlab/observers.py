@@ -49,8 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from numba import njit
-
+from ._jit import jit
 from .plant import accelerations
 
 __all__ = [
@@ -61,7 +60,7 @@ __all__ = [
 ]
 
 
-@njit(cache=True)
+@jit
 def pendulum_observer_step(x1, x2, theta_m, arm_dot_hat, u, k1, k2, omega0, g, h):
     """One forward-difference step of the nonlinear pendulum observer.
 
@@ -88,7 +87,7 @@ def pendulum_observer_step(x1, x2, theta_m, arm_dot_hat, u, k1, k2, omega0, g, h
     return x1 + h * (omega0 * x2 + k1 * e), x2 + h * (th_dd / omega0 + k2 * e)
 
 
-@njit(cache=True)
+@jit
 def arm_observer_step(arm, arm_dot, arm_m, u, k3, k4, h, arm_length):
     """One step of the discrete arm observer (Sec. 2.3).
 

@@ -40,9 +40,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy.linalg import expm
 
+from ._jit import jit
 from ._validation import Validated, param
 
 __all__ = [
@@ -87,7 +87,7 @@ class PlantParams(Validated):
         return self.g / self.omega0**2
 
 
-@njit(cache=True)
+@jit
 def accelerations_sc(sin_theta, cos_theta, theta_dot, arm_dot, a, omega0, zeta, g, arm_length):
     r""":func:`accelerations` with :math:`\sin\theta, \cos\theta` supplied (the
     integrator reuses them between evaluations)."""
@@ -100,7 +100,7 @@ def accelerations_sc(sin_theta, cos_theta, theta_dot, arm_dot, a, omega0, zeta, 
     return theta_ddot, a * (1.0 / arm_length)  # the reciprocal is hoisted out of loops
 
 
-@njit(cache=True)
+@jit
 def accelerations(theta, theta_dot, arm_dot, a, omega0, zeta, g, arm_length):
     r"""Pendulum and arm angular accelerations of eq. (6).
 

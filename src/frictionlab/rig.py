@@ -22,8 +22,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from ._jit import jit
 from ._validation import Validated, param
 
 __all__ = [
@@ -117,7 +117,7 @@ def unwrap_raw(previous: float, current: float) -> float:
     return current
 
 
-@njit(cache=True)
+@jit
 def quantize(value, step):
     """Round ``value`` to a multiple of ``step`` (``step <= 0``: unchanged)."""
     if step <= 0.0:

@@ -38,8 +38,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
+from ._jit import jit
 from .config import Config, build_config
 from .controller import (
     DEFAULT_ERROR_SIGNAL,
@@ -82,7 +82,7 @@ STATUS = ("ok", "fell")
 MAX_TICKS = 20_000_000
 
 
-@njit(cache=True)
+@jit
 def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
     """Advance the plant state ``x`` (5,) in place over one sample with u held.
 
@@ -135,7 +135,7 @@ def plant_tick(x, u, relay, substeps, h, pp, fkind, fp):
     return f_sum / substeps, relay
 
 
-@njit(cache=True)
+@jit
 def _run(x, relay, n_ticks, substeps, pp, fkind, fp, gp, cp, s, noise, seed, quanta,
          fall_angle, out, record):
     """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, relay).
