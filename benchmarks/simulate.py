@@ -20,8 +20,10 @@ Measures, single-threaded and side by side in one process:
 * ``speedup_vs_scipy`` - ``scipy_ms / classical_ms``;
 * ``feature_error_vs_fine`` - the largest relative difference of the seven
   limit-cycle features (:data:`frictionlab.limit_cycles.FEATURES`) between a
-  run with the default ``sim.substeps`` and one with 20 times as many, over
-  both friction models, as a fraction (0.005 = 0.5%).
+  run with the default integration steps (``sim.substeps`` and
+  ``sim.pendulum_steps``) and one with 20 times as many of both, over both
+  friction models and both designs, and LuGre with sigma0 = 1000 (the stiff
+  bristle), as a fraction (0.005 = 0.5%).
 
 It also prints the features of the scipy run next to the compiled run's (an
 independent check of the compiled integrator over the whole 30 s).
@@ -67,18 +69,25 @@ FINE_FACTOR = 20
 RTOL = 1e-6
 
 
-def classical_config(substeps: int | None = None) -> Config:
-    """Fast design, classical friction eq. (17) with eq. (20)'s levels, band 0.03."""
-    sets = list(CLASSICAL_SETS)
-    if substeps is not None:
-        sets.append(f"sim.substeps={substeps}")
-    return build_config("fast", "classical", sets=sets)
+def classical_config(design: str = "fast", extra: tuple[str, ...] = ()) -> Config:
+    """Classical friction eq. (17) with eq. (20)'s levels, band 0.03."""
+    return build_config(design, "classical", sets=[*CLASSICAL_SETS, *extra])
 
 
-def lugre_config(substeps: int | None = None) -> Config:
-    """Fast design, LuGre plant friction at its defaults (eq. 21)."""
-    sets = [] if substeps is None else [f"sim.substeps={substeps}"]
-    return build_config("fast", "lugre", sets=sets)
+def lugre_config(design: str = "fast", extra: tuple[str, ...] = ()) -> Config:
+    """LuGre plant friction at its defaults (eq. 21)."""
+    return build_config(design, "lugre", sets=list(extra))
+
+
+#: The convergence cases: (name, configuration).
+CONVERGENCE = (
+    ("classical fast", classical_config("fast")),
+    ("lugre fast", lugre_config("fast")),
+    ("classical slow", classical_config("slow")),
+    ("lugre slow", lugre_config("slow")),
+    ("lugre fast sigma0 1000", lugre_config("fast", ("friction.sigma0=1000",))),
+    ("lugre slow sigma0 1000", lugre_config("slow", ("friction.sigma0=1000",))),
+)
 
 
 def scipy_closed_loop(cfg: Config, duration: float, rtol: float = RTOL) -> dict:
@@ -168,10 +177,12 @@ def _rel_errors(coarse, fine) -> dict[str, float]:
     return out
 
 
-def convergence(make_cfg, duration: float = DURATION) -> tuple[dict[str, float], object, object]:
-    """Relative feature differences between default and 20x ``sim.substeps``."""
-    base = make_cfg()
-    fine = make_cfg(base.sim.substeps * FINE_FACTOR)
+def convergence(base: Config, duration: float = DURATION
+                ) -> tuple[dict[str, float], object, object]:
+    """Relative feature differences between the default integration steps and
+    20 times as many (arm substeps and pendulum steps)."""
+    fine = base.with_values({"sim.substeps": base.substeps * FINE_FACTOR,
+                             "sim.pendulum_steps": base.sim.pendulum_steps * FINE_FACTOR})
     fc = trajectory_features(simulate_config(base, duration))
     ff = trajectory_features(simulate_config(fine, duration))
     return _rel_errors(fc, ff), fc, ff
@@ -194,7 +205,8 @@ def main(argv: list[str] | None = None) -> dict:
     ccfg, lcfg = classical_config(), lugre_config()
     classical_ms, classical_med = _time_ms(lambda: simulate_config(ccfg, DURATION), args.repeats)
     lugre_ms, lugre_med = _time_ms(lambda: simulate_config(lcfg, DURATION), args.repeats)
-    print(f"compiled, {DURATION:g} s run, substeps {ccfg.sim.substeps}, min (median) of "
+    print(f"compiled, {DURATION:g} s run, substeps {ccfg.substeps} (classical) / "
+          f"{lcfg.substeps} (lugre), pendulum steps {ccfg.sim.pendulum_steps}, min (median) of "
           f"{args.repeats}: classical {classical_ms:.3f} ({classical_med:.3f}) ms, "
           f"lugre {lugre_ms:.3f} ({lugre_med:.3f}) ms")
 
@@ -224,13 +236,13 @@ def main(argv: list[str] | None = None) -> dict:
           f"{100 * max(ce.values()):.2f}% ({max(ce, key=ce.get)})")
 
     worst = 0.0
-    for name, make in (("classical", classical_config), ("lugre", lugre_config)):
-        err, fc, ff = convergence(make)
+    for name, cfg in CONVERGENCE:
+        err, fc, ff = convergence(cfg)
         arg = max(err, key=err.get)
         worst = max(worst, err[arg])
-        print(f"{name}: features (substeps {make().sim.substeps}): {_fmt(fc)}")
-        print(f"{name}: features (substeps {make().sim.substeps * FINE_FACTOR}): {_fmt(ff)}")
-        print(f"{name}: max relative feature error vs {FINE_FACTOR}x substeps "
+        print(f"{name}: features (substeps {cfg.substeps}): {_fmt(fc)}")
+        print(f"{name}: features (substeps {cfg.substeps * FINE_FACTOR}): {_fmt(ff)}")
+        print(f"{name}: max relative feature error vs {FINE_FACTOR}x steps "
               f"{100 * err[arg]:.3f}% ({arg}); per feature: "
               + ", ".join(f"{k} {100 * v:.3f}%" for k, v in err.items()))
 

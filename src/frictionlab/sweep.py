@@ -551,7 +551,7 @@ def _check_dask_address(dask: str) -> None:
 
 def _serial_work(base: Config, n_points: int, duration: float | None) -> float:
     d = base.sim.duration if duration is None else duration
-    return n_points * (d / base.design.h) * base.sim.substeps
+    return n_points * (d / base.design.h) * base.substeps
 
 
 def auto_workers(base: Config, n_points: int, duration: float | None = None) -> int:

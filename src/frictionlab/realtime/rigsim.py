@@ -5,7 +5,7 @@ microcontroller would, in front of :class:`frictionlab.simulation.SimulatedPlant
 running in real time:
 
 * **Real time, lazily.**  The plant is integrated in quanta of
-  ``h / sim.substeps`` (the simulator's own substep) with the commanded u
+  ``h / substeps`` (the simulator's own arm substep) with the commanded u
   held; whenever a frame arrives the plant is first brought up to the last
   quantum boundary before the current time, in one compiled call of the
   simulator's integrator.  A SAMPLE therefore reads the plant as it was at
@@ -76,7 +76,9 @@ class RigEmulator:
     ----------
     cfg : Config
         Plant, friction, ``design.h``, ``sim.substeps`` (integration quantum
-        ``h / substeps``), ``sim.initial_angle``, ``sim.noise``, ``sim.seed``.
+        ``h / substeps``; the pendulum steps every ``Config.pendulum_ratio``
+        quanta, as in the simulator), ``sim.initial_angle``, ``sim.noise``,
+        ``sim.seed``.
     clock : object with ``now_ns()``
         Time source (the monotonic clock, or a fake one in tests).
     watchdog : float
@@ -93,7 +95,8 @@ class RigEmulator:
         self.clock = clock
         self.scaling = scaling or RigScaling()
         self.h = cfg.design.h
-        self.dt_ns = max(1, round(self.h / cfg.sim.substeps * 1e9))
+        self.dt_ns = max(1, round(self.h / cfg.substeps * 1e9))
+        self._ratio = cfg.pendulum_ratio
         self._chunk_max = max(1, 1_000_000_000 // self.dt_ns)   # <= 1 s per call
         self._plants: dict[int, SimulatedPlant] = {}
         self.adc = AdcModel(self.scaling, arm_offset, True, cfg.sim.noise, cfg.sim.seed)
@@ -109,7 +112,7 @@ class RigEmulator:
         self.last_command_seq: int | None = None
         self._t0 = clock.now_ns()
         self.state = self._plant(1).init()
-        for n in range(1, 2 * cfg.sim.substeps + 1):  # compile and cache the usual chunks
+        for n in range(1, 2 * cfg.substeps + 1):  # compile and cache the usual chunks
             self._plant(n).step(self.state, 0.0)
         self.t_state = self._t0
         self.u_da = 0.0
@@ -125,7 +128,8 @@ class RigEmulator:
         """The plant stepping ``n`` quanta in one compiled call (cached per n)."""
         p = self._plants.get(n)
         if p is None:
-            cfg = self.cfg.with_values({"design.h": n * self.dt_ns / 1e9, "sim.substeps": n})
+            cfg = self.cfg.with_values({"design.h": n * self.dt_ns / 1e9, "sim.substeps": n,
+                                        "sim.pendulum_steps": -(-n // self._ratio)})
             p = self._plants[n] = SimulatedPlant(cfg)
         return p
 
@@ -209,7 +213,7 @@ class RigEmulator:
         x[1] = 0.0
         x[3] = 0.0
         x[4] = 0.0
-        self.state = dataclasses.replace(st, x=x, relay=0.0)
+        self.state = dataclasses.replace(st, x=x, memory=0.0)
         self.t_state = t
         self.held = True
         self.tripped = False
