@@ -5,6 +5,7 @@ in-process rig (``SimRig`` or the emulator behind :class:`DirectTransport`)
 steps the plant in fake time.
 """
 
+import dataclasses
 import gc
 import json
 import random
@@ -183,7 +184,8 @@ def _replay_u(samples, params_at):
 def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
     clock = FakeClock()
     ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=clock, duration=1.0,
-                             realtime=False, manage_gc=False)
+                             safety=Safety(gain_transition=0.0), realtime=False,
+                             manage_gc=False)
     sub = ctl.subscribe(maxlen=1000)
     before = ControlParams.from_config(cfg)
     futures = []
@@ -211,6 +213,67 @@ def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
     assert np.max(np.abs(u_wrong[k_new:] - u_log[k_new:])) > 1e-3
 
 
+def test_new_gains_replace_the_running_ones_linearly_over_the_transition(cfg):
+    clock = FakeClock()
+    ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=clock, duration=1.5,
+                             safety=Safety(gain_transition=0.5), realtime=False,
+                             manage_gc=False)
+    sub = ctl.subscribe(maxlen=1000)
+    before = ControlParams.from_config(cfg)
+    after = before.apply({"design": "slow"})
+    futures = []
+    clock.call_at(clock.now_ns() + H_NS + 98 * H_NS + H_NS // 2,
+                  lambda: futures.append(ctl.submit({"design": "slow"})))
+    ctl.run()
+    samples = [s for s in sub.drain() if not s.flags & STOP]
+    k_new = futures[0].result(timeout=0)
+    n = 100  # 0.5 s of ticks
+    l_old, l_new = before.gp[0:4], after.gp[0:4]
+
+    def params_at(k):
+        if k < k_new:
+            return before
+        a = min(1.0, (k - k_new + 1) / n)
+        gp = after.gp.copy()
+        gp[0:4] = l_old + a * (l_new - l_old)
+        return dataclasses.replace(after, gp=gp)
+
+    u_log = np.array([s.u for s in samples])
+    np.testing.assert_allclose(u_log, _replay_u(samples, params_at), rtol=0, atol=1e-9)
+    # at once would have been different during the transition, the same after it
+    u_at_once = _replay_u(samples, lambda k: before if k < k_new else after)
+    assert np.max(np.abs(u_at_once[k_new:k_new + n] - u_log[k_new:k_new + n])) > 1e-2
+    assert ctl.status()["design"]["L"] == pytest.approx(list(l_new))
+
+
+def test_slow_to_fast_in_mid_cycle_stays_inside_the_angle_limit():
+    # the slow design's arm swings 1.4 rad about its reference at up to 5 rad/s:
+    # the fast gains switched at once throw the pendulum past 0.35 rad (two times in
+    # three); over the default 2 s transition it stays well inside
+    cfg = build_config("slow", "classical")
+    worst = {}
+    for transition in (0.0, 2.0):
+        peaks = []
+        for t_switch in (10.2, 10.9, 11.6, 12.3):
+            clock = FakeClock()
+            ctl = RealtimeController(cfg, SimRig(cfg, lockstep=True), log_dir=None,
+                                     clock=clock, duration=t_switch + 3.0,
+                                     safety=Safety(angle_limit=1.2,
+                                                   gain_transition=transition),
+                                     realtime=False, manage_gc=False)
+            sub = ctl.subscribe(maxlen=4000)
+            clock.call_at(clock.now_ns() + round(t_switch * 1e9),
+                          lambda ctl=ctl: ctl.submit({"design": "fast"}))
+            stats = ctl.run()
+            assert stats["stop_reason"] == "duration"
+            theta = np.array([s.theta_m for s in sub.drain()
+                              if s.k * 0.005 > t_switch and not s.flags & STOP])
+            peaks.append(np.max(np.abs(theta)))
+        worst[transition] = max(peaks)
+    assert worst[0.0] > 0.35
+    assert worst[2.0] < 0.33
+
+
 def test_a_change_is_taken_from_the_mailbox_after_a_tick_without_a_reading(cfg):
     class Unanswered(SimRig):
         """The rig is alive, but the readings of ticks 50-59 come too late."""
@@ -221,7 +284,8 @@ def test_a_change_is_taken_from_the_mailbox_after_a_tick_without_a_reading(cfg):
 
     clock = FakeClock()
     ctl = RealtimeController(cfg, Unanswered(cfg), log_dir=None, clock=clock, duration=0.5,
-                             safety=Safety(unread_limit=20), realtime=False, manage_gc=False)
+                             safety=Safety(unread_limit=20, gain_transition=0.0), realtime=False,
+                             manage_gc=False)
     sub = ctl.subscribe(maxlen=1000)
     futures = []
     t0 = clock.now_ns() + H_NS

@@ -88,6 +88,11 @@ def register_cli(sub) -> None:
                    help="stop when |theta| exceeds this (default 0.35 rad)")
     p.add_argument("--start-tolerance", type=float, default=0.15, metavar="RAD",
                    help="start only if |theta| <= this (default 0.15 rad; no swing-up)")
+    p.add_argument("--gain-transition", type=float, default=2.0, metavar="S",
+                   help="new state-feedback gains (a design change while running) replace "
+                        "the running ones linearly over S seconds, so a switch in mid-cycle "
+                        "does not throw the pendulum past the angle limit; 0: at once "
+                        "(default: 2)")
     p.add_argument("--no-realtime", action="store_true",
                    help="do not ask for SCHED_FIFO priority")
     p.add_argument("--prewarm-us", type=float, default=PREWARM_US, metavar="US",
@@ -145,10 +150,12 @@ def cmd_run(args) -> int:
     if not 0 <= args.port < 65536:
         raise UsageError(f"--port must be in 0..65535, got {args.port}")
     try:
-        safety = Safety(angle_limit=args.angle_limit, start_tolerance=args.start_tolerance)
+        safety = Safety(angle_limit=args.angle_limit, start_tolerance=args.start_tolerance,
+                        gain_transition=args.gain_transition)
     except ValueError as exc:
         raise UsageError(str(exc).replace("safety.angle_limit", "--angle-limit")
-                         .replace("safety.start_tolerance", "--start-tolerance")) from None
+                         .replace("safety.start_tolerance", "--start-tolerance")
+                         .replace("safety.gain_transition", "--gain-transition")) from None
     ctl = RealtimeController(cfg, args.backend, log_dir=args.log_dir,
                              clock=MonotonicClock(), safety=safety, prewarm_us=args.prewarm_us,
                              duration=args.duration, realtime=not args.no_realtime,

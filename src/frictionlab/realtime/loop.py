@@ -25,6 +25,17 @@ nanoseconds on the monotonic clock, so there is no drift):
    next tick), and the scheduled housekeeping (garbage collection once a
    second, the host's steal time every 100 ms).
 
+Gain transitions: a change of the state-feedback gains L while the loop runs
+(a new design) moves L linearly from the gains in use to the new ones over
+:attr:`Safety.gain_transition` seconds (2 s), one step per tick; everything
+else of the change (observer gains, compensation) takes effect at once.
+Switched at once in the middle of the slow design's limit cycle, the fast
+design's gains meet an arm swinging at up to 5 rad/s about 1.4 rad from its
+reference and throw the pendulum to 0.41-0.44 rad, past the 0.35 rad angle
+limit, two times in three (simulated over a whole cycle of switch times);
+over 2 s the swing stays below 0.31 rad.  ``gain_transition = 0`` switches at
+once.
+
 Pre-warming (``prewarm_us`` > 0): on a virtual machine whose CPU sits idle
 between ticks, the first microseconds after a wake-up run from cold caches
 (on the project's VM a tick's code ran 2-20 times slower right after a
@@ -63,7 +74,18 @@ from collections import deque
 from dataclasses import dataclass
 
 from .._validation import Validated, param
-from ..controller import G_COMP, G_W0, S_ARM, S_ARMDOT, S_RELAY, S_X1, S_X2, S_ZHAT, controller_step
+from ..controller import (
+    G_COMP,
+    G_L,
+    G_W0,
+    S_ARM,
+    S_ARMDOT,
+    S_RELAY,
+    S_X1,
+    S_X2,
+    S_ZHAT,
+    controller_step,
+)
 from ..rig import RigScaling
 from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
@@ -100,6 +122,9 @@ class Safety(Validated):
                                  "rig's reply, as a fraction of h", "1", lo=0.05, hi=0.9)
     min_reply_wait: float = param(0.25, "the least time a tick waits for the reply after a "
                                   "late wake-up, as a fraction of h", "1", lo=0.0, hi=0.9)
+    gain_transition: float = param(2.0, "time over which new state-feedback gains L replace "
+                                   "the running ones, linearly (0: at once)", "s", lo=0.0,
+                                   hi=60.0)
 
 
 class _Stop(Exception):
@@ -289,6 +314,15 @@ class Loop:
         gp, cp = params.gp, params.cp
         w0 = gp[G_W0]
         comp_flag = COMPENSATE if params.comp_enabled else 0
+        ramp_n = round(safety.gain_transition / h)
+        ramp_k = ramp_n  # ticks of the gain transition done (ramp_n: none under way)
+        l_from = l_to = None
+        # the gains during a transition: written through gp_work, read by the
+        # controller through a read-only view (the compiled step's argument type is
+        # that of the read-only snapshots: nothing is compiled or loaded mid-run)
+        gp_work = gp.copy()
+        gp_ramp = gp_work.view()
+        gp_ramp.flags.writeable = False
         s = None
         first = True
         silent = unread = 0
@@ -407,6 +441,12 @@ class Loop:
                 arm_hat = s[S_ARM]
                 armd_hat = s[S_ARMDOT]
                 z_hat = s[S_ZHAT]
+                if ramp_k < ramp_n:
+                    ramp_k += 1
+                    if ramp_k == ramp_n:
+                        gp = params.gp
+                    else:
+                        gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
                 u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
                 u_da = us * u
                 if u_da > 1.0:
@@ -438,7 +478,17 @@ class Loop:
                     applied.append(mailbox.popleft())
                 params = applied[-1][0]
                 self.params = params
+                l_now = gp[G_L:G_L + 4].copy()
                 gp, cp = params.gp, params.cp
+                if ramp_n and s is not None and not (l_now == gp[G_L:G_L + 4]).all():
+                    # move L from the gains in use (mid-transition too) to the new ones
+                    l_from, l_to = l_now, gp[G_L:G_L + 4].copy()
+                    gp_work[:] = gp
+                    gp_work[G_L:G_L + 4] = l_from
+                    gp = gp_ramp
+                    ramp_k = 0
+                else:
+                    ramp_k = ramp_n
                 w0 = gp[G_W0]
                 comp_flag = COMPENSATE if params.comp_enabled else 0
                 if gp[G_COMP] != old_kind and s is not None:
