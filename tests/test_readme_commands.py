@@ -49,6 +49,7 @@ SKIPPED = [
 #: Python blocks that are fragments, not programs (undefined names on purpose).
 PYTHON_FRAGMENTS = {
     ("compensation.md", "make_compensator"): "shows a call with the loop's signals as names",
+    ("logs.md", "pd.read_parquet"): "needs pandas (not a dependency) and names a run's files",
 }
 #: A run longer than this is a bug (the slowest documented command takes ~30 s).
 TIMEOUT = 600

@@ -77,3 +77,55 @@ def test_truncated_last_line_is_ignored_when_reading(tmp_path):
 def test_flush_interval_is_at_most_100_ms(tmp_path):
     with pytest.raises(ValueError, match="flush_interval"):
         LogWriter(tmp_path, "bad", flush_interval=0.2)
+
+
+def test_parquet_log_holds_the_csv_columns_and_the_sidecar(tmp_path):
+    pq = pytest.importorskip("pyarrow.parquet")  # a core dependency: always there
+    w = LogWriter(tmp_path, "runp", formats=("csv", "parquet"))
+    assert w.paths["parquet"] == str(tmp_path / "runp.parquet")
+    w.start()
+    for k in range(40):
+        w.put(sample(k, NO_READING if k == 3 else 0))
+    w.record_start()
+    for k in range(40, 55):
+        w.put(sample(k))
+    rec = w.record_stop("stretch")
+    w.close({"stop_reason": "duration", "gains": [1.0, 2.0]})
+    table = pq.read_table(tmp_path / "runp.parquet")
+    csv = read_csv_log(tmp_path / "runp.csv")
+    assert table.column_names == list(csv)
+    for name, values in csv.items():
+        np.testing.assert_array_equal(table.column(name).to_numpy(), values)
+    assert str(table.schema.field("tick").type) == "int64"
+    assert table.column("flags").to_numpy()[3] == NO_READING
+    meta = json.loads(table.schema.metadata[b"frictionlab"])
+    assert meta == {"stop_reason": "duration", "gains": [1.0, 2.0]}
+    # the recording gets its own table with its own rows
+    assert rec["parquet"] == str(tmp_path / "stretch.parquet")
+    np.testing.assert_array_equal(pq.read_table(rec["parquet"]).column("tick").to_numpy(),
+                                  np.arange(40, 55))
+
+
+def test_parquet_never_overwrites_and_a_failure_is_reported_not_fatal(tmp_path):
+    (tmp_path / "runq.parquet").write_text("someone else's file")
+    w = LogWriter(tmp_path, "runq", formats=("csv", "parquet"))
+    w.start()
+    for k in range(10):
+        w.put(sample(k))
+    w.close({"stop_reason": "duration"})
+    assert (tmp_path / "runq.parquet").read_text() == "someone else's file"
+    meta = json.loads((tmp_path / "runq.json").read_text())
+    assert meta["stop_reason"] == "duration" and "exists" in meta["parquet_error"]
+    assert len(read_csv_log(tmp_path / "runq.csv")["tick"]) == 10  # the CSV is intact
+
+
+def test_unknown_log_format_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="log formats"):
+        LogWriter(tmp_path, "runr", formats=("csv", "hdf5"))
+
+
+def test_cli_log_format_choices_match_the_writer():
+    from frictionlab.realtime import datalog
+    from frictionlab.realtime_cli import LOG_FORMATS
+
+    assert LOG_FORMATS == datalog.LOG_FORMATS

@@ -35,6 +35,9 @@ __all__ = ["interface_stats", "register_cli", "start_console"]
 DEFAULT_RIG_PORT = 9870
 PREWARM_US = 300.0
 _OK_STOPS = ("duration", "signal", "user", "exit")
+#: ``--log-format`` choices (:data:`frictionlab.realtime.datalog.LOG_FORMATS`; kept here so
+#: that ``--help`` does not import the logger; a test checks they agree).
+LOG_FORMATS = ("csv", "parquet")
 
 
 def _cpu_arg(text: str):
@@ -87,6 +90,10 @@ def register_cli(sub) -> None:
                    help="with --headless: print the run's statistics as one JSON object "
                         "(without --headless it is refused, exit status 2)")
     p.add_argument("--log-dir", default="runs", help="where runs are logged (default ./runs)")
+    p.add_argument("--log-format", choices=LOG_FORMATS, default="csv",
+                   help="csv: the .dat/.csv pair and the JSON sidecar (default); parquet: "
+                        "also a .parquet table of the CSV's columns for the run and every "
+                        "recording, written when each ends (docs/logs.md)")
     _add_config_args(p)
     p.add_argument("--angle-limit", type=float, default=0.35, metavar="RAD",
                    help="stop when |theta| exceeds this (default 0.35 rad)")
@@ -168,7 +175,8 @@ def cmd_run(args) -> int:
                                  clock=MonotonicClock(), safety=safety,
                                  prewarm_us=args.prewarm_us, duration=args.duration,
                                  realtime=not args.no_realtime, fsync=args.fsync,
-                                 cpu=_resolve_cpu(args.cpu), sim_lockstep=args.sim_lockstep)
+                                 cpu=_resolve_cpu(args.cpu), sim_lockstep=args.sim_lockstep,
+                                 log_formats=("csv", args.log_format))
         signals.ctl = ctl
         if signals.received is not None:  # before anything ran: no rig opened, no log
             return _report(_not_started(signals.received), args)

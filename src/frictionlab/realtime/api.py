@@ -70,8 +70,10 @@ class RealtimeController:
                  clock=None, safety: Safety | None = None, duration: float | None = None,
                  realtime: bool = True, manage_gc: bool = True, fsync: bool = False,
                  scaling: RigScaling | None = None, prewarm_us: float = 0.0,
-                 cpu: int | None = None, sim_lockstep: bool = False):
+                 cpu: int | None = None, sim_lockstep: bool = False,
+                 log_formats: tuple[str, ...] = ("csv",)):
         self.cfg = cfg
+        self.log_formats = tuple(log_formats)
         self.sim_lockstep = sim_lockstep
         self.backend = backend
         self.backend_name = backend if isinstance(backend, str) else backend.name
@@ -273,7 +275,8 @@ class RealtimeController:
             self.run_id = self._new_run_id(n)
             try:
                 return LogWriter(self.log_dir, self.run_id, fsync=self.fsync,
-                                 meta_fn=self._meta, on_error=failed)
+                                 meta_fn=self._meta, on_error=failed,
+                                 formats=self.log_formats)
             except FileExistsError:
                 continue
         raise OSError(f"no free run name in {self.log_dir}")

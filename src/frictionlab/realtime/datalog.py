@@ -27,8 +27,16 @@ Files of a run ``<run_id>`` in the log directory:
     back and tells a finished run from one whose process died
     (``"state"``).
 
-A *recording* (the thesis's Save button) writes the same two formats for a
-stretch of the run to ``<name>.dat``/``<name>.csv``.
+``<run_id>.parquet`` (only with ``formats`` holding ``"parquet"``, ``frictionlab run
+--log-format parquet``)
+    The CSV's columns as an Apache Parquet table (float64; ``tick`` and
+    ``flags`` int64), written from the CSV once the run has stopped, with the
+    final sidecar in the file's key-value metadata (key ``frictionlab``).
+    The .dat/.csv pair stays the crash-safe record: a run that dies leaves
+    them and no Parquet file (:func:`write_parquet` converts one later).
+
+A *recording* (the thesis's Save button) writes the same formats for a
+stretch of the run to ``<name>.dat``/``<name>.csv`` (and ``<name>.parquet``).
 
 No silent data loss: files are created exclusively (an existing file of the
 same name is never overwritten; a recording's automatic name moves on to the
@@ -61,12 +69,14 @@ from .samples import Sample
 
 __all__ = [
     "CSV_HEADER",
+    "LOG_FORMATS",
     "RESERVE_BYTES",
     "LogWriter",
     "link_no_clobber",
     "read_csv_log",
     "read_sidecar",
     "write_json_atomic",
+    "write_parquet",
     "writer_identity",
 ]
 
@@ -74,6 +84,8 @@ CSV_HEADER = ("t,tick,flags," + ",".join(LOGGED)
               + ",y,x,v,u_da,jitter_us,compute_us,rig_us\n")
 _DAT_FMT = " ".join(["%.9g"] * 10) + "\n"
 _CSV_FMT = "%.6f,%d,%d," + ",".join(["%.9g"] * 14) + ",%.1f,%.1f,%.1f\n"
+#: The log formats of ``frictionlab run --log-format`` (.dat/.csv are always written).
+LOG_FORMATS = ("csv", "parquet")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
 #: Disk space set aside at a run's start for its final sidecar (released only if needed).
 RESERVE_BYTES = 256 << 10
@@ -186,6 +198,37 @@ def read_csv_log(path) -> dict:
     return {name: arr[:, i] for i, name in enumerate(header)}
 
 
+def write_parquet(csv_path, meta: dict | None = None) -> Path:
+    """Convert a CSV log (a run's or a recording's) to ``<stem>.parquet`` beside it.
+
+    The columns keep their names; ``tick`` and ``flags`` are int64, the rest
+    float64.  ``meta`` (the sidecar) goes into the file's key-value metadata
+    under ``frictionlab`` as JSON.  An existing ``.parquet`` is never
+    overwritten (``FileExistsError``).
+    """
+    import pyarrow as pa  # a dependency; imported here, off the loop's start-up path
+    import pyarrow.parquet as pq
+
+    csv_path = Path(csv_path)
+    out = csv_path.with_suffix(".parquet")
+    if os.path.lexists(out):
+        raise FileExistsError(errno.EEXIST, "File exists", str(out))
+    cols = read_csv_log(csv_path)
+    arrays = {k: (v.astype("int64") if k in ("tick", "flags") else v) for k, v in cols.items()}
+    table = pa.table(arrays)
+    if meta is not None:
+        table = table.replace_schema_metadata(
+            {"frictionlab": json.dumps(_json_safe(meta), allow_nan=False)})
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        pq.write_table(table, tmp)
+        link_no_clobber(tmp, out)
+    finally:
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+    return out
+
+
 class _Files:
     """A new .dat/.csv pair (created exclusively: an existing file raises
     ``FileExistsError`` and is left alone), written with raw file descriptors."""
@@ -290,12 +333,19 @@ class LogWriter:
         ``on_error(message)``, called once from the writer thread when a
         write of the log (or of a recording) fails; nothing more is written
         after that (see the module docstring).
+    formats : tuple of str
+        :data:`LOG_FORMATS` to write: ``("csv",)`` (default) or with
+        ``"parquet"``: the run's and every recording's CSV is also converted
+        to Parquet when it ends (off the tick: at :meth:`close` and on the
+        writer thread).  A failed conversion is reported in the sidecar
+        (``parquet_error``) and does not stop the run; the CSV stays.
     """
 
     def __init__(self, log_dir, run_id: str, *, flush_interval: float = 0.05,
                  maxsize: int = 12_000, fsync: bool = False,
                  meta_fn: Callable[[], dict] | None = None, meta_interval: float = 1.0,
-                 on_error: Callable[[str], None] | None = None):
+                 on_error: Callable[[str], None] | None = None,
+                 formats: tuple[str, ...] = ("csv",)):
         if not 0 < flush_interval <= 0.1:
             raise ValueError(f"flush_interval must be in (0, 0.1] s, got {flush_interval}")
         self.dir = Path(log_dir)
@@ -307,6 +357,11 @@ class LogWriter:
         self.meta_fn = meta_fn
         self.meta_interval = meta_interval
         self.on_error = on_error
+        bad = [f for f in formats if f not in LOG_FORMATS]
+        if bad:
+            raise ValueError(f"log formats must be among {LOG_FORMATS}, got {bad}")
+        self.parquet = "parquet" in formats
+        self.parquet_error: str | None = None
         self.dropped = 0
         self.written = 0
         self.error: str | None = None
@@ -327,8 +382,11 @@ class LogWriter:
 
     @property
     def paths(self) -> dict:
-        return {"dat": str(self._files.dat), "csv": str(self._files.csv),
-                "json": str(self.json_path)}
+        paths = {"dat": str(self._files.dat), "csv": str(self._files.csv),
+                 "json": str(self.json_path)}
+        if self.parquet:
+            paths["parquet"] = str(self._files.csv.with_suffix(".parquet"))
+        return paths
 
     def start(self, on_thread_start: Callable[[], None] | None = None) -> None:
         self._on_start = on_thread_start
@@ -399,7 +457,19 @@ class LogWriter:
         except OSError as exc:  # e.g. a deferred write error reported at close
             self._fail(f"log write failed: closing {self._files.csv}: {exc}")
         if meta is not None:
-            self.write_meta(meta() if callable(meta) else meta, final=True)
+            meta = meta() if callable(meta) else meta
+            if self.parquet:
+                try:
+                    write_parquet(self._files.csv, meta)
+                except (OSError, ValueError) as exc:
+                    self.parquet_error = f"{self._files.csv.with_suffix('.parquet')}: {exc}"
+                    meta = {**meta, "parquet_error": self.parquet_error}
+            self.write_meta(meta, final=True)
+        elif self.parquet:
+            try:
+                write_parquet(self._files.csv)
+            except (OSError, ValueError) as exc:
+                self.parquet_error = f"{self._files.csv.with_suffix('.parquet')}: {exc}"
         self._release_reserve()
 
     def write_meta(self, meta: dict, final: bool = False) -> None:
@@ -552,4 +622,10 @@ class LogWriter:
         except OSError as exc:
             stop.future.set_exception(exc)
             return
-        stop.future.set_result({"dat": str(dat), "csv": str(csv), "rows": self._rec_rows})
+        result = {"dat": str(dat), "csv": str(csv), "rows": self._rec_rows}
+        if self.parquet:
+            try:
+                result["parquet"] = str(write_parquet(csv))
+            except (OSError, ValueError) as exc:
+                result["parquet_error"] = str(exc)
+        stop.future.set_result(result)
