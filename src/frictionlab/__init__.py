@@ -38,17 +38,20 @@ imported on demand so that ``import frictionlab`` stays light:
   (registered on import; needs the ``gym`` extra)
 """
 
+from ._aliases import install as _install_aliases
 from .config import Config, ConfigError, SimParams, build_config
-from .controller import Controller
-from .design import Design, DesignSpec, design, preset
-from .friction import FrictionModel, FrictionParams, make_model
-from .limit_cycles import LimitCycleFeatures, features, trajectory_features
-from .observers import ArmObserver, PendulumObserver
-from .plant import PlantParams, rhs, zoh
-from .rig import RigScaling
-from .simulation import Trajectory, simulate, simulate_config
+from .model.controller import Controller
+from .model.design import Design, DesignSpec, design, preset
+from .model.friction import FrictionModel, FrictionParams, make_model
+from .model.limit_cycles import LimitCycleFeatures, features, trajectory_features
+from .model.observers import ArmObserver, PendulumObserver
+from .model.plant import PlantParams, rhs, zoh
+from .model.rig import RigScaling
+from .model.simulation import Trajectory, simulate, simulate_config
 
 __version__ = "0.1.0"
+
+_install_aliases()
 
 __all__ = [
     "ArmObserver",

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ._validation import ParamError, Validated, param
-from .design import DesignSpec, preset
-from .friction import KINDS, FrictionParams
-from .plant import PlantParams
+from .model.design import DesignSpec, preset
+from .model.friction import KINDS, FrictionParams
+from .model.params import ParamError, Validated, param
+from .model.plant import PlantParams
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -176,7 +176,7 @@ class Config:
             raise ConfigError(f"compensation must be one of {', '.join(COMPENSATOR_KINDS)}; "
                               f"got {self.compensation_kind!r}")
         if self.compensation_kind != "none":
-            from .compensation import check_compensator
+            from .studies.compensation import check_compensator
 
             check_compensator(self.compensation_kind, self.compensation)
 

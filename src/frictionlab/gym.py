@@ -85,11 +85,11 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ._jit import jit
 from .config import PLANT_FRICTION_KINDS, Config, build_config
-from .friction import KINDS
-from .rig import RigScaling, quantize
-from .simulation import _pack_plant, _quanta, plant_tick
+from .model._jit import jit
+from .model.friction import KINDS
+from .model.rig import RigScaling, quantize
+from .model.simulation import _pack_plant, _quanta, plant_tick
 
 __all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "FurutaEnv",
            "FurutaVectorEnv"]

@@ -61,8 +61,8 @@ import control
 import numpy as np
 
 from .config import Config, build_config
-from .friction import COULOMB, KINDS, LUGRE, NONE, P_EPS, lugre_dz, lugre_force, static_force
-from .plant import ARM, ARM_DOT, THETA, Z, rhs
+from .model.friction import COULOMB, KINDS, LUGRE, NONE, P_EPS, lugre_dz, lugre_force, static_force
+from .model.plant import ARM, ARM_DOT, THETA, Z, rhs
 
 __all__ = ["INPUTS", "OUTPUTS", "STATES", "linearize", "to_control"]
 

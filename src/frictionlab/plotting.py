@@ -114,8 +114,8 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
     not to list (e.g. swept ones).
     """
     from .config import COMPENSATOR_FIELDS, PLANT_FIELDS
-    from .design import PRESETS
-    from .plant import PlantParams
+    from .model.design import PRESETS
+    from .model.plant import PlantParams
 
     exclude = set(exclude)
     parts = []
@@ -149,7 +149,7 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
 def _design_base(cfg) -> tuple[str, str]:
     """(name, preset): ``fast``/``slow`` for a preset, else ``modified P`` where
     P is the preset the spec differs least from."""
-    from .design import PRESETS
+    from .model.design import PRESETS
 
     def ndiff(p):
         return sum(getattr(cfg.design, f.name) != getattr(p, f.name)

@@ -21,9 +21,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from ..controller import ERROR_SIGNALS
-from ..design import PRESETS, DesignSpec
-from ..friction import FrictionParams
+from ..model.controller import ERROR_SIGNALS
+from ..model.design import PRESETS, DesignSpec
+from ..model.friction import FrictionParams
 
 __all__ = [
     "COMPENSATOR_FIELDS",

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from ..limit_cycles import features
+from ..model.limit_cycles import features
 
 __all__ = ["PLOT_SIGNALS", "RingBuffer", "SampleStream", "decimate", "frame_json"]
 

@@ -14,7 +14,7 @@ from concurrent.futures import Future
 from pathlib import Path
 
 from ..config import Config
-from ..rig import RigScaling
+from ..model.rig import RigScaling
 from .clock import MonotonicClock
 from .datalog import LogWriter, link_no_clobber, writer_identity
 from .loop import STOP_REASONS, Loop, Safety

@@ -64,7 +64,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from pathlib import Path
 
-from ..simulation import LOGGED
+from ..model.simulation import LOGGED
 from .samples import Sample
 
 __all__ = [

@@ -84,8 +84,7 @@ import traceback
 from collections import deque
 from dataclasses import dataclass
 
-from .._validation import Validated, param
-from ..controller import (
+from ..model.controller import (
     G_COMP,
     G_L,
     G_W0,
@@ -97,7 +96,8 @@ from ..controller import (
     S_ZHAT,
     controller_step,
 )
-from ..rig import RigScaling
+from ..model.params import Validated, param
+from ..model.rig import RigScaling
 from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
 from .protocol import STATUS_HELD, STATUS_WATCHDOG

@@ -49,10 +49,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import Config, ConfigError
-from ..controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
-from ..design import PRESETS, Design, DesignSpec, design, preset
-from ..friction import FrictionParams
-from ..loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
+from ..model.controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
+from ..model.design import PRESETS, Design, DesignSpec, design, preset
+from ..model.friction import FrictionParams
+from ..model.loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
 
 __all__ = ["CHANGE_KEYS", "COMPENSATOR_MODELS", "ChangeError", "ControlParams", "UnsafeChange"]
 

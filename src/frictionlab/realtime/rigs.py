@@ -53,8 +53,8 @@ from collections.abc import Callable
 from urllib.parse import parse_qs, urlsplit
 
 from ..config import Config
-from ..rig import ADC_BITS, RigScaling
-from ..simulation import SimulatedPlant
+from ..model.rig import ADC_BITS, RigScaling
+from ..model.simulation import SimulatedPlant
 from . import protocol as P
 from .protocol import Frame, FrameError, SensorReading
 

@@ -50,8 +50,8 @@ import time
 from collections import deque
 
 from ..config import Config
-from ..rig import ADC_BITS, RigScaling
-from ..simulation import SimulatedPlant
+from ..model.rig import ADC_BITS, RigScaling
+from ..model.simulation import SimulatedPlant
 from . import protocol as P
 from .osrt import try_realtime_priority
 from .protocol import Frame, FrameError

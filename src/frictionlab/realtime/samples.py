@@ -26,7 +26,7 @@ import threading
 from collections import deque
 from typing import NamedTuple
 
-from ..simulation import LOGGED
+from ..model.simulation import LOGGED
 
 __all__ = [
     "CHANGED",

@@ -12,8 +12,8 @@ import math
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..limit_cycles import FEATURES
-from ..plotting import (
+from ...model.limit_cycles import FEATURES
+from ...plotting import (
     TRACES,
     axis_label,
     config_title,

@@ -24,7 +24,7 @@ import sys
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 
-from .config import (
+from ..config import (
     COMPENSATOR_KINDS,
     PLANT_FRICTION_KINDS,
     Config,
@@ -154,7 +154,7 @@ def parse_sets(texts: Sequence[str]) -> list[tuple[str, str]]:
 def config_from_args(args) -> Config:
     """Build the run's configuration; note on stderr any given key the chosen
     friction model or compensator ignores."""
-    from .config import inert_keys, load_toml
+    from ..config import inert_keys, load_toml
 
     items = [*(load_toml(args.config) if args.config else []), *parse_sets(args.sets)]
     cfg = build_config(
@@ -219,7 +219,7 @@ def progress_bar(label: str, enabled: bool = True):
 
 
 def cmd_design(args) -> int:
-    from .design import design
+    from ..model.design import design
 
     cfg = config_from_args(args)
     d = design(cfg.design, cfg.plant, method=args.method)
@@ -239,8 +239,8 @@ def cmd_design(args) -> int:
 
 def simulate_result(cfg: Config, duration: float | None, window: float | None,
                     progress: Callable[[float], None] | None = None):
-    from .limit_cycles import trajectory_features
-    from .simulation import simulate_config
+    from ..model.limit_cycles import trajectory_features
+    from ..model.simulation import simulate_config
 
     traj = simulate_config(cfg, duration, progress=progress)
     feats = trajectory_features(traj, window)
@@ -267,7 +267,7 @@ def cmd_simulate(args) -> int:
     if args.save:
         traj.save(args.save)
     if args.plot:
-        from .plotting import plot_trajectory
+        from ..plotting import plot_trajectory
 
         plot_trajectory(traj, args.plot, window=args.window, period=feats.period)
     out = {
@@ -293,7 +293,7 @@ def cmd_simulate(args) -> int:
 
 def cmd_keys(args) -> int:
     """``frictionlab keys``: every parameter key with its default, range, unit and meaning."""
-    from .config import _CLASSES, _SECTIONS
+    from ..config import _CLASSES, _SECTIONS
 
     cfg = build_config(design=args.design, friction=args.friction,
                        compensation=args.compensation)
@@ -383,17 +383,9 @@ def _describe_subcommands(parser: argparse.ArgumentParser) -> None:
 
 def _register_subcommands(sub) -> None:
     """The subcommands that live beside the numerics they drive."""
-    from . import (
-        compensation_cli,
-        identification,
-        predict_cli,
-        realtime_cli,
-        reproduce_cli,
-        sweep_cli,
-    )
+    from . import compensate, identify, predict, reproduce, run, sweep
 
-    for mod in (sweep_cli, identification, compensation_cli, realtime_cli, reproduce_cli,
-                predict_cli):
+    for mod in (sweep, identify, compensate, run, reproduce, predict):
         mod.register_cli(sub)
 
 

@@ -7,8 +7,11 @@ import math
 import signal
 import sys
 
-from .._validation import ParamError
-from ..cli import (
+from ..config import PLANT_FRICTION_KINDS, build_config
+from ..model.limit_cycles import FEATURES
+from ..model.params import ParamError
+from ..studies.identification.experiments import EXPERIMENTS, IdentificationError
+from . import (
     UsageError,
     _add_config_args,
     check_output_path,
@@ -18,9 +21,6 @@ from ..cli import (
     parse_sets,
     progress_bar,
 )
-from ..config import PLANT_FRICTION_KINDS, build_config
-from ..limit_cycles import FEATURES
-from .experiments import EXPERIMENTS, IdentificationError
 
 __all__ = ["parse_bounds", "parse_weights", "register_cli"]
 
@@ -72,7 +72,7 @@ MAX_MEASURED_BYTES = 16 << 20
 
 
 def _load_measured(path: str):
-    from .limit_cycle import parse_experiments
+    from ..studies.identification.limit_cycle import parse_experiments
 
     try:
         with open(path, "rb") as fh:
@@ -102,7 +102,7 @@ INTERFACE_FIELDS = ("estimate", "stderr", "residuals", "cost")
 
 
 def _write_report(path: str, obj: dict) -> None:
-    from ..cli import _clean
+    from . import _clean
 
     try:
         with open(path, "w") as fh:
@@ -117,7 +117,11 @@ def _never(*args, **kwargs):  # pragma: no cover - validation only
 
 
 def cmd_limit_cycle(args) -> int:
-    from .limit_cycle import LimitCycleProblem, check_fit_keys, fit_limit_cycle
+    from ..studies.identification.limit_cycle import (
+        LimitCycleProblem,
+        check_fit_keys,
+        fit_limit_cycle,
+    )
 
     experiments = _load_measured(args.measured)
     keys = check_fit_keys([k.strip() for k in args.fit.split(",") if k.strip()])
@@ -127,7 +131,7 @@ def cmd_limit_cycle(args) -> int:
     check_output_path(args.report, (".json",), "--report")
     check_workers(args.workers)
     if args.dask is not None:
-        from ..sweep import _check_dask_address
+        from ..studies.sweep import _check_dask_address
 
         _check_dask_address(args.dask)
     if not 1 <= args.maxiter <= MAX_ITER:
@@ -185,9 +189,9 @@ def cmd_limit_cycle(args) -> int:
     print(f"done in {result.seconds:.1f} s: {result.evaluations} parameter sets, "
           f"{result.generations} generations, cost {result.cost:.4g}", file=err)
     if args.plot:
-        from ..simulation import simulate_config
-        from .limit_cycle import experiment_config
-        from .plots import plot_limit_cycle_fit
+        from ..model.simulation import simulate_config
+        from ..studies.identification.limit_cycle import experiment_config
+        from ..studies.identification.plots import plot_limit_cycle_fit
 
         trajs = [simulate_config(experiment_config(result, i), args.duration)
                  for i in range(len(experiments))]
@@ -225,7 +229,7 @@ def _float_list(text: str, what: str) -> list[float]:
 
 
 def cmd_experiment(args) -> int:
-    from . import experiments as ex
+    from ..studies.identification import experiments as ex
 
     name = args.experiment
     friction = args.friction or _DEFAULT_FRICTION[name]
@@ -237,7 +241,7 @@ def cmd_experiment(args) -> int:
         raise UsageError("--save only applies to --simulate runs")
     warnings: list[str] = []
     if args.log:
-        from .logs import log_warnings, read_log
+        from ..io.logs import log_warnings, read_log
 
         log = read_log(args.log, cfg.design.h)
         warnings += log_warnings(args.log)
@@ -273,7 +277,7 @@ def cmd_experiment(args) -> int:
     except IdentificationError as exc:
         raise UsageError(f"{name}: {exc}") from None
     if args.plot:
-        from . import plots
+        from ..studies.identification import plots
 
         appendix = {"stiction": "App. E.1", "stribeck": "App. E.2",
                     "free-oscillation": "App. A", "control-scaling": "App. B.4"}[name]

@@ -50,8 +50,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .config import Config, build_config
-from .limit_cycles import FEATURES
+from ..config import Config, build_config
+from ..model.limit_cycles import FEATURES
 from .reference import SIMULATED_PERIODS, TABLE1, TABLE2, TABLE3, TABLE_COLUMNS
 
 __all__ = [
@@ -207,8 +207,8 @@ def reduce_with_trace(cfg: Config, duration: float | None,
     The features of :func:`frictionlab.sweep.reduce_features`, plus ``trace``:
     :data:`TRACE` over the last six periods (at least 5 s).
     """
-    from .limit_cycles import trajectory_features
-    from .simulation import simulate_config
+    from ..model.limit_cycles import trajectory_features
+    from ..model.simulation import simulate_config
 
     traj = simulate_config(cfg, duration)
     feats = trajectory_features(traj, window)
@@ -502,7 +502,7 @@ def _f(v: float | None) -> str:
 
 
 def _design_name(cfg: Config) -> str:
-    from .design import PRESETS
+    from ..model.design import PRESETS
 
     for name, spec in PRESETS.items():
         if dataclasses.replace(spec, omega0=cfg.design.omega0) == cfg.design:
@@ -548,7 +548,7 @@ def _table_md(table: Table, rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 
 def _report_md(results: Results, seconds: float, figures: Sequence[str]) -> str:
-    from . import __version__
+    from .. import __version__
 
     lines = [
         "# The thesis's simulation studies, re-run by frictionlab",
@@ -626,7 +626,7 @@ def write_report(results: Results, out: str, seconds: float,
     list of str
         The figure paths, in order.
     """
-    from .plotting import plot_cycle_figure
+    from ..plotting import plot_cycle_figure
 
     jobs = sorted(((case, row, stem, kind)
                    for case, row in results.cases if case.figures and "trace" in row

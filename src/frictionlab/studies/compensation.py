@@ -76,8 +76,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .config import COMPENSATOR_FIELDS, Config, ConfigError
-from .controller import (
+from ..config import COMPENSATOR_FIELDS, Config, ConfigError
+from ..model.controller import (
     DEFAULT_ERROR_SIGNAL,
     ERROR_SIGNALS,
     NS,
@@ -85,8 +85,8 @@ from .controller import (
     S_ZHAT,
     compensator_force,
 )
-from .friction import COULOMB, LUGRE, STRIBECK, FrictionParams
-from .rig import RigScaling
+from ..model.friction import COULOMB, LUGRE, STRIBECK, FrictionParams
+from ..model.rig import RigScaling
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
 #: pendulum-angle ADC (12 bits, App. B), about 1.5 mrad.  A compensated run whose
@@ -416,8 +416,8 @@ class Comparison:
 
 
 def _run(cfg: Config, duration: float | None, window: float | None, controller=None):
-    from .limit_cycles import trajectory_features
-    from .simulation import simulate_config
+    from ..model.limit_cycles import trajectory_features
+    from ..model.simulation import simulate_config
 
     traj = simulate_config(cfg, duration, controller=controller)
     feats = trajectory_features(traj, window)
@@ -688,7 +688,7 @@ def tune(
         failed=len(rows) - len(cands))
     if not return_trajectories:
         return res
-    from .simulation import simulate_config
+    from ..model.simulation import simulate_config
 
     return (res, simulate_config(cfg.with_values(res.best), duration),
             simulate_config(base_cfg, duration))

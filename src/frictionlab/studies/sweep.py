@@ -67,8 +67,8 @@ from contextlib import closing, contextmanager
 from pathlib import Path
 from typing import Any
 
-from .config import Config, ConfigError, UnknownKeyError, valid_keys
-from .limit_cycles import FEATURES
+from ..config import Config, ConfigError, UnknownKeyError, valid_keys
+from ..model.limit_cycles import FEATURES
 
 __all__ = [
     "MODES",
@@ -299,7 +299,7 @@ def reduce_features(cfg: Config, duration: float | None,
         (``None`` where undefined) and ``status`` (``limit_cycle``,
         ``settled`` or ``fell``).
     """
-    from .simulation import run_features
+    from ..model.simulation import run_features
 
     feats = run_features(cfg, duration, window)
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
@@ -363,8 +363,8 @@ def _check_reduce(reduce: Any) -> None:
 
 def _warm_up() -> None:
     """Load the compiled simulator once (from numba's on-disk cache)."""
-    from .config import build_config
-    from .simulation import run_features
+    from ..config import build_config
+    from ..model.simulation import run_features
 
     run_features(build_config(), 2.0)
 

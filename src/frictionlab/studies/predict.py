@@ -63,9 +63,9 @@ import numpy as np
 import scipy.integrate
 import scipy.optimize
 
-from .config import Config
-from .friction import stribeck_classical_force, stribeck_curve
-from .periodic import LinearLoop, PeriodicOrbit, linear_loop, periodic_orbit
+from ..config import Config
+from ..model.friction import stribeck_classical_force, stribeck_curve
+from ..model.periodic import LinearLoop, PeriodicOrbit, linear_loop, periodic_orbit
 
 __all__ = [
     "DescribingFunctionPrediction",
@@ -385,8 +385,8 @@ def plot_prediction(cfg: Config, result: Prediction, path: str) -> str:
     period (solid) and the describing function's sinusoid of the predicted
     pendulum amplitude and period (dash-dot).  The path is printed on stderr.
     """
-    from .periodic import orbit_trajectory
-    from .plotting import TRACES, axis_label, config_title, plt, save_figure
+    from ..model.periodic import orbit_trajectory
+    from ..plotting import TRACES, axis_label, config_title, plt, save_figure
 
     loop = linear_loop(cfg)
     nl, _ = friction_nonlinearity(cfg)

@@ -20,7 +20,7 @@ import os
 import signal
 import sys
 
-from .cli import (
+from . import (
     UsageError,
     _add_config_args,
     check_output_dir,
@@ -61,7 +61,7 @@ def _cpu_arg(text: str):
 
 
 def _resolve_cpu(value):
-    from .realtime.osrt import default_cpu
+    from ..realtime.osrt import default_cpu
 
     if value == "none":
         return None
@@ -126,7 +126,7 @@ def register_cli(sub) -> None:
     p.add_argument("--serial", metavar="DEVICE", default=None,
                    help="serve on a serial device instead of UDP")
     _add_config_args(p, friction=False)
-    from .config import PLANT_FRICTION_KINDS
+    from ..config import PLANT_FRICTION_KINDS
 
     p.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
                    help="friction model of the emulated plant (default: classical)")
@@ -148,8 +148,8 @@ def register_cli(sub) -> None:
 
 
 def cmd_run(args) -> int:
-    from .realtime import RealtimeController, Safety
-    from .realtime.clock import MonotonicClock
+    from ..realtime import RealtimeController, Safety
+    from ..realtime.clock import MonotonicClock
 
     if args.json and not args.headless:
         raise UsageError("--json needs --headless: the console prints its address, not one "
@@ -246,7 +246,7 @@ class _RunSignals:
         self._previous: dict = {}
 
     def __enter__(self):
-        from .realtime.osrt import STOP_SIGNALS
+        from ..realtime.osrt import STOP_SIGNALS
 
         for sig in STOP_SIGNALS:
             self._previous[sig] = signal.signal(sig, self._stop)
@@ -290,7 +290,7 @@ def _not_started(reason_detail: str) -> dict:
 
 
 def _run_headless(ctl, args) -> int:
-    from .realtime import RigError
+    from ..realtime import RigError
 
     try:
         try:
@@ -342,7 +342,7 @@ def interface_stats(st: dict) -> dict:
 
 
 def cmd_rig_sim(args) -> int:
-    from .realtime.rigsim import FAULTS, run_rig_sim
+    from ..realtime.rigsim import FAULTS, run_rig_sim
 
     cfg = config_from_args(args)
     if not 0 <= args.port < 65536:

@@ -8,8 +8,10 @@
   (E.1), Stribeck curve (E.2), free oscillation (A.1-A.2), control scaling
   (B.4), each against the simulated rig or on a recorded log
   (``frictionlab identify experiment``);
-* :mod:`.logs` - reading the project's ``.csv``/``.dat`` logs;
-* :mod:`.plots`, :mod:`.cli` - figures and the command line.
+* :mod:`.plots` - figures.
+
+Reading the project's ``.csv``/``.dat`` logs: :mod:`frictionlab.io.logs`; the
+command line: :mod:`frictionlab.cli.identify`.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from __future__ import annotations
 from importlib import import_module
 from typing import TYPE_CHECKING
 
-__all__ = ["Experiment", "FitResult", "fit_limit_cycle", "parse_experiments", "register_cli"]
+__all__ = ["Experiment", "FitResult", "fit_limit_cycle", "parse_experiments"]
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers only
     from .limit_cycle import Experiment, FitResult, fit_limit_cycle, parse_experiments
@@ -31,9 +33,3 @@ def __getattr__(name: str):
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-
-def register_cli(sub) -> None:
-    """Add ``frictionlab identify`` to the command line's subparsers."""
-    from .cli import register_cli as _register
-
-    _register(sub)

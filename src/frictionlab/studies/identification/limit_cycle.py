@@ -112,8 +112,8 @@ from typing import Any
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from ..config import _CLASSES, Config, ConfigError, build_config, parse_assignment, valid_keys
-from ..limit_cycles import FEATURES
+from ...config import _CLASSES, Config, ConfigError, build_config, parse_assignment, valid_keys
+from ...model.limit_cycles import FEATURES
 
 __all__ = [
     "DEFAULT_BOUNDS",

@@ -18,21 +18,9 @@ from collections.abc import Mapping, Sequence
 from contextlib import closing
 from typing import Any
 
-from .cli import (
-    UsageError,
-    _add_config_args,
-    check_output_path,
-    check_workers,
-    config_from_args,
-    emit_json,
-    finite,
-    flush_notes,
-    note,
-    progress_bar,
-)
-from .config import inert_keys
-from .limit_cycles import FEATURES
-from .sweep import (
+from ..config import inert_keys
+from ..model.limit_cycles import FEATURES
+from ..studies.sweep import (
     MODES,
     STATUSES,
     SweepFile,
@@ -43,6 +31,18 @@ from .sweep import (
     make_points,
     parse_vary,
     validate_points,
+)
+from . import (
+    UsageError,
+    _add_config_args,
+    check_output_path,
+    check_workers,
+    config_from_args,
+    emit_json,
+    finite,
+    flush_notes,
+    note,
+    progress_bar,
 )
 
 __all__ = ["NOT_A_CYCLE_MARKER", "UNDEFINED_MARKERS", "markdown_table", "plot_sweep",
@@ -171,7 +171,7 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]],
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from .plotting import config_title, feature_label, key_label, save_figure, series_style
+    from ..plotting import config_title, feature_label, key_label, save_figure, series_style
 
     base_vals = base_vals or {}
     keys = [k for k, _ in varies]

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..simulation import LOGGED
+from ..model.simulation import LOGGED
 
 __all__ = ["log_warnings", "read_log"]
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 import sys
 import time
 
-from .cli import (
+from ..config import SimParams
+from . import (
     UsageError,
     _add_config_args,
     check_output_path,
@@ -23,7 +24,6 @@ from .cli import (
     flush_notes,
     progress_bar,
 )
-from .config import SimParams
 
 __all__ = ["plot_before_after", "register_cli"]
 
@@ -44,7 +44,7 @@ def plot_before_after(traj_off, traj_on, path: str, window: float | None = None,
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from .plotting import TRACES, axis_label, config_title, save_figure
+    from ..plotting import TRACES, axis_label, config_title, save_figure
 
     fig, axes = plt.subplots(4, 2, figsize=(11, 9), sharex="col", sharey="row")
     for col, (traj, name) in enumerate(((traj_off, "without compensation"),
@@ -143,7 +143,7 @@ def _check_run_args(args):
 
 def cmd_compare(args) -> int:
     """``frictionlab compensate compare``."""
-    from .compensation import compare
+    from ..studies.compensation import compare
 
     cfg = config_from_args(args)
     if cfg.compensation_kind == "none":
@@ -174,8 +174,8 @@ def cmd_compare(args) -> int:
 
 def cmd_tune(args) -> int:
     """``frictionlab compensate tune``."""
-    from .compensation import DEFAULT_GRIDS, check_grid, tune
-    from .sweep import _check_dask_address, parse_vary
+    from ..studies.compensation import DEFAULT_GRIDS, check_grid, tune
+    from ..studies.sweep import _check_dask_address, parse_vary
 
     t0 = time.perf_counter()
     cfg = config_from_args(args)

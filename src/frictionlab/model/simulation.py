@@ -60,8 +60,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config import Config, build_config
 from ._jit import jit
-from .config import Config, build_config
 from .controller import (
     DEFAULT_ERROR_SIGNAL,
     NS,

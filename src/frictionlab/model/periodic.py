@@ -75,8 +75,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config import Config
 from ._jit import jit
-from .config import Config
 from .controller import (
     G_COMP,
     G_FEEDNET,

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import jit
-from ._validation import Validated, param
+from .params import Validated, param
 
 __all__ = [
     "ARM",

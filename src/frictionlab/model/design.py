@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import Validated, param
+from .params import Validated, param
 from .plant import PlantParams, zoh_closed_form
 
 __all__ = [

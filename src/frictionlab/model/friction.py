@@ -76,7 +76,7 @@ from typing import ClassVar
 import numpy as np
 
 from ._jit import jit
-from ._validation import Validated, param
+from .params import Validated, param
 
 __all__ = [
     "KINDS",

@@ -38,10 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import ParamError, check_range
-from ..config import Config
-from ..rig import RigScaling
-from ..simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory
+from ...config import Config
+from ...model.params import ParamError, check_range
+from ...model.rig import RigScaling
+from ...model.simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory
 
 __all__ = [
     "EXPERIMENTS",

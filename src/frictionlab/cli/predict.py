@@ -12,8 +12,8 @@ __all__ = ["register_cli"]
 
 
 def cmd_predict(args) -> int:
-    from .cli import check_output_path, config_from_args, emit_json
-    from .predict import predict
+    from ..studies.predict import predict
+    from . import check_output_path, config_from_args, emit_json
 
     cfg = config_from_args(args)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
@@ -22,7 +22,7 @@ def cmd_predict(args) -> int:
         print(f"frictionlab predict: note: {note}", file=sys.stderr)
     out = result.interface_dict()
     if args.plot:
-        from .predict import plot_prediction
+        from ..studies.predict import plot_prediction
 
         plot_prediction(cfg, result, args.plot)  # prints the path on stderr
         out["plot"] = args.plot
@@ -49,7 +49,7 @@ def cmd_predict(args) -> int:
 
 def register_cli(sub) -> None:
     """Add ``predict`` to the ``frictionlab`` subcommands."""
-    from .cli import _add_config_args
+    from . import _add_config_args
 
     p = sub.add_parser(
         "predict",
