@@ -186,11 +186,12 @@ def test_loopback_and_bind_rules(monkeypatch):
 
 
 def test_serve_refuses_a_non_loopback_bind_without_token(monkeypatch):
-    from frictionlab.cli import UsageError
+    from frictionlab.model.params import ParamError
 
     monkeypatch.delenv(TOKEN_ENV, raising=False)
-    with pytest.raises(UsageError, match="needs a token"):
+    with pytest.raises(ParamError, match="needs a token") as info:
         serve(object(), "0.0.0.0", 0, None)
+    assert info.value.field == "token"  # the command line maps it to --token
 
 
 def test_console_url():

@@ -39,7 +39,7 @@ imported on demand so that ``import frictionlab`` stays light:
 """
 
 from ._aliases import install as _install_aliases
-from .config import Config, ConfigError, SimParams, build_config
+from .config import Config, ConfigError, SimParams, build_config, simulate
 from .model.controller import Controller
 from .model.design import Design, DesignSpec, design, preset
 from .model.friction import FrictionModel, FrictionParams, make_model
@@ -47,7 +47,7 @@ from .model.limit_cycles import LimitCycleFeatures, features, trajectory_feature
 from .model.observers import ArmObserver, PendulumObserver
 from .model.plant import PlantParams, rhs, zoh
 from .model.rig import RigScaling
-from .model.simulation import Trajectory, simulate, simulate_config
+from .model.simulation import Trajectory, simulate_config
 
 __version__ = "0.1.0"
 

@@ -83,6 +83,9 @@ def install() -> None:
     # the function, not the module of the same former name)
     for old, new in ALIASES.items():
         if new in sys.modules:
-            sys.modules.setdefault(old, sys.modules[new])
+            module = sys.modules.setdefault(old, sys.modules[new])
+            parent, _, child = old.rpartition(".")
+            if parent in sys.modules and not hasattr(sys.modules[parent], child):
+                setattr(sys.modules[parent], child, module)
     if not any(isinstance(f, _AliasFinder) for f in sys.meta_path):
         sys.meta_path.insert(0, _AliasFinder())

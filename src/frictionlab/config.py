@@ -23,10 +23,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .model.controller import COMPENSATOR_FIELDS, COMPENSATOR_KINDS
+from .model.controller import check_compensator as _check_compensator
 from .model.design import DesignSpec, preset
 from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
 from .model.plant import PlantParams
+from .model.simulation import Trajectory, simulate_config
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -39,15 +42,15 @@ __all__ = [
     "SimParams",
     "UnknownKeyError",
     "build_config",
+    "check_compensator",
     "inert_keys",
     "parse_assignment",
+    "simulate",
     "valid_keys",
 ]
 
 #: Plant friction models selectable with ``--friction``.
 PLANT_FRICTION_KINDS = KINDS
-#: Compensators selectable with ``--compensation``.
-COMPENSATOR_KINDS = ("none", "coulomb", "classical", "lugre")
 
 
 class ConfigError(ValueError):
@@ -176,8 +179,6 @@ class Config:
             raise ConfigError(f"compensation must be one of {', '.join(COMPENSATOR_KINDS)}; "
                               f"got {self.compensation_kind!r}")
         if self.compensation_kind != "none":
-            from .studies.compensation import check_compensator
-
             check_compensator(self.compensation_kind, self.compensation)
 
     @property
@@ -232,15 +233,13 @@ PLANT_FIELDS = {
     "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "sigma1_velocity", "observer_gain"} | _NEG,
 }
-#: Friction fields each compensator reads.
-COMPENSATOR_FIELDS = {
-    "none": set(),
-    "coulomb": {"coulomb", "coulomb_negative", "hysteresis"},
-    "classical": {"stiction", "coulomb", "stribeck_velocity", "hysteresis"}
-    | _NEG - {"viscous_negative"},
-    "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
-              "sigma1_velocity", "observer_gain"} | _NEG,
-}
+def check_compensator(kind: str, params: FrictionParams) -> None:
+    """:func:`frictionlab.model.controller.check_compensator`, its refusal a
+    :class:`ConfigValueError` (a :class:`ConfigError` naming the key)."""
+    try:
+        _check_compensator(kind, params)
+    except ParamError as exc:
+        raise ConfigValueError(exc.field, exc.value, exc.allowed, str(exc)) from None
 
 
 def inert_keys(cfg: Config, keys: Iterable[str]) -> list[str]:
@@ -460,3 +459,20 @@ def build_config(
     for key, _ in items:
         _split(key)
     return _apply(cfg, items) if items else cfg
+
+
+def simulate(
+    design: str = "fast",
+    friction: str = "classical",
+    compensation: str = "none",
+    duration: float | None = None,
+    **values,
+) -> Trajectory:
+    """Build a configuration and simulate it: ``simulate("fast", "classical",
+    friction__coulomb=1.3)`` (:func:`~frictionlab.model.simulation.simulate_config`).
+
+    Keyword names are keys with ``.`` written as ``__``.
+    """
+    sets = [(k.replace("__", "."), v) for k, v in values.items()]
+    cfg = build_config(design, friction, compensation, sets=sets)
+    return simulate_config(cfg, duration)

@@ -13,7 +13,7 @@ import sys
 import time
 
 from ..config import SimParams
-from . import (
+from .common import (
     UsageError,
     _add_config_args,
     check_output_path,

@@ -11,7 +11,7 @@ from ..config import PLANT_FRICTION_KINDS, build_config
 from ..model.limit_cycles import FEATURES
 from ..model.params import ParamError
 from ..studies.identification.experiments import EXPERIMENTS, IdentificationError
-from . import (
+from .common import (
     UsageError,
     _add_config_args,
     check_output_path,
@@ -102,7 +102,7 @@ INTERFACE_FIELDS = ("estimate", "stderr", "residuals", "cost")
 
 
 def _write_report(path: str, obj: dict) -> None:
-    from . import _clean
+    from .common import _clean
 
     try:
         with open(path, "w") as fh:

@@ -13,7 +13,7 @@ __all__ = ["register_cli"]
 
 def cmd_predict(args) -> int:
     from ..studies.predict import predict
-    from . import check_output_path, config_from_args, emit_json
+    from .common import check_output_path, config_from_args, emit_json
 
     cfg = config_from_args(args)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
@@ -49,7 +49,7 @@ def cmd_predict(args) -> int:
 
 def register_cli(sub) -> None:
     """Add ``predict`` to the ``frictionlab`` subcommands."""
-    from . import _add_config_args
+    from .common import _add_config_args
 
     p = sub.add_parser(
         "predict",

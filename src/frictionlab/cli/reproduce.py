@@ -18,7 +18,7 @@ def cmd_reproduce(args) -> int:
     """``frictionlab reproduce``."""
     from ..studies.reproduce import count_runs, interface_json, run, write_report
     from ..studies.sweep import _check_dask_address, _get_dask
-    from . import UsageError, check_workers, emit_json, progress_bar
+    from .common import UsageError, check_workers, emit_json, progress_bar
 
     t0 = time.perf_counter()
     out = args.out

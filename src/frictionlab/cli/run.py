@@ -20,7 +20,8 @@ import os
 import signal
 import sys
 
-from . import (
+from ..model.params import ParamError
+from .common import (
     UsageError,
     _add_config_args,
     check_output_dir,
@@ -216,6 +217,10 @@ def start_console(ctl, host: str, port: int, token: str | None = None) -> bool:
         raise
     try:
         console.serve(ctl, host, port, token)
+    except ParamError as exc:
+        if exc.field == "token":  # the console's field is this command's option
+            raise UsageError(f"--token: {exc}") from None
+        raise
     finally:
         ctl.close()
     return True

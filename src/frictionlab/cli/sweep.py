@@ -32,7 +32,7 @@ from ..studies.sweep import (
     parse_vary,
     validate_points,
 )
-from . import (
+from .common import (
     UsageError,
     _add_config_args,
     check_output_path,

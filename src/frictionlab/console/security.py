@@ -31,6 +31,8 @@ import os
 from http.cookies import SimpleCookie
 from urllib.parse import parse_qs, urlsplit
 
+from ..model.params import ParamError
+
 __all__ = [
     "COOKIE",
     "MAX_BODY",
@@ -68,14 +70,16 @@ def resolve_token(token: str | None, environ=None) -> str | None:
 
     Raises
     ------
-    ValueError
-        If the token is shorter than :data:`MIN_TOKEN_LENGTH` characters.
+    ParamError
+        (field ``token``) If the token is shorter than :data:`MIN_TOKEN_LENGTH`
+        characters.
     """
     environ = os.environ if environ is None else environ
     if token is None or token == "":
         token = environ.get(TOKEN_ENV) or None
     if token is not None and len(token) < MIN_TOKEN_LENGTH:
-        raise ValueError(f"the console token must have at least {MIN_TOKEN_LENGTH} characters")
+        raise ParamError("token", f"{len(token)} characters", f">= {MIN_TOKEN_LENGTH} characters",
+                         f"the console token must have at least {MIN_TOKEN_LENGTH} characters")
     return token
 
 
@@ -84,12 +88,13 @@ def check_bind(host: str, token: str | None) -> None:
 
     Raises
     ------
-    ValueError
-        Naming the address and how to give a token.
+    ParamError
+        (field ``token``) Naming the address and the token's environment variable.
     """
     if not is_loopback(host) and not token:
-        raise ValueError(f"binding the console to {host} (not a loopback address) needs a token: "
-                         f"give --token TOKEN or set {TOKEN_ENV}")
+        raise ParamError("token", None, f"a token when {host} is not a loopback address",
+                         f"binding the console to {host} (not a loopback address) needs a token: "
+                         f"give one or set {TOKEN_ENV}")
 
 
 def _headers(scope) -> dict[str, str]:

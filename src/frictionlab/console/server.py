@@ -189,18 +189,14 @@ def serve(controller, host: str = "127.0.0.1", port: int = 8000, token: str | No
 
     Raises
     ------
-    frictionlab.cli.UsageError
-        A non-loopback address without a token, or a token that is too short.
+    frictionlab.model.params.ParamError
+        (field ``token``) A non-loopback address without a token, or a token
+        that is too short.
     OSError
         The address cannot be bound.
     """
-    from ..cli import UsageError
-
-    try:
-        token = resolve_token(token)
-        check_bind(host, token)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    token = resolve_token(token)
+    check_bind(host, token)
     if autostart is None:
         autostart = getattr(controller, "backend_name", None) == "sim"
     sock = _bind(host, port)

@@ -56,14 +56,34 @@ from .friction import (
     stribeck_level,
 )
 from .observers import arm_observer_step, pendulum_observer_step
+from .params import ParamError
 
 __all__ = [
+    "COMPENSATORS",
+    "COMPENSATOR_FIELDS",
+    "COMPENSATOR_KINDS",
     "DEFAULT_ERROR_SIGNAL",
     "ERROR_SIGNALS",
     "Controller",
     "ControllerOutput",
+    "check_compensator",
     "controller_step",
 ]
+
+#: The compensators of Sec. 6 (``--compensation`` values other than ``none``).
+COMPENSATORS = ("coulomb", "classical", "lugre")
+#: ``--compensation`` values.
+COMPENSATOR_KINDS = ("none", *COMPENSATORS)
+_NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
+#: The friction fields (of :class:`FrictionParams`) each compensator reads.
+COMPENSATOR_FIELDS = {
+    "none": set(),
+    "coulomb": {"coulomb", "coulomb_negative", "hysteresis"},
+    "classical": {"stiction", "coulomb", "stribeck_velocity", "hysteresis"}
+    | _NEG - {"viscous_negative"},
+    "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+              "sigma1_velocity", "observer_gain"} | _NEG,
+}
 
 S_X1, S_X2, S_ARM, S_ARMDOT, S_RELAY, S_ZHAT, S_FHAT, S_U = range(8)
 NS = 8
@@ -233,8 +253,8 @@ class Controller:
     feed_net: bool = True
 
     def __post_init__(self) -> None:
-        if self.compensation not in ("none", "coulomb", "classical", "lugre"):
-            raise ValueError("compensation must be one of none, coulomb, classical, lugre; "
+        if self.compensation not in COMPENSATOR_KINDS:
+            raise ValueError(f"compensation must be one of {', '.join(COMPENSATOR_KINDS)}; "
                              f"got {self.compensation!r}")
         if self.error_signal not in ERROR_SIGNALS:
             raise ValueError(f"error_signal must be one of {', '.join(ERROR_SIGNALS)}; "
@@ -280,3 +300,39 @@ class Controller:
                                float(s[S_ZHAT]))
         return out, s
 
+
+def check_compensator(kind: str, params: FrictionParams) -> None:
+    """Reject a compensator model that the compensator cannot run.
+
+    The LuGre observer of eq. (19) divides by :math:`g(v) = s(v)/\\sigma_0`
+    with the Stribeck level :math:`s(v) = F_C + (F_S - F_C)e^{-(v/v_S)^2}`.
+    With :math:`F_S = F_C = 0` (for :math:`v \\ge 0`, or with the
+    ``*_negative`` levels for :math:`v < 0`) :math:`s` vanishes for every v
+    and the observer is singular.  The other compensators accept any valid
+    :class:`FrictionParams`.
+
+    Parameters
+    ----------
+    kind : str
+        ``none`` or one of :data:`COMPENSATORS`.
+    params : FrictionParams
+        The compensator's model (keys ``compensation.*``).
+
+    Raises
+    ------
+    ParamError
+        Naming the ``compensation.*`` key at fault (``field``) and what is
+        allowed; its message names both levels.
+    """
+    if kind != "lugre":
+        return
+    fs_neg = params.stiction if params.stiction_negative is None else params.stiction_negative
+    fc_neg = params.coulomb if params.coulomb_negative is None else params.coulomb_negative
+    for side, fs, fc in (("", params.stiction, params.coulomb), ("_negative", fs_neg, fc_neg)):
+        if fs == 0 and fc == 0:
+            raise ParamError(
+                f"compensation.stiction{side}", fs,
+                f"> 0 when compensation.coulomb{side} is 0",
+                f"compensation.stiction{side} and compensation.coulomb{side} are both 0: "
+                f"the LuGre compensator's g(v) = s(v)/sigma0 vanishes and eq. (19) is "
+                f"singular; set at least one of them > 0")

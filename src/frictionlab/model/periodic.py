@@ -72,10 +72,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Config
 from ._jit import jit
 from .controller import (
     G_COMP,
@@ -102,6 +102,9 @@ from .simulation import (
     make_controller,
     plant_tick,
 )
+
+if TYPE_CHECKING:  # only annotations: the configuration layer builds what the model runs
+    from ..config import Config
 
 __all__ = [
     "LinearLoop",

@@ -69,6 +69,7 @@ __all__ = [
     "SimRig",
     "UdpTransport",
     "open_rig",
+    "send_control",
     "serial_settings",
 ]
 
@@ -615,8 +616,6 @@ class FramedRig(Rig):
     def push(self, kick: float) -> None:
         if not self.emulated or not isinstance(self.tx, UdpTransport):
             raise RigError(f"push needs an emulated rig over UDP; {self.name} is not one")
-        from .rigsim import send_control
-
         reply = send_control(self.tx.addr[0], self.tx.addr[1], {"cmd": "fault", "push": kick})
         if not reply.get("ok"):
             raise RigError(f"rig refused the push: {reply.get('error')}")
@@ -658,3 +657,24 @@ def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
         return FramedRig(SerialTransport(device, baud), spec)
     raise ValueError(f"--backend {spec!r}: expected sim, udp://HOST:PORT or serial://DEVICE")
 
+
+def send_control(host: str, port: int, message: dict, timeout: float = 1.0) -> dict:
+    """Send a CONTROL object to a rig-sim and return its answer (a dict)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_DGRAM) as sock:
+        sock.settimeout(timeout)
+        seq = int(time.monotonic_ns() & 0xFFFFFFFF)
+        sock.sendto(P.control_frame(seq, message), (host, port))
+        end = time.monotonic() + timeout
+        while True:
+            sock.settimeout(max(1e-3, end - time.monotonic()))
+            try:
+                data = sock.recv(4096)
+            except TimeoutError:
+                raise TimeoutError(f"rig-sim at {host}:{port} did not answer") from None
+            try:
+                frame = P.decode(data)
+            except FrameError:
+                continue
+            if frame.type == P.MSG_CONTROL_ACK and frame.seq == seq:
+                return P.parse_control(frame)

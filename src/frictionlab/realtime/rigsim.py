@@ -55,7 +55,7 @@ from ..model.simulation import SimulatedPlant
 from . import protocol as P
 from .osrt import try_realtime_priority
 from .protocol import Frame, FrameError
-from .rigs import ARM_START, AdcModel, serial_settings
+from .rigs import ARM_START, AdcModel, send_control, serial_settings
 
 __all__ = ["FAULTS", "DirectTransport", "RigEmulator", "send_control", "serve_stream", "serve_udp"]
 
@@ -519,28 +519,6 @@ def serve_stream(emulator: RigEmulator, fd: int, stop: threading.Event | None = 
             out.extend(emulator.handle_frame(frame))
         if out:
             os.write(fd, b"".join(out))
-
-
-def send_control(host: str, port: int, message: dict, timeout: float = 1.0) -> dict:
-    """Send a CONTROL object to a rig-sim and return its answer (a dict)."""
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_DGRAM) as sock:
-        sock.settimeout(timeout)
-        seq = int(time.monotonic_ns() & 0xFFFFFFFF)
-        sock.sendto(P.control_frame(seq, message), (host, port))
-        end = time.monotonic() + timeout
-        while True:
-            sock.settimeout(max(1e-3, end - time.monotonic()))
-            try:
-                data = sock.recv(4096)
-            except TimeoutError:
-                raise TimeoutError(f"rig-sim at {host}:{port} did not answer") from None
-            try:
-                frame = P.decode(data)
-            except FrameError:
-                continue
-            if frame.type == P.MSG_CONTROL_ACK and frame.seq == seq:
-                return P.parse_control(frame)
 
 
 def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,

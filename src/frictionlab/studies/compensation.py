@@ -76,8 +76,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..config import COMPENSATOR_FIELDS, Config, ConfigError
+from ..config import COMPENSATOR_FIELDS, Config, ConfigError, check_compensator
 from ..model.controller import (
+    COMPENSATORS,
     DEFAULT_ERROR_SIGNAL,
     ERROR_SIGNALS,
     NS,
@@ -114,44 +115,6 @@ __all__ = [
     "reversals",
     "tune",
 ]
-
-#: Compensators (``--compensation`` values other than ``none``).
-COMPENSATORS = ("coulomb", "classical", "lugre")
-
-
-def check_compensator(kind: str, params: FrictionParams) -> None:
-    """Reject a compensator model that the compensator cannot run.
-
-    The LuGre observer of eq. (19) divides by :math:`g(v) = s(v)/\\sigma_0`
-    with the Stribeck level :math:`s(v) = F_C + (F_S - F_C)e^{-(v/v_S)^2}`.
-    With :math:`F_S = F_C = 0` (for :math:`v \\ge 0`, or with the
-    ``*_negative`` levels for :math:`v < 0`) :math:`s` vanishes for every v
-    and the observer is singular.  The other compensators accept any valid
-    :class:`FrictionParams`.
-
-    Parameters
-    ----------
-    kind : str
-        ``none`` or one of :data:`COMPENSATORS`.
-    params : FrictionParams
-        The compensator's model (keys ``compensation.*``).
-
-    Raises
-    ------
-    ConfigError
-        One line naming the ``compensation.*`` keys at fault.
-    """
-    if kind != "lugre":
-        return
-    fs_neg = params.stiction if params.stiction_negative is None else params.stiction_negative
-    fc_neg = params.coulomb if params.coulomb_negative is None else params.coulomb_negative
-    for side, fs, fc in (("", params.stiction, params.coulomb), ("_negative", fs_neg, fc_neg)):
-        if fs == 0 and fc == 0:
-            raise ConfigError(
-                f"compensation.stiction{side} and compensation.coulomb{side} are both 0: "
-                f"the LuGre compensator's g(v) = s(v)/sigma0 vanishes and eq. (19) is "
-                f"singular; set at least one of them > 0")
-
 
 @dataclass(frozen=True)
 class CompensatorState:

@@ -1,0 +1,200 @@
+"""What every subcommand shares: the usage error (exit status 2), the
+parameter options (``--design``, ``--friction``, ``--compensation``,
+``--config``, ``--set``), option and output-path checks, JSON output and the
+progress bar.  Imports the configuration layer only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from collections.abc import Sequence
+from contextlib import contextmanager
+
+from ..config import (
+    COMPENSATOR_KINDS,
+    PLANT_FRICTION_KINDS,
+    Config,
+    ConfigError,
+    build_config,
+    parse_assignment,
+)
+
+
+class UsageError(Exception):
+    """Bad input: exit status 2."""
+
+
+class _Formatter(argparse.HelpFormatter):
+    """argparse's help layout, with a subcommand's summary on its own line:
+    argparse measures subcommand names one indentation level short, and then
+    pushes every summary of a long name onto the next line."""
+
+    def add_argument(self, action: argparse.Action) -> None:
+        super().add_argument(action)
+        if isinstance(action, argparse._SubParsersAction) and action.help != argparse.SUPPRESS:
+            longest = max((len(name) for name in action.choices), default=0)
+            self._action_max_length = max(self._action_max_length,
+                                          longest + self._current_indent + 2)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", _Formatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def check_output_path(path: str | None, exts: tuple[str, ...], option: str) -> None:
+    """Refuse, before any work, an output file with a wrong extension, whose
+    directory does not exist or cannot be written, or that is a directory."""
+    if not path:
+        return
+    if not path.endswith(exts):
+        names = ", ".join(exts[:-1]) + " or " + exts[-1] if len(exts) > 1 else exts[0]
+        raise UsageError(f"{option} {path}: the extension must be {names}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise UsageError(f"{option} {path}: directory {folder} does not exist")
+    if os.path.isdir(path):
+        raise UsageError(f"{option} {path} is a directory")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {path}: directory {folder} is not writable")
+
+
+def check_output_dir(path: str, option: str) -> None:
+    """Refuse, before any work, an output directory that is not a writable
+    directory and cannot be created as one (creating it if missing)."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise UsageError(f"{option} {path} exists and is not a directory")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"{option} {path}: cannot create it ({exc.strerror or exc})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {path}: the directory is not writable")
+
+
+def finite(option: str, value: float | None, lo: float | None = None,
+           lo_open: bool = True, hi: float | None = None) -> None:
+    """Refuse a float option that is not finite or outside ``lo``/``hi``
+    (``None``, an option not given, passes)."""
+    if value is None:
+        return
+    ok = math.isfinite(value) and (lo is None or value > lo or (not lo_open and value == lo))
+    ok = ok and (hi is None or value <= hi)
+    if not ok:
+        rel = f"{'>' if lo_open else '>='} {lo:g}" if lo is not None else "finite"
+        rng = f" and <= {hi:g}" if hi is not None else ""
+        raise UsageError(f"{option} must be {rel}{rng}, got {value:g}")
+
+
+def _clean(obj):
+    """JSON-safe copy: NaN/inf become null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def emit_json(obj) -> None:
+    sys.stdout.write(json.dumps(_clean(obj)) + "\n")
+    sys.stdout.flush()
+
+
+def _add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
+    p.add_argument("--design", choices=("fast", "slow"), default="fast",
+                   help="design preset of Sec. 2.4 (eqs. 13-16), applied before --set "
+                        "(default: %(default)s)")
+    if friction:
+        p.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
+                       help="friction model of the simulated plant (default: %(default)s)")
+        p.add_argument("--compensation", choices=COMPENSATOR_KINDS, default="none",
+                       help="friction compensator in the controller (default: %(default)s)")
+    p.add_argument("--config", metavar="FILE", help="TOML file with parameter keys")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a parameter key (repeatable; later wins); "
+                        "see 'frictionlab keys'")
+
+
+def parse_sets(texts: Sequence[str]) -> list[tuple[str, str]]:
+    """The ``--set KEY=VALUE`` options as (key, value) pairs."""
+    pairs = []
+    for text in texts:
+        try:
+            pairs.append(parse_assignment(text))
+        except ConfigError as exc:
+            raise UsageError(f"--set: {exc}") from None
+    return pairs
+
+
+def config_from_args(args) -> Config:
+    """Build the run's configuration; note on stderr any given key the chosen
+    friction model or compensator ignores."""
+    from ..config import inert_keys, load_toml
+
+    items = [*(load_toml(args.config) if args.config else []), *parse_sets(args.sets)]
+    cfg = build_config(
+        design=args.design,
+        friction=getattr(args, "friction", "classical"),
+        compensation=getattr(args, "compensation", "none"),
+        sets=items,
+    )
+    given = [k for k, _ in items]
+    if hasattr(args, "friction"):
+        for key in dict.fromkeys(inert_keys(cfg, given)):
+            if key.startswith("friction."):
+                why = f"with the {cfg.friction_kind!r} plant friction"
+            else:
+                why = f"with the {cfg.compensation_kind!r} compensator"
+            note(args, f"frictionlab: note: {key} has no effect {why}")
+    return cfg
+
+
+def note(args, text: str) -> None:
+    """Queue a note for stderr.  Notes wait until the input has been checked
+    (:func:`flush_notes`), so that bad input gets its one line alone."""
+    vars(args).setdefault("_notes", []).append(text)
+
+
+def flush_notes(args) -> None:
+    """Print the queued notes: a handler calls this once its input is checked,
+    before the work; :func:`main` prints any left after a successful run."""
+    for text in vars(args).pop("_notes", []):
+        print(text, file=sys.stderr)
+
+
+#: Most local worker processes a command starts.
+MAX_WORKERS = 256
+
+
+def check_workers(value: int | None, option: str = "--workers") -> None:
+    """Refuse a worker count outside 1..:data:`MAX_WORKERS` (None: automatic)."""
+    if value is not None and not 1 <= value <= MAX_WORKERS:
+        raise UsageError(f"{option} must be in 1..{MAX_WORKERS}, got {value}")
+
+
+@contextmanager
+def progress_bar(label: str, enabled: bool = True):
+    """A rich progress bar on stderr; yields ``update(fraction)``."""
+    if not enabled:
+        yield lambda f: None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    console = Console(stderr=True)
+    with Progress(TextColumn(label), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                  TimeRemainingColumn(), console=console, transient=True) as prog:
+        task = prog.add_task(label, total=1.0)
+        yield lambda f: prog.update(task, completed=f)

@@ -1,0 +1,162 @@
+"""The package's layering, checked on the source (docs/architecture.md).
+
+Every ``import`` counts, the ones inside functions included: a lazy import
+may defer loading a heavy library, never hide a cycle between frictionlab
+modules.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "frictionlab"
+#: What the model may import besides itself.
+MODEL_ALLOWED = {"numpy", "scipy", "numba"}
+
+
+def _module_name(path: Path) -> str:
+    parts = ["frictionlab", *path.relative_to(SRC).with_suffix("").parts]
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for p in sorted(SRC.rglob("*.py"))}
+
+
+def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """Every module ``name`` imports at run time, at module level or inside a
+    function (absolute names; frictionlab submodules resolved to the module,
+    third-party ones to their top-level package)."""
+    tree = ast.parse(path.read_text(), str(path))
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in _runtime_nodes(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                found.add(_resolve(alias.name, modules))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module
+            sub = [f"{target}.{a.name}" for a in node.names if f"{target}.{a.name}" in modules]
+            found.update(sub)
+            if len(sub) < len(node.names):
+                found.add(_resolve(target, modules))
+    found.discard(name)
+    return found
+
+
+def _runtime_nodes(tree: ast.AST):
+    """Every node, those under ``if TYPE_CHECKING:`` left out (never executed)."""
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        yield node
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and _is_type_checking(child.test):
+                todo.extend(child.orelse)
+            else:
+                todo.append(child)
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def _resolve(target: str, modules: dict[str, Path]) -> str:
+    if target.split(".")[0] != "frictionlab":
+        return target.split(".")[0]
+    while target not in modules:
+        target = target.rpartition(".")[0]
+    return target
+
+
+def _graph() -> dict[str, set[str]]:
+    modules = _modules()
+    return {name: _imports(name, path, modules) for name, path in modules.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in graph:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    sys.setrecursionlimit(10000)
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_import_graph_is_acyclic_counting_function_level_imports():
+    assert _cycles(_graph()) == []
+
+
+def test_the_model_imports_only_numpy_scipy_numba_and_the_standard_library():
+    bad = {}
+    for name, targets in _graph().items():
+        if not name.startswith("frictionlab.model"):
+            continue
+        wrong = {t for t in targets
+                 if not t.startswith("frictionlab.model")
+                 and t not in MODEL_ALLOWED and t not in sys.stdlib_module_names
+                 and t != "__future__"}
+        if wrong:
+            bad[name] = sorted(wrong)
+    assert bad == {}
+
+
+def test_the_checker_sees_a_cycle_hidden_in_a_function():
+    graph = {"frictionlab.a": {"frictionlab.b"}, "frictionlab.b": {"frictionlab.a"},
+             "frictionlab.c": {"frictionlab.a"}}
+    assert _cycles(graph) == [["frictionlab.a", "frictionlab.b"]]
+
+
+def test_the_checker_reads_function_level_and_relative_imports(tmp_path):
+    modules = {"frictionlab": Path(), "frictionlab.x": Path(), "frictionlab.x.y": Path(),
+               "frictionlab.z": Path()}
+    path = tmp_path / "y.py"
+    path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                    "    from .. import x\n"
+                    "def f():\n    from ..z import g\n    from . import y\n    import numba\n")
+    assert _imports("frictionlab.x.y", path, modules) == {"frictionlab.z", "numba", "typing"}
+
+
+@pytest.mark.parametrize("name", sorted(_modules()))
+def test_every_module_parses(name):
+    ast.parse(_modules()[name].read_text())
