@@ -515,7 +515,7 @@ def test_json_is_one_object_and_csv_has_documented_columns(tmp_path):
     assert "| friction.coulomb | plant.omega0 |" in err  # --table goes to stderr with --json
     with open(path) as fh:
         header = fh.readline().strip().split(",")
-    # INTERFACE.md: the varied keys, then the feature columns (then status, error)
+    # docs/cli.md: the varied keys, then the feature columns (then status, error)
     assert header == ["friction.coulomb", "plant.omega0", *FEATURES, "status", "error"]
     assert header == columns(["friction.coulomb", "plant.omega0"])
     rows = read_csv(path)

@@ -1,6 +1,6 @@
 """Run configuration: every parameter of a run, addressable by ``section.field`` keys.
 
-The keys are those of ``shared/INTERFACE.md`` (``plant.omega0``,
+The keys are those ``frictionlab keys`` lists (docs/cli.md; ``plant.omega0``,
 ``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``...).
 A configuration is built from, in order: the thesis defaults, the design
 preset (``fast``/``slow``), the per-model friction defaults, a TOML file, and

@@ -4,8 +4,9 @@ Every computing subcommand takes ``--json`` and then prints exactly one JSON
 object on stdout; progress and logs go to stderr.  Exit status 0 on success,
 2 on bad input with a one-line message on stderr (never a traceback): the
 library raises structured errors (:class:`~frictionlab.config.ConfigError`,
-:class:`~frictionlab._validation.ParamError`, ``ValueError``, ``OSError``)
-and :func:`main` alone turns them into the exit status; the subcommands
+:class:`~frictionlab.model.params.ParamError`, ``ValueError``, ``OSError``)
+and :func:`main` alone turns them into the exit status and names the option
+of a refused argument (:data:`.common.OPTIONS`); the subcommands
 check their options and output paths before any work.
 
 Start-up is kept light (docs/cli.md, "Start-up"): a subcommand's parser is
@@ -35,6 +36,7 @@ from .common import (
     check_output_path,
     config_from_args,
     emit_json,
+    error_message,
     finite,
     flush_notes,
     progress_bar,
@@ -218,7 +220,7 @@ def _register_subcommands(sub) -> None:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split()) or type(exc).__name__
+    text = " ".join(error_message(exc).split()) or type(exc).__name__
     return text if len(text) <= 800 else text[:797] + "..."
 
 

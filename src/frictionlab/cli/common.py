@@ -22,6 +22,8 @@ from ..config import (
     build_config,
     parse_assignment,
 )
+from ..io.jsonsafe import json_safe
+from ..model.params import ParamError
 
 
 class UsageError(Exception):
@@ -96,15 +98,22 @@ def finite(option: str, value: float | None, lo: float | None = None,
         raise UsageError(f"{option} must be {rel}{rng}, got {value:g}")
 
 
-def _clean(obj):
-    """JSON-safe copy: NaN/inf become null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_clean(v) for v in obj]
-    return obj
+_clean = json_safe  # the one sanitiser (frictionlab.io.jsonsafe)
+
+#: Library argument names (a :class:`~frictionlab.model.params.ParamError`'s
+#: ``field``) that are this command line's options: only the command line names
+#: its options; the library names its arguments.
+OPTIONS = {"vary": "--vary", "mode": "--mode", "dask": "--dask", "backend": "--backend",
+           "token": "--token"}
+
+
+def error_message(exc: BaseException) -> str:
+    """The message of an error, a refused argument named by its option
+    (``--vary: friction.coulomb: empty value in the list``)."""
+    field = getattr(exc, "field", None)
+    if isinstance(exc, ParamError) and field in OPTIONS:
+        return f"{OPTIONS[field]}: {exc}"
+    return str(exc)
 
 
 def emit_json(obj) -> None:

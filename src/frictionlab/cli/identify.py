@@ -96,7 +96,7 @@ def _load_measured(path: str):
 #: already hours of simulation.
 MAX_ITER, MAX_POPSIZE = 100_000, 1000
 
-#: The fields of ``identify limit-cycle --json`` (INTERFACE.md); the rest of
+#: The fields of ``identify limit-cycle --json`` (docs/cli.md); the rest of
 #: :meth:`FitResult.to_json` goes to ``--report FILE.json``.
 INTERFACE_FIELDS = ("estimate", "stderr", "residuals", "cost")
 

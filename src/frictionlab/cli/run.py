@@ -20,7 +20,6 @@ import os
 import signal
 import sys
 
-from ..model.params import ParamError
 from .common import (
     UsageError,
     _add_config_args,
@@ -217,10 +216,6 @@ def start_console(ctl, host: str, port: int, token: str | None = None) -> bool:
         raise
     try:
         console.serve(ctl, host, port, token)
-    except ParamError as exc:
-        if exc.field == "token":  # the console's field is this command's option
-            raise UsageError(f"--token: {exc}") from None
-        raise
     finally:
         ctl.close()
     return True
@@ -337,7 +332,7 @@ def _report(st: dict, args) -> int:
 
 
 def interface_stats(st: dict) -> dict:
-    """The fields ``frictionlab run --headless --json`` prints (INTERFACE.md), from the
+    """The fields ``frictionlab run --headless --json`` prints (docs/cli.md), from the
     run's full statistics (all of which are in the run's JSON sidecar)."""
     j, c = st["jitter_ms"], st["compute_us"]
     return {"ticks": st["ticks"], "missed": st["missed"], "overruns": st["overruns"],

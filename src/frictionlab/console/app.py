@@ -56,6 +56,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from starlette.background import BackgroundTask
 from starlette.staticfiles import StaticFiles
 
+from ..io.jsonsafe import json_safe
 from ..realtime.params import ChangeError, UnsafeChange
 from .models import (
     CompensationRequest,
@@ -74,19 +75,6 @@ __all__ = ["MAX_PAGES", "STATIC_DIR", "Hub", "Page", "create_app"]
 STATIC_DIR = Path(__file__).parent / "static"
 _FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}\.(dat|csv)$")
 log = logging.getLogger("frictionlab.console")
-
-
-def json_safe(obj):
-    """A JSON-safe copy: NaN and infinities become None, tuples lists, paths strings."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
 
 
 def _dumps(obj) -> str:

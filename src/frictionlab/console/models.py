@@ -21,7 +21,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from ..model.controller import ERROR_SIGNALS
+from ..model.controller import COMPENSATOR_FIELDS as _MODEL_FIELDS
+from ..model.controller import COMPENSATORS, ERROR_SIGNALS
 from ..model.design import PRESETS, DesignSpec
 from ..model.friction import FrictionParams
 
@@ -45,13 +46,13 @@ __all__ = [
 FEEDBACK_FIELDS = ("omega0", "omega1", "zeta1", "omega2", "zeta2")
 #: Kalman Filter panel (Sec. 2.3): the observer pole pairs.
 OBSERVER_FIELDS = ("observer_omega1", "observer_zeta1", "observer_omega2", "observer_zeta2")
-#: Parameters each compensator model reads (Sec. 6.1-6.3), in the panel's order.
+#: The panel's order of the compensator parameters (Sec. 6.1-6.3).
+_PANEL_ORDER = ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+                "observer_gain", "hysteresis")
+#: The fields each compensator reads (:data:`~frictionlab.model.controller.COMPENSATOR_FIELDS`)
+#: that the panel shows (the symmetric model: no ``*_negative`` levels).
 COMPENSATOR_FIELDS = {
-    "coulomb": ("coulomb", "hysteresis"),
-    "classical": ("stiction", "coulomb", "stribeck_velocity", "hysteresis"),
-    "lugre": ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
-              "observer_gain"),
-}
+    kind: tuple(f for f in _PANEL_ORDER if f in _MODEL_FIELDS[kind]) for kind in COMPENSATORS}
 #: Allowed push (rad/s added to the pendulum's angular velocity).
 KICK_RANGE = (-3.0, 3.0)
 #: Recording names: no path, no extension (``.dat`` and ``.csv`` are added).

@@ -45,7 +45,7 @@ from ._jit import jit
 
 __all__ = ["FEATURES", "LimitCycleFeatures", "features", "trajectory_features"]
 
-#: Feature names of INTERFACE.md, in Table 1's order plus peak_to_peak.
+#: Feature names of ``simulate --json`` (docs/cli.md), in Table 1's order plus peak_to_peak.
 FEATURES = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity", "peak_to_peak")
 
 

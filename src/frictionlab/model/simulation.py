@@ -57,10 +57,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Config, build_config
 from ._jit import jit
 from .controller import (
     DEFAULT_ERROR_SIGNAL,
@@ -77,13 +77,16 @@ from .friction import KINDS, LUGRE, NONE, P_K, lugre_force, lugre_step_exact, st
 from .plant import accelerations_sc
 from .rig import RigScaling, quantize
 
+if TYPE_CHECKING:  # only annotations: the configuration layer builds what the model runs
+    from ..config import Config
+
 __all__ = [
     "COLUMNS",
+    "DAT_LINE",
     "LOGGED",
     "SimulatedPlant",
     "Trajectory",
     "run_features",
-    "simulate",
     "simulate_config",
 ]
 
@@ -92,6 +95,9 @@ LOGGED = (
     "theta_m", "theta_hat", "theta_dot_hat", "u", "arm_m", "arm_dot_m", "arm_hat",
     "arm_dot_hat", "friction_hat", "z_hat",
 )
+#: One tick of a ``.dat`` log: the :data:`LOGGED` signals, space separated (the
+#: simulator's :meth:`Trajectory.save_dat` and the real-time logger both write it).
+DAT_LINE = " ".join(["%.9g"] * len(LOGGED)) + "\n"
 #: All recorded columns: the ten logged signals, then the true plant signals.
 COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction")
 NC = len(COLUMNS)
@@ -310,8 +316,10 @@ class Trajectory:
         return len(self.k)
 
     def save_dat(self, path) -> None:
-        """Write the ten logged signals as ASCII columns (the thesis's ``.dat``)."""
-        np.savetxt(path, self.data[:, :10], fmt="%.9g")
+        """Write the ten logged signals as ASCII columns (the thesis's ``.dat``,
+        one :data:`DAT_LINE` a tick, as the real-time logger writes it)."""
+        with open(path, "w") as fh:
+            fh.writelines(DAT_LINE % tuple(row) for row in self.data[:, :len(LOGGED)].tolist())
 
     def save_csv(self, path) -> None:
         """Write time and every signal as CSV with a header line."""
@@ -499,18 +507,3 @@ def run_features(cfg: Config, duration: float | None = None, window: float | Non
     traj = simulate_config(cfg, duration)
     return trajectory_features(traj, window)
 
-
-def simulate(
-    design: str = "fast",
-    friction: str = "classical",
-    compensation: str = "none",
-    duration: float | None = None,
-    **values,
-) -> Trajectory:
-    """Convenience wrapper: ``simulate("fast", "classical", friction__coulomb=1.3)``.
-
-    Keyword names are keys with ``.`` written as ``__``.
-    """
-    sets = [(k.replace("__", "."), v) for k, v in values.items()]
-    cfg = build_config(design, friction, compensation, sets=sets)
-    return simulate_config(cfg, duration)

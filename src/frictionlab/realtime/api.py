@@ -20,7 +20,7 @@ from .datalog import LogWriter, link_no_clobber, writer_identity
 from .loop import STOP_REASONS, Loop, Safety
 from .osrt import single_thread_blas, try_realtime_priority
 from .params import ControlParams
-from .rigs import Rig, open_rig
+from .rigs import Rig, open_rig, parse_backend
 from .samples import Subscription
 
 __all__ = ["GC_POLICY", "RealtimeController"]
@@ -486,23 +486,8 @@ class RealtimeController:
 
 
 def _check_backend(spec: str) -> None:
-    """Validate a backend string's syntax without connecting."""
-    from urllib.parse import urlsplit
-
-    parts = urlsplit(spec)
-    if parts.scheme == "udp":
-        try:
-            port = parts.port
-        except ValueError:
-            port = None
-        if not parts.hostname or port is None:
-            raise ValueError(f"--backend {spec!r}: expected udp://HOST:PORT")
-    elif parts.scheme == "serial":
-        if not spec[len("serial://"):]:
-            raise ValueError(f"--backend {spec!r}: expected serial://DEVICE")
-    else:
-        raise ValueError(f"--backend {spec!r}: expected sim, udp://HOST:PORT or "
-                         "serial://DEVICE")
+    """Validate a backend string's syntax without connecting (:func:`.rigs.parse_backend`)."""
+    parse_backend(spec)
 
 
 def _rename_recording(rec: dict, name: str | None, log_dir) -> dict:

@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import errno
 import json
-import math
 import os
 import re
 import socket
@@ -64,7 +63,8 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from pathlib import Path
 
-from ..model.simulation import LOGGED
+from ..io.jsonsafe import json_safe
+from ..model.simulation import DAT_LINE, LOGGED
 from .samples import Sample
 
 __all__ = [
@@ -82,7 +82,6 @@ __all__ = [
 
 CSV_HEADER = ("t,tick,flags," + ",".join(LOGGED)
               + ",y,x,v,u_da,jitter_us,compute_us,rig_us\n")
-_DAT_FMT = " ".join(["%.9g"] * 10) + "\n"
 _CSV_FMT = "%.6f,%d,%d," + ",".join(["%.9g"] * 14) + ",%.1f,%.1f,%.1f\n"
 #: The log formats of ``frictionlab run --log-format`` (.dat/.csv are always written).
 LOG_FORMATS = ("csv", "parquet")
@@ -97,21 +96,11 @@ _write = os.write
 _fallocate = os.posix_fallocate
 
 
-def _json_safe(obj):
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    return obj
-
-
 def write_json_atomic(path: Path, obj: dict) -> None:
     """Write ``obj`` as JSON to ``path`` via a temporary file and a rename."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    data = (json.dumps(_json_safe(obj), indent=1, default=str) + "\n").encode()
+    data = (json.dumps(json_safe(obj), indent=1, default=str) + "\n").encode()
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
     try:
         _write_all(fd, data)
@@ -218,7 +207,7 @@ def write_parquet(csv_path, meta: dict | None = None) -> Path:
     table = pa.table(arrays)
     if meta is not None:
         table = table.replace_schema_metadata(
-            {"frictionlab": json.dumps(_json_safe(meta), allow_nan=False)})
+            {"frictionlab": json.dumps(json_safe(meta), allow_nan=False)})
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:
         pq.write_table(table, tmp)
@@ -553,7 +542,7 @@ class LogWriter:
         while q:
             item = q.popleft()
             if isinstance(item, Sample):
-                dat.append(_DAT_FMT % item[3:13])
+                dat.append(DAT_LINE % item[3:13])
                 csv.append(_CSV_FMT % (item[1], item[0], item[2], *item[3:]))
                 continue
             self._flush(dat, csv)

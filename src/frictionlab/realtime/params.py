@@ -49,15 +49,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import Config, ConfigError
-from ..model.controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
+from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
 from ..model.design import PRESETS, Design, DesignSpec, design, preset
 from ..model.friction import FrictionParams
 from ..model.loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
+from ..model.params import ParamError
 
 __all__ = ["CHANGE_KEYS", "COMPENSATOR_MODELS", "ChangeError", "ControlParams", "UnsafeChange"]
 
 #: Friction models the compensator can use (the thesis's "Friction Type").
-COMPENSATOR_MODELS = ("coulomb", "classical", "lugre")
+COMPENSATOR_MODELS = COMPENSATORS
 CHANGE_KEYS = ("design", "compensation", "compensation_enabled", "compensation_params", "set",
                "error_signal")
 _FRICTION_FIELDS = tuple(f.name for f in dataclasses.fields(FrictionParams)
@@ -227,9 +228,11 @@ class ControlParams:
                                       f"{', '.join(_FRICTION_FIELDS)}", [f"compensation.{name}"])
                 try:
                     new_params = dataclasses.replace(new_params, **{name: value})
+                except ParamError as exc:  # refused as friction.<name>: the compensator's key
+                    own = ParamError(f"compensation.{name}", exc.value, exc.allowed)
+                    raise ChangeError(str(own), [own.field]) from None
                 except (TypeError, ValueError) as exc:
-                    raise ChangeError(str(exc).replace("friction.", "compensation."),
-                                      [f"compensation.{name}"]) from None
+                    raise ChangeError(str(exc), [f"compensation.{name}"]) from None
             params[kind] = new_params
         if "error_signal" in changes:
             error_signal = changes["error_signal"]
@@ -247,7 +250,9 @@ class ControlParams:
             touched = [f"compensation.{f.name}" for f in dataclasses.fields(FrictionParams)
                        if getattr(params[kind], f.name) != getattr(self.comp_params[kind],
                                                                    f.name)]
-            raise ChangeError(str(exc), touched or ["compensation"]) from None
+            field = getattr(exc, "field", None) if isinstance(exc, ParamError) else None
+            keys = [field] if field and field.startswith("compensation.") else touched
+            raise ChangeError(str(exc), keys or ["compensation"]) from None
 
     @functools.cached_property
     def loop_check(self) -> LoopCheck:

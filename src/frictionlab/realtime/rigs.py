@@ -53,6 +53,7 @@ from collections.abc import Callable
 from urllib.parse import parse_qs, urlsplit
 
 from ..config import Config
+from ..model.params import ParamError
 from ..model.rig import ADC_BITS, RigScaling
 from ..model.simulation import SimulatedPlant
 from . import protocol as P
@@ -69,6 +70,7 @@ __all__ = [
     "SimRig",
     "UdpTransport",
     "open_rig",
+    "parse_backend",
     "send_control",
     "serial_settings",
 ]
@@ -632,30 +634,61 @@ def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
 
     Raises
     ------
-    ValueError
-        For an unknown scheme or a malformed address.
+    ParamError
+        (a ``ValueError``, field ``backend``) For an unknown scheme or a
+        malformed address (:func:`parse_backend`).
+    """
+    scheme, where, arg = parse_backend(spec)
+    if scheme == "sim":
+        return SimRig(cfg, lockstep=lockstep)
+    if scheme == "udp":
+        return FramedRig(UdpTransport(where, arg), spec)
+    return FramedRig(SerialTransport(where, arg), spec)
+
+
+#: The backends a rig string may name (the ``allowed`` of a refused one, field ``backend``).
+BACKEND_FORMS = "sim, udp://HOST:PORT or serial://DEVICE[?baud=N]"
+
+
+def parse_backend(spec: str) -> tuple[str, str | None, int | None]:
+    """``(scheme, host or device, port or baud)`` of a backend string, checked
+    without connecting: ``("sim", None, None)``, ``("udp", HOST, PORT)``,
+    ``("serial", DEVICE, BAUD)`` (baud 1 000 000 unless ``?baud=N``).
+
+    Raises
+    ------
+    ParamError
+        (field ``backend``) An unknown scheme or a malformed address.
     """
     if spec == "sim":
-        return SimRig(cfg, lockstep=lockstep)
+        return "sim", None, None
     parts = urlsplit(spec)
     if parts.scheme == "udp":
-        if not parts.hostname or parts.port is None:
-            raise ValueError(f"--backend {spec!r}: expected udp://HOST:PORT")
-        return FramedRig(UdpTransport(parts.hostname, parts.port), spec)
+        try:
+            port = parts.port
+        except ValueError:
+            port = None
+        if not parts.hostname or port is None:
+            raise ParamError("backend", spec, BACKEND_FORMS,
+                             f"{spec!r}: expected udp://HOST:PORT")
+        return "udp", parts.hostname, port
     if parts.scheme == "serial":
         rest = spec[len("serial://"):]
         device, _, query = rest.partition("?")
         if not device:
-            raise ValueError(f"--backend {spec!r}: expected serial://DEVICE[?baud=N]")
+            raise ParamError("backend", spec, BACKEND_FORMS,
+                             f"{spec!r}: expected serial://DEVICE[?baud=N]")
         baud = 1_000_000
         if query:
             q = parse_qs(query)
             try:
                 baud = int(q.get("baud", [baud])[0])
             except ValueError:
-                raise ValueError(f"--backend {spec!r}: baud must be an integer") from None
-        return FramedRig(SerialTransport(device, baud), spec)
-    raise ValueError(f"--backend {spec!r}: expected sim, udp://HOST:PORT or serial://DEVICE")
+                raise ParamError("backend", spec, BACKEND_FORMS,
+                                 f"{spec!r}: baud must be an integer") from None
+        return "serial", device, baud
+    raise ParamError("backend", spec, BACKEND_FORMS,
+                     f"{spec!r}: expected sim, udp://HOST:PORT or serial://DEVICE")
 
 
 def send_control(host: str, port: int, message: dict, timeout: float = 1.0) -> dict:

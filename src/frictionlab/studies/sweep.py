@@ -67,7 +67,7 @@ from contextlib import closing, contextmanager
 from pathlib import Path
 from typing import Any
 
-from ..config import Config, ConfigError, UnknownKeyError, valid_keys
+from ..config import Config, ConfigError, ConfigValueError, UnknownKeyError, valid_keys
 from ..model.limit_cycles import FEATURES
 
 __all__ = [
@@ -108,16 +108,25 @@ MAX_POINTS = 100_000
 # ---------------------------------------------------------------------------
 
 
+#: What a varied key's values may be (the ``allowed`` of a refused one).
+VARY_FORMS = "KEY=V1,V2,... or KEY=START:STOP:N"
+
+
+def _vary_error(value: Any, message: str) -> ConfigValueError:
+    """A refused varied key: field ``vary`` (the command line's ``--vary``)."""
+    return ConfigValueError("vary", value, VARY_FORMS, message)
+
+
 def _number(key: str, text: str) -> float:
     t = text.strip()
     if not t:
-        raise ConfigError(f"--vary {key}: empty value in the list")
+        raise _vary_error(key, f"{key}: empty value in the list")
     try:
         v = float(t)
     except ValueError:
-        raise ConfigError(f"--vary {key}: {t!r} is not a number") from None
+        raise _vary_error(key, f"{key}: {t!r} is not a number") from None
     if not math.isfinite(v):
-        raise ConfigError(f"--vary {key}: {t!r} is not a finite number")
+        raise _vary_error(key, f"{key}: {t!r} is not a finite number")
     return v
 
 
@@ -139,27 +148,26 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
         :data:`MAX_POINTS`), duplicate value.
     """
     if "=" not in text:
-        raise ConfigError(f"--vary expects KEY=V1,V2,... or KEY=START:STOP:N, got {text!r}")
+        raise _vary_error(text, f"expected {VARY_FORMS}, got {text!r}")
     key, spec = (s.strip() for s in text.split("=", 1))
     if key not in valid_keys():
-        raise UnknownKeyError(key, "--vary: ")
+        raise UnknownKeyError(key)
     if not spec:
-        raise ConfigError(f"--vary {key}: empty list of values")
+        raise _vary_error(key, f"{key}: empty list of values")
     if ":" in spec:
         parts = spec.split(":")
         if len(parts) != 3:
-            raise ConfigError(f"--vary {key}: a range is START:STOP:N, got {spec!r}")
+            raise _vary_error(key, f"{key}: a range is START:STOP:N, got {spec!r}")
         start, stop = _number(key, parts[0]), _number(key, parts[1])
         try:
             n = int(parts[2].strip())
         except ValueError:
-            raise ConfigError(
-                f"--vary {key}: N in START:STOP:N must be an integer >= 1, got {parts[2]!r}"
-            ) from None
+            raise _vary_error(key, f"{key}: N in START:STOP:N must be an integer >= 1, "
+                                   f"got {parts[2]!r}") from None
         if n < 1:
-            raise ConfigError(f"--vary {key}: N in START:STOP:N must be >= 1, got {n}")
+            raise _vary_error(key, f"{key}: N in START:STOP:N must be >= 1, got {n}")
         if n > MAX_POINTS:
-            raise ConfigError(f"--vary {key}: N in START:STOP:N must be <= {MAX_POINTS}, "
+            raise _vary_error(key, f"{key}: N in START:STOP:N must be <= {MAX_POINTS}, "
                               f"got {n}")
         if n == 1:
             values = [start]
@@ -170,7 +178,7 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
     seen = set()
     for v in values:
         if v in seen:
-            raise ConfigError(f"--vary {key}: value {v:g} appears twice")
+            raise _vary_error(key, f"{key}: value {v:g} appears twice")
         seen.add(v)
     return key, values
 
@@ -206,16 +214,17 @@ def make_points(base: Config, varies: Sequence[tuple[str, Sequence[float]]],
         Each point gives a value for every varied key.
     """
     if mode not in MODES:
-        raise ConfigError(f"--mode must be one of {', '.join(MODES)}; got {mode!r}")
+        raise ConfigValueError("mode", mode, ", ".join(MODES),
+                               f"must be one of {', '.join(MODES)}; got {mode!r}")
     if not varies:
-        raise ConfigError("a sweep needs at least one --vary KEY=VALUES")
+        raise _vary_error(None, "a sweep needs at least one varied key (KEY=VALUES)")
     keys = [k for k, _ in varies]
     for k in keys:
         if keys.count(k) > 1:
-            raise ConfigError(f"--vary {k} given more than once")
+            raise _vary_error(k, f"{k} given more than once")
     for k, values in varies:
         if not values:
-            raise ConfigError(f"--vary {k}: empty list of values")
+            raise _vary_error(k, f"{k}: empty list of values")
     sizes = [len(values) for _, values in varies]
     total = math.prod(sizes) if mode == "grid" else sum(sizes)
     if total > MAX_POINTS:
@@ -521,8 +530,9 @@ def _get_dask(address: str, workers: int | None):
             try:
                 client = Client(address, timeout="30s")
             except OSError as exc:
-                raise ConfigError(f"--dask {address}: cannot connect to the scheduler "
-                                  f"({exc})") from None
+                raise ConfigValueError("dask", address, DASK_FORMS,
+                                       f"{address}: cannot connect to the scheduler "
+                                       f"({exc})") from None
         try:
             client.run(_warm_up)
         except BaseException:
@@ -559,9 +569,13 @@ if os.environ.pop(_FORKSERVER_WARM_ENV, None) == "1":  # this is the pool's fork
         pass
 
 
+#: What a Dask address may be (the ``allowed`` of a refused one, field ``dask``).
+DASK_FORMS = "'local' or tcp://HOST:PORT"
+
+
 def _check_dask_address(dask: str) -> None:
     if dask != "local" and not (dask.startswith("tcp://") and ":" in dask[len("tcp://"):]):
-        raise ConfigError(f"--dask must be 'local' or tcp://HOST:PORT, got {dask!r}")
+        raise ConfigValueError("dask", dask, DASK_FORMS, f"must be {DASK_FORMS}, got {dask!r}")
 
 
 def _serial_work(base: Config, n_points: int, duration: float | None) -> float:
