@@ -104,7 +104,7 @@ _clean = json_safe  # the one sanitiser (frictionlab.io.jsonsafe)
 #: ``field``) that are this command line's options: only the command line names
 #: its options; the library names its arguments.
 OPTIONS = {"vary": "--vary", "mode": "--mode", "dask": "--dask", "backend": "--backend",
-           "token": "--token"}
+           "token": "--token", "fit": "--fit", "weights": "--weights", "bounds": "--bounds"}
 
 
 def error_message(exc: BaseException) -> str:

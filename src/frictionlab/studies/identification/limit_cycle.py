@@ -112,7 +112,15 @@ from typing import Any
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from ...config import _CLASSES, Config, ConfigError, build_config, parse_assignment, valid_keys
+from ...config import (
+    _CLASSES,
+    Config,
+    ConfigError,
+    ConfigValueError,
+    build_config,
+    parse_assignment,
+    valid_keys,
+)
 from ...model.limit_cycles import FEATURES
 
 __all__ = [
@@ -279,18 +287,19 @@ def _key_meta(key: str) -> dict:
 def check_fit_keys(keys: Sequence[str]) -> list[str]:
     """Validate the keys to fit: known, real-valued parameters, no repeats."""
     if not keys:
-        raise ConfigError("--fit needs at least one key")
+        raise ConfigValueError("fit", "", "one or more parameter keys", "needs at least one key")
     out: list[str] = []
     for key in keys:
         if key not in valid_keys():
-            raise ConfigError(f"--fit: {key!r} is not a parameter key; "
+            raise ConfigValueError("fit", key, "parameter keys", f"{key!r} is not a parameter key; "
                               "see 'frictionlab keys'")
         section = key.split(".")[0]
         if section not in _FITTABLE_SECTIONS or _key_meta(key)["integer"]:
-            raise ConfigError(f"--fit: {key!r} is not a real-valued model parameter "
+            raise ConfigValueError("fit", key, "real-valued model parameters",
+                                   f"{key!r} is not a real-valued model parameter "
                               f"(fittable sections: {', '.join(_FITTABLE_SECTIONS)})")
         if key in out:
-            raise ConfigError(f"--fit: {key!r} given twice")
+            raise ConfigValueError("fit", key, "each key once", f"{key!r} given twice")
         out.append(key)
     return out
 
@@ -409,10 +418,12 @@ class LimitCycleProblem:
         weights = dict(weights or {})
         for name, w in weights.items():
             if name not in FEATURES:
-                raise ConfigError(f"--weights: unknown feature {name!r}; known features: "
+                raise ConfigValueError("weights", name, ", ".join(FEATURES),
+                                       f"unknown feature {name!r}; known features: "
                                   f"{', '.join(FEATURES)}")
             if not (math.isfinite(w) and w >= 0):
-                raise ConfigError(f"--weights: weight of {name} must be >= 0, got {w}")
+                raise ConfigValueError("weights", w, ">= 0",
+                                       f"weight of {name} must be >= 0, got {w}")
         self.weights = weights
         # one configuration per experiment; all are expressed as points on the
         # first one, so a whole population is a single batch
@@ -420,8 +431,9 @@ class LimitCycleProblem:
         common = [k for k, _ in (parse_assignment(a) if isinstance(a, str) else a
                                  for a in sets)]
         if "sim.duration" in common:
-            raise ConfigError("sim.duration: the length of the fit's runs is --duration "
-                              f"(here {self.duration:g} s)")
+            raise ConfigValueError("sim.duration", None, "unset (the fit's runs last its duration)",
+                                   "sim.duration: the length of the fit's runs is the fit's "
+                                   f"duration (here {self.duration:g} s)")
         for exp in self.experiments:
             for key in exp.sets:
                 if key in self.keys:
@@ -429,7 +441,7 @@ class LimitCycleProblem:
                                       "fitted")
                 if key == "sim.duration":
                     raise ConfigError(f"experiment {exp.label!r} sets sim.duration: every run "
-                                      f"of the fit lasts --duration ({self.duration:g} s)")
+                                      f"of the fit lasts the fit's duration ({self.duration:g} s)")
             configs.append(build_config(design=exp.design, friction=friction,
                                         sets=[*sets, *exp.sets.items()]))
         self.configs = configs
@@ -451,7 +463,8 @@ class LimitCycleProblem:
         given = dict(bounds or {})
         for k in given:
             if k not in self.keys:
-                raise ConfigError(f"--bounds given for {k}, which is not fitted")
+                raise ConfigValueError("bounds", k, "the fitted keys",
+                                       f"given for {k}, which is not fitted")
         lo, hi = [], []
         for k in self.keys:
             b = given.get(k) or default_bounds(k, self.base.get(k))
