@@ -72,10 +72,14 @@ class UnknownKeyError(ConfigError):
         The key given.
     suggestions : list of str
         The nearest valid keys (:func:`suggest_keys`), best first; may be empty.
+    field : str or None
+        The argument that named the key (e.g. ``vary``), if not a ``--set``
+        or TOML key; the command line names its option.
     """
 
-    def __init__(self, key: str, where: str = ""):
+    def __init__(self, key: str, where: str = "", field: str | None = None):
         self.key = key
+        self.field = field
         self.suggestions = suggest_keys(key)
         section = key.split(".", 1)[0]
         if self.suggestions:

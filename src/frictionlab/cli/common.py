@@ -19,6 +19,7 @@ from ..config import (
     PLANT_FRICTION_KINDS,
     Config,
     ConfigError,
+    UnknownKeyError,
     build_config,
     parse_assignment,
 )
@@ -111,7 +112,7 @@ def error_message(exc: BaseException) -> str:
     """The message of an error, a refused argument named by its option
     (``--vary: friction.coulomb: empty value in the list``)."""
     field = getattr(exc, "field", None)
-    if isinstance(exc, ParamError) and field in OPTIONS:
+    if isinstance(exc, ParamError | UnknownKeyError) and field in OPTIONS:
         return f"{OPTIONS[field]}: {exc}"
     return str(exc)
 

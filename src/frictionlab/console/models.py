@@ -165,7 +165,7 @@ class CompensationRequest(_Request):
 
     confirm: Confirm = False
     enabled: bool | None = Field(default=None, strict=True)
-    kind: Literal["coulomb", "classical", "lugre"] | None = None
+    kind: Literal[COMPENSATORS] | None = None  # the same as Literal["coulomb", ...]
     params: FrictionModelRequest | None = None
     error_signal: Literal[ERROR_SIGNALS] | None = None  # type: ignore[valid-type]
 

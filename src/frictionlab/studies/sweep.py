@@ -151,7 +151,7 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
         raise _vary_error(text, f"expected {VARY_FORMS}, got {text!r}")
     key, spec = (s.strip() for s in text.split("=", 1))
     if key not in valid_keys():
-        raise UnknownKeyError(key)
+        raise UnknownKeyError(key, field="vary")
     if not spec:
         raise _vary_error(key, f"{key}: empty list of values")
     if ":" in spec:
