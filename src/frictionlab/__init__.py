@@ -11,7 +11,7 @@ Inverted Pendulum" (Lund, 1996).  The public API:
   eq. 7, as a ``control.StateSpace``); :mod:`frictionlab.interop`, loaded on
   first use
 * friction: :func:`make_model`, :class:`FrictionModel` (one subclass per model:
-  :mod:`frictionlab.friction`)
+  :mod:`frictionlab.model.friction`)
 * design: :func:`design`, :func:`preset`
 * observers and controller: :class:`PendulumObserver`, :class:`ArmObserver`,
   :class:`Controller`
@@ -19,17 +19,24 @@ Inverted Pendulum" (Lund, 1996).  The public API:
   :class:`Trajectory`, :func:`features`, :func:`trajectory_features`
 * rig conversions: :class:`RigScaling`
 
+The package is layered (docs/architecture.md): :mod:`frictionlab.model`
+(numpy, scipy and numba only), :mod:`frictionlab.config`, :mod:`frictionlab.io`,
+:mod:`frictionlab.studies`, :mod:`frictionlab.realtime`,
+:mod:`frictionlab.console` and :mod:`frictionlab.cli`.  The modules' former
+paths (``frictionlab.simulation``, ``frictionlab.sweep``...) still import, as
+the same module objects (:mod:`frictionlab._aliases`).
+
 The larger capabilities are subpackages with their own curated ``__all__``,
 imported on demand so that ``import frictionlab`` stays light:
 
-* :mod:`frictionlab.sweep`: many parameter sets through the process pool or
-  Dask (:func:`frictionlab.sweep.evaluate`)
-* :mod:`frictionlab.identification`: limit-cycle fits
-  (:func:`frictionlab.identification.fit_limit_cycle`) and the simple
+* :mod:`frictionlab.studies.sweep`: many parameter sets through the process pool or
+  Dask (:func:`frictionlab.studies.sweep.evaluate`)
+* :mod:`frictionlab.studies.identification`: limit-cycle fits
+  (:func:`frictionlab.studies.identification.fit_limit_cycle`) and the simple
   experiments of Appendices A, B.4 and E
-* :mod:`frictionlab.compensation`: the compensators of Sec. 6 and their tuning
-* :mod:`frictionlab.predict`: the limit cycle predicted by the exact periodic
-  orbit (:func:`frictionlab.periodic.periodic_orbit`) and by the describing
+* :mod:`frictionlab.studies.compensation`: the compensators of Sec. 6 and their tuning
+* :mod:`frictionlab.studies.predict`: the limit cycle predicted by the exact periodic
+  orbit (:func:`frictionlab.model.periodic.periodic_orbit`) and by the describing
   function
 * :mod:`frictionlab.realtime`: the 200 Hz loop, rig backends and logging
   (:class:`frictionlab.realtime.RealtimeController`)
