@@ -141,6 +141,36 @@ def test_the_model_imports_only_numpy_scipy_numba_and_the_standard_library():
     assert bad == {}
 
 
+def _unresolved(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The frictionlab modules ``name`` imports that do not exist at their path
+    (a former path, say, which only the aliases of frictionlab._aliases serve)."""
+    tree = ast.parse(path.read_text(), str(path))
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out: set[str] = set()
+    for node in _runtime_nodes(tree):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                targets = [".".join(base + ([node.module] if node.module else []))]
+            else:
+                targets = [node.module or ""]
+        else:
+            continue
+        out.update(t for t in targets if t.split(".")[0] == "frictionlab" and t not in modules)
+    return out
+
+
+def test_the_package_imports_its_modules_by_their_current_paths():
+    # a module merged in at a former path, or an import of a former path, shows here:
+    # move the module into its layer (docs/architecture.md) and import the new path
+    modules = _modules()
+    bad = {name: sorted(u) for name, path in modules.items()
+           if (u := _unresolved(name, path, modules))}
+    assert bad == {}
+
+
 def test_the_checker_sees_a_cycle_hidden_in_a_function():
     graph = {"frictionlab.a": {"frictionlab.b"}, "frictionlab.b": {"frictionlab.a"},
              "frictionlab.c": {"frictionlab.a"}}
@@ -155,6 +185,8 @@ def test_the_checker_reads_function_level_and_relative_imports(tmp_path):
                     "    from .. import x\n"
                     "def f():\n    from ..z import g\n    from . import y\n    import numba\n")
     assert _imports("frictionlab.x.y", path, modules) == {"frictionlab.z", "numba", "typing"}
+    path.write_text("from .old import f\nfrom ..z import g\n")
+    assert _unresolved("frictionlab.x.y", path, modules) == {"frictionlab.x.old"}
 
 
 @pytest.mark.parametrize("name", sorted(_modules()))

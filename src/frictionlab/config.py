@@ -8,7 +8,7 @@ preset (``fast``/``slow``), the per-model friction defaults, a TOML file, and
 Unknown keys and bad values raise :class:`ConfigError` (a ``ValueError``)
 naming the key and what is allowed (an unknown key: :class:`UnknownKeyError`,
 with the nearest valid keys); a value out of its range raises the parameter
-class's :class:`~frictionlab.model.params.ParamError`.
+class's :class:`~frictionlab._validation.ParamError`.
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ class ConfigError(ValueError):
 
 class ConfigValueError(ConfigError, ParamError):
     """A key's value of the wrong type or out of its range: a :class:`ConfigError`
-    with the :class:`~frictionlab.model.params.ParamError` attributes ``field``
+    with the :class:`~frictionlab._validation.ParamError` attributes ``field``
     (the key), ``value`` and ``allowed``."""
 
 

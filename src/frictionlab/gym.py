@@ -5,8 +5,8 @@ r"""Gymnasium environment ``frictionlab/Furuta-v0``: the sampled loop at h = 5 m
 An outer layer: this module imports gymnasium, the model does not.
 
 One step is one sampling period ``design.h`` (5 ms) of the simulator's own
-plant (:func:`frictionlab.model.simulation.plant_tick`, the compiled integrator of
-``frictionlab simulate`` and of :class:`~frictionlab.model.simulation.SimulatedPlant`,
+plant (:func:`frictionlab.simulation.plant_tick`, the compiled integrator of
+``frictionlab simulate`` and of :class:`~frictionlab.simulation.SimulatedPlant`,
 with the configured arm friction, any model), with the action held
 (zero-order hold), exactly as the simulator's controller tick drives it.
 The observation is what the rig measures at the start of the next tick.
@@ -24,7 +24,7 @@ Observation (``observation="si"``, the default)
     the 12-bit quantisation of App. B when ``sim.quantization`` is 1.
 ``observation="raw"``
     The same measurements as the rig's raw ADC values ``[y, x, v]`` in
-    [-1, 1] (App. B.5 scaling, :class:`frictionlab.model.rig.RigScaling`; the
+    [-1, 1] (App. B.5 scaling, :class:`frictionlab.rig.RigScaling`; the
     angle channels wrap, the velocity channel saturates).
 Action (``action="u"``, the default)
     The control signal u in m/s^2, in [-u_max, u_max] with u_max = 1/0.022
@@ -126,7 +126,7 @@ def _step_plants(mask, xs, us, mems, friction, substeps, ratios, h, pps, fkinds,
 @jit
 def _sense(xs, draws, quanta, out):
     """The simulator's sensor: each measured signal (theta, Omega, Omega_dot)
-    plus its noise draw, quantised (:func:`frictionlab.model.rig.quantize`)."""
+    plus its noise draw, quantised (:func:`frictionlab.rig.quantize`)."""
     for i in range(xs.shape[0]):
         out[i, 0] = quantize(xs[i, 0] + draws[i, 0], quanta[0])
         out[i, 1] = quantize(xs[i, 2] + draws[i, 1], quanta[1])

@@ -230,7 +230,7 @@ class Controller:
     Parameters
     ----------
     design : Design
-        Gains from :func:`frictionlab.model.design.design`.
+        Gains from :func:`frictionlab.design.design`.
     compensation : str
         ``none``, ``coulomb``, ``classical`` (Sec. 6.2's implementation form)
         or ``lugre`` (the observer eq. 19).

@@ -48,7 +48,7 @@ Models
     how the thesis's Sec. 5.3 / App. F simulations used k (docs/model.md,
     "The observer gain k in the plant").  In the compensator e is an
     estimation error that the controller feeds (see
-    :mod:`frictionlab.model.controller`).  Optional
+    :mod:`frictionlab.controller`).  Optional
     variants: direction-dependent :math:`F_S, F_C, F_v` (``*_negative``
     fields, used for :math:`v < 0`) and the velocity-dependent damping
     :math:`\sigma_1(v) = \sigma_1 e^{-(v/v_d)^2}` of Sec. 3.3 (``sigma1_velocity``

@@ -1,7 +1,7 @@
 r"""Sampled-data closed-loop simulation (Sec. 5).
 
 The continuous plant eq. (6) with arm friction is integrated between samples;
-the controller (:func:`frictionlab.model.controller.controller_step`: observers,
+the controller (:func:`frictionlab.controller.controller_step`: observers,
 state feedback, compensator) runs every h with zero-order hold on u.  Time is
 the integer tick k, t = k h.
 
@@ -15,7 +15,7 @@ the friction force is evaluated once and held (friction is discontinuous, so
 a higher-order integration *through* it gains nothing) and the arm moves
 with the resulting constant acceleration (exact).
 The LuGre bristle state is advanced with the exact exponential update for
-frozen velocity (:func:`frictionlab.model.friction.lugre_step_exact`), so a stiff
+frozen velocity (:func:`frictionlab.friction.lugre_step_exact`), so a stiff
 bristle (``sigma0`` = 1000) stays stable at any substep count; the velocity
 it sees is the substep's midpoint velocity predicted with the last friction,
 which makes the smooth LuGre model second order in the substep (first order

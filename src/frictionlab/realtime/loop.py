@@ -8,11 +8,11 @@ nanoseconds on the monotonic clock, so there is no drift):
    latest deadline that has passed (never a burst of catch-up ticks),
    count the skipped ones as *missed* and record the stall;
 3. read the rig's raw (y, x, v), check them (finite, inside [-1, 1]),
-   convert them to SI with App. B (:class:`frictionlab.model.rig.RigScaling`;
+   convert them to SI with App. B (:class:`frictionlab.rig.RigScaling`;
    the arm channel is unwrapped and its bias x_0 captured at the first tick,
    so Omega = 0 at the start), check the angle limit;
 4. run the compiled controller step - the simulator's own code
-   (:func:`frictionlab.model.controller.controller_step`: u from the predicted
+   (:func:`frictionlab.controller.controller_step`: u from the predicted
    estimates, saturation, observer update);
 5. write u_DA = -0.022 u (saturated to [-1, 1]); *compute* = u written -
    wake-up, less the time spent reading the rig (*rig*: request to reply

@@ -10,7 +10,7 @@ snapshot in between two ticks, so a tick never sees half a change.
 Change requests are dicts (the console's and the mailbox's format):
 
 ``"design"``
-    ``"fast"`` / ``"slow"`` (preset), a :class:`~frictionlab.model.design.DesignSpec`,
+    ``"fast"`` / ``"slow"`` (preset), a :class:`~frictionlab.design.DesignSpec`,
     or a dict of ``design.*`` fields (``{"omega1": 5.0}``) applied to the
     current spec.  ``h`` cannot change while the loop exists.
 ``"compensation"``
@@ -25,7 +25,7 @@ Change requests are dicts (the console's and the mailbox's format):
 ``"set"``
     Dict of ``design.*`` / ``compensation.*`` keys as for ``--set``.
 ``"error_signal"``
-    The LuGre observer's error signal (:data:`frictionlab.model.controller.ERROR_SIGNALS`).
+    The LuGre observer's error signal (:data:`frictionlab.controller.ERROR_SIGNALS`).
 
 A refused change raises :class:`ChangeError` (a
 :class:`~frictionlab.config.ConfigError`) whose ``keys`` name what was
@@ -33,7 +33,7 @@ refused, as ``design.<field>``, ``compensation.<field>``, ``compensation``
 (the model), ``compensation_enabled`` or ``error_signal``, so that a caller
 can point at the fields without reading the message.  Every snapshot
 carries :attr:`ControlParams.loop_check`, the model's verdict on it
-(:func:`frictionlab.model.loopcheck.check_loop`: stability of the sampled loop,
+(:func:`frictionlab.loopcheck.check_loop`: stability of the sampled loop,
 of the compensator, predicted peak of u); :meth:`ControlParams.refusal`
 turns a failing verdict into an :class:`UnsafeChange` that also says what
 would be safe.
@@ -250,16 +250,16 @@ class ControlParams:
             touched = [f"compensation.{f.name}" for f in dataclasses.fields(FrictionParams)
                        if getattr(params[kind], f.name) != getattr(self.comp_params[kind],
                                                                    f.name)]
-            field = getattr(exc, "field", None) if isinstance(exc, ParamError) else None
-            keys = [field] if field and field.startswith("compensation.") else touched
-            raise ChangeError(str(exc), keys or ["compensation"]) from None
+            field = exc.field if isinstance(exc, ParamError) else ""
+            own = [field] if field.startswith("compensation.") else []
+            raise ChangeError(str(exc), touched or own or ["compensation"]) from None
 
     @functools.cached_property
     def loop_check(self) -> LoopCheck:
-        """The model's verdict on these settings (:func:`~frictionlab.model.loopcheck.check_loop`).
+        """The model's verdict on these settings (:func:`~frictionlab.loopcheck.check_loop`).
 
         Against the run's plant model (``cfg.plant``); measurement noise
-        ``sim.noise``, or :data:`~frictionlab.model.loopcheck.DEFAULT_NOISE` when
+        ``sim.noise``, or :data:`~frictionlab.loopcheck.DEFAULT_NOISE` when
         that is 0 (a real rig's noise is not configured).
         """
         return check_loop(self.controller, self.cfg.plant,
@@ -355,7 +355,7 @@ class ControlParams:
     def warm(self) -> None:
         """Do now, off the loop, the one-time work of the first change of each kind.
 
-        Designs both presets (:func:`~frictionlab.model.design.design` caches its
+        Designs both presets (:func:`~frictionlab.design.design` caches its
         results) and builds a controller for every compensator model, which
         imports the compensation code on first use.  Done in a request
         thread while the loop runs, this held the GIL for up to 30 ms and

@@ -25,7 +25,7 @@ Backends (:func:`open_rig` parses the ``--backend`` string):
 
 ``sim``
     :class:`SimRig`: the simulated plant in-process
-    (:class:`frictionlab.model.simulation.SimulatedPlant`, the simulator's own
+    (:class:`frictionlab.simulation.SimulatedPlant`, the simulator's own
     integrator).  Paced in real time by the loop: reading tick k first
     advances the plant to step k with the last u held, so after missed
     deadlines the plant has moved on as a real one would.  Readings go

@@ -1,7 +1,7 @@
 """The emulated rig (``frictionlab rig-sim``): the plant behind the raw protocol.
 
 :class:`RigEmulator` answers protocol frames the way the rig's
-microcontroller would, in front of :class:`frictionlab.model.simulation.SimulatedPlant`
+microcontroller would, in front of :class:`frictionlab.simulation.SimulatedPlant`
 running in real time:
 
 * **Real time, lazily.**  The plant is integrated in quanta of

@@ -6,7 +6,7 @@ the seven LuGre parameters around the defaults of eq. (21)) and note the
 limit cycle's peaks, period, max(u) and max arm velocity for each setting.
 This module does that for any parameter keys, on one core, all local cores,
 or a Dask cluster.  It is the engine only: the command line (``frictionlab
-sweep``, its table and plot) is :mod:`frictionlab.cli.sweep`, which imports
+sweep``, its table and plot) is :mod:`frictionlab.sweep_cli`, which imports
 this module, never the reverse.
 
 Engine
@@ -14,7 +14,7 @@ Engine
 :func:`evaluate` maps a list of points (``{key: value}`` dicts applied to a
 base :class:`~frictionlab.config.Config`) to result rows, in order.  The unit
 of work is one closed-loop run reduced to a row: by default
-:func:`reduce_features` (:func:`frictionlab.model.simulation.run_features`); a
+:func:`reduce_features` (:func:`frictionlab.simulation.run_features`); a
 caller that needs more of each run than its features (compensation tuning:
 the control chatter) passes its own ``reduce``, which runs in the workers
 beside the simulation so that only the row travels back.  Points are shipped
@@ -45,7 +45,7 @@ Output files
 :class:`SweepFile` writes rows as chunks complete (CSV, flushed and fsynced per
 chunk), reads them back for ``--resume``, and at the end rewrites the file in
 sweep order (atomically).  Columns: the varied keys, the seven features of
-:data:`frictionlab.model.limit_cycles.FEATURES`, ``status``, ``error`` (a
+:data:`frictionlab.limit_cycles.FEATURES`, ``status``, ``error`` (a
 ``reduce``'s extra columns are not written).  A
 ``.parquet`` output is written at the end from all rows; while the sweep runs
 the rows go to the crash-safe CSV journal ``FILE.parquet.partial.csv``.
@@ -299,12 +299,12 @@ def reduce_features(cfg: Config, duration: float | None,
     cfg : Config
         The point's configuration.
     duration, window : float or None
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.simulation.run_features`.
 
     Returns
     -------
     dict
-        The seven features of :data:`~frictionlab.model.limit_cycles.FEATURES`
+        The seven features of :data:`~frictionlab.limit_cycles.FEATURES`
         (``None`` where undefined) and ``status`` (``limit_cycle``,
         ``settled`` or ``fell``).
     """
@@ -423,7 +423,7 @@ def _get_pool(workers: int):
 
             ctx = multiprocessing.get_context("forkserver")
             # the forkserver imports and warms the simulator once; workers fork from it
-            ctx.set_forkserver_preload(["frictionlab.studies.sweep"])
+            ctx.set_forkserver_preload(["frictionlab.sweep"])
             os.environ[_FORKSERVER_WARM_ENV] = "1"
             try:
                 forkserver.ensure_running()
@@ -743,7 +743,7 @@ def evaluate(
     points : sequence of mappings ``{key: value}``
         Parameter sets, applied with :meth:`Config.with_values`.
     duration, window : float, optional
-        As for :func:`frictionlab.model.simulation.run_features` (defaults:
+        As for :func:`frictionlab.simulation.run_features` (defaults:
         ``sim.duration``; the last half of the run).
     workers : int, optional
         ``1``: in-process.  ``N``: a local pool of N processes (or N Dask
@@ -769,7 +769,7 @@ def evaluate(
     -------
     list of dict
         One row per point, in the order of ``points``: the point's keys and
-        values, the seven features of :data:`~frictionlab.model.limit_cycles.FEATURES`
+        values, the seven features of :data:`~frictionlab.limit_cycles.FEATURES`
         (``None`` where undefined), ``status``
         (``limit_cycle``/``settled``/``fell``/``error``), ``error`` (a
         message, or ``None``) and the extra columns of ``reduce`` (absent

@@ -4,12 +4,12 @@ Each experiment has two halves:
 
 * ``simulate_*(cfg, ...) -> Trajectory``: runs the experiment open loop (or
   under the experiment's own P velocity loop) against the simulated rig
-  (:class:`frictionlab.model.simulation.SimulatedPlant` with the plant and friction
+  (:class:`frictionlab.simulation.SimulatedPlant` with the plant and friction
   of ``cfg``), recording the signals the rig would log (columns of
-  :data:`frictionlab.model.simulation.COLUMNS`; measurement noise ``sim.noise``);
+  :data:`frictionlab.simulation.COLUMNS`; measurement noise ``sim.noise``);
 * ``analyse_*(log, ...) -> dict``: derives the estimates from a log, which is
-  anything indexable by signal name (a :class:`~frictionlab.model.simulation.Trajectory`
-  or the dict :func:`frictionlab.io.logs.read_log` returns), so
+  anything indexable by signal name (a :class:`~frictionlab.simulation.Trajectory`
+  or the dict :func:`frictionlab.identification.logs.read_log` returns), so
   the same analysis runs on a real rig's recording.
 
 Friction levels are in the plant's units (m/s^2 of arm-tip acceleration, like
