@@ -27,6 +27,7 @@ stiction           ``t``, ``u``, ``arm_dot_m``
 stribeck           ``t``, ``u``, ``arm_dot_m``
 free-oscillation   ``t``, ``theta_m``
 control-scaling    ``t``, ``u``, ``arm_dot_m``
+velocity-scale     ``t``, ``arm_m``, ``v`` (the raw velocity channel)
 =================  ==========================================
 """
 
@@ -50,6 +51,7 @@ __all__ = [
     "analyse_free_oscillation",
     "analyse_stiction",
     "analyse_stribeck",
+    "analyse_velocity_scale",
     "simulate_control_scaling",
     "simulate_free_oscillation",
     "simulate_stiction",
@@ -58,7 +60,8 @@ __all__ = [
 ]
 
 #: Experiment names of ``frictionlab identify experiment``.
-EXPERIMENTS = ("stiction", "stribeck", "free-oscillation", "control-scaling")
+EXPERIMENTS = ("stiction", "stribeck", "free-oscillation", "control-scaling",
+               "velocity-scale")
 
 _I = {name: i for i, name in enumerate(COLUMNS)}
 
@@ -727,6 +730,75 @@ def analyse_control_scaling(log: Any, *, coulomb: float = 1.5, arm_length: float
         out["input_gain_free"] = float(slope)
         out["coulomb_free"] = float(-icpt)
     return out
+
+
+# ---------------------------------------------------------------------------
+# B.3: the arm-velocity channel
+# ---------------------------------------------------------------------------
+
+
+def analyse_velocity_scale(log: Any, *, chunk: float = 0.25, v_min: float = 0.5) -> dict:
+    r"""Scale and bias of the arm-velocity channel (App. B.3).
+
+    The arm angle :math:`\Omega` (``arm_m``, whose scale ``rig.arm_scale`` is
+    known from App. B.2) gives the true arm velocity; the raw velocity
+    channel ``v`` is compared with it at several steady speeds.  The log is
+    cut into chunks of ``chunk`` s; in each the velocity is the slope of a
+    straight line fitted to :math:`\Omega(t)` and the raw reading is the
+    mean of ``v``.  A chunk counts when the arm moves faster than ``v_min``
+    rad/s, the raw reading is steady (its range below 3 % of its level plus
+    8 noise standard deviations) and the line fits (residual below 2 % of
+    the distance travelled plus the angle's noise).  A straight line through
+    the (raw, velocity) points of both directions, velocity =
+    :math:`s(v + b)`, gives the scale s (``velocity_scale``) and bias b
+    (``velocity_bias``) in the convention of ``rig.velocity_scale`` and
+    ``rig.velocity_bias``.
+
+    Returns
+    -------
+    dict
+        ``velocity_scale``, ``velocity_bias``, ``points`` ([raw v, velocity]
+        per chunk), ``residual_rms`` (rad/s), ``warnings``.
+    """
+    t = _time(log)
+    arm = _signal(log, "arm_m")
+    v = _signal(log, "v")
+    ok = np.isfinite(t) & np.isfinite(arm) & np.isfinite(v)
+    t, arm, v = t[ok], arm[ok], v[ok]
+    if len(t) < 16:
+        raise IdentificationError("the log is too short for the velocity-scale analysis")
+    h = float(np.median(np.diff(t)))
+    n = max(8, round(chunk / h))
+    sig_v, sig_a = _noise_level(v), _noise_level(arm)
+    pts = []
+    for a in range(0, len(t) - n + 1, n):
+        s = slice(a, a + n)
+        tt, aa, vv = t[s], arm[s], v[s]
+        if np.any(np.diff(tt) > 3.0 * h):
+            continue  # a gap in the log (missed ticks)
+        vel, icpt, _ = _slope(tt, aa)
+        vm = float(vv.mean())
+        if abs(vel) < v_min:
+            continue
+        if np.ptp(vv) > 0.03 * abs(vm) + 8.0 * sig_v + 1e-9:
+            continue
+        res = aa - (vel * tt + icpt)
+        if float(np.sqrt(np.mean(res * res))) > 0.02 * abs(vel) * (tt[-1] - tt[0]) + 3 * sig_a:
+            continue
+        pts.append((vm, vel))
+    if len(pts) < 4:
+        raise IdentificationError(f"only {len(pts)} steady chunk(s) of arm motion faster "
+                                  f"than {v_min:g} rad/s; the velocity-scale fit needs at "
+                                  "least 4")
+    p = np.array(pts)
+    warnings = []
+    if not (p[:, 1].min() < 0 < p[:, 1].max()):
+        warnings.append("steady motion in one direction only: the bias is extrapolated")
+    slope, icpt = np.polyfit(p[:, 0], p[:, 1], 1)
+    res = p[:, 1] - (slope * p[:, 0] + icpt)
+    return {"velocity_scale": float(slope), "velocity_bias": float(icpt / slope),
+            "residual_rms": float(np.sqrt(np.mean(res * res))),
+            "points": [[float(a), float(b)] for a, b in p], "warnings": warnings}
 
 
 def estimates_only(result: Mapping[str, Any]) -> dict[str, float]:

@@ -64,6 +64,12 @@ class RealtimeController:
     sim_lockstep : bool
         ``sim`` backend: one plant step per executed tick (see
         :class:`~.rigs.SimRig`).
+    experiment : object, optional
+        Run an identification experiment (:mod:`.experiment`) in place of
+        the balancing controller: same loop, timing, safety and logging;
+        the run ends with reason ``finished`` when its schedule is done.
+        Its ``describe()`` goes into the sidecar (``experiment``) and
+        :meth:`status`, its ``progress`` into :meth:`status`.
     """
 
     def __init__(self, cfg: Config, backend: str | Rig = "sim", *, log_dir="runs",
@@ -71,8 +77,9 @@ class RealtimeController:
                  realtime: bool = True, manage_gc: bool = True, fsync: bool = False,
                  scaling: RigScaling | None = None, prewarm_us: float = 0.0,
                  cpu: int | None = None, sim_lockstep: bool = False,
-                 log_formats: tuple[str, ...] = ("csv",)):
+                 log_formats: tuple[str, ...] = ("csv",), experiment=None):
         self.cfg = cfg
+        self.experiment = experiment
         self.log_formats = tuple(log_formats)
         self.sim_lockstep = sim_lockstep
         self.backend = backend
@@ -182,7 +189,8 @@ class RealtimeController:
                 loop = Loop(rig, self.clock, self._params, safety=self.safety,
                             scaling=self.scaling, duration=self.duration,
                             realtime=self.realtime, manage_gc=self.manage_gc,
-                            prewarm_us=self.prewarm_us, cpu=self.cpu)
+                            prewarm_us=self.prewarm_us, cpu=self.cpu,
+                            experiment=self.experiment)
                 self._writer = None
                 if self.log_dir is not None:
                     self._writer = self._open_log(loop)
@@ -248,7 +256,8 @@ class RealtimeController:
                 # the last rows are written after the loop stopped: if that failed, the
                 # run's outcome is a failed log whatever ended it (no silent data loss)
                 failed = self._writer.failed
-                if failed and loop.stop_reason in ("duration", "user", "signal", "exit"):
+                if failed and loop.stop_reason in ("duration", "user", "signal", "exit",
+                                                   "finished"):
                     loop.stop_detail = (f"{failed} (after the run had stopped: "
                                         f"{loop.stop_reason}, {loop.stop_detail})")
                     loop.stop_reason = "log_failed"
@@ -426,6 +435,10 @@ class RealtimeController:
             "recording": bool(self._writer is not None and self._writer.recording),
             "safety": dataclasses.asdict(self.safety),
         }
+        if self.experiment is not None:
+            out["experiment"] = {**self.experiment.describe(),
+                                 "progress": self.experiment.progress,
+                                 "phase": self.experiment.phase}
         if loop is None:
             out.update({"stop_reason": None, "ticks": 0, "missed": 0, "overruns": 0,
                         "t": 0.0})
@@ -482,6 +495,8 @@ class RealtimeController:
                          "switch_interval_s": _SWITCH_INTERVAL,
                          "blas_single_threaded": self.blas_single_threaded},
             "events": list(self.events),
+            "experiment": (None if self.experiment is None
+                           else self.experiment.describe()),
         }
 
 

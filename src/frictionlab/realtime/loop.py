@@ -63,7 +63,9 @@ late, or a tick that took that long from its deadline to its output - the
 process was suspended, e.g. SIGSTOP, or the host stalled - so the
 controller's state is stale; the tick zeroes the motor instead of acting on
 it; not with a rig whose plant waits for the loop, ``Rig.realtime_plant``
-False), ``exception``, and the requested stops ``duration``, ``user``,
+False), ``exception``, an identification experiment's ``finished`` (its
+schedule is done) and ``experiment_limit`` (arm speed, travel or waiting
+time exceeded, :mod:`.experiment`), and the requested stops ``duration``, ``user``,
 ``signal``, ``exit`` and ``log_failed`` (the log writer could not write,
 :mod:`.datalog`).
 
@@ -105,12 +107,12 @@ from .rigs import BadReading, Rig
 from .samples import CHANGED, COMPENSATE, MISSED, NO_READING, OVERRUN, START, STOP, Sample
 from .stats import Histogram, StallLog
 
-__all__ = ["STOP_REASONS", "Loop", "Safety"]
+__all__ = ["STOP_REASONS", "ExperimentEnd", "Loop", "Safety"]
 
 #: Every stop reason the loop records.
 STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_reading",
                 "rig_silent", "not_upright", "rig_fault", "nonfinite_u", "paused",
-                "log_failed", "exception")
+                "log_failed", "exception", "finished", "experiment_limit")
 _NAN = math.nan
 _FMAX = sys.float_info.max
 _rt_warned = False
@@ -153,6 +155,16 @@ class Safety(Validated):
                             integer=True)
 
 
+class ExperimentEnd(Exception):
+    """Raised by an experiment's ``step`` to end the run: reason ``finished`` (its
+    schedule is done) or ``experiment_limit`` (one of its limits was exceeded)."""
+
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(detail)
+        self.reason = reason
+        self.detail = detail
+
+
 class _Stop(Exception):
     """Internal: leave the loop with a reason."""
 
@@ -186,6 +198,14 @@ class Loop:
     manage_gc : bool
         Freeze and disable the cyclic garbage collector during the run (see
         the module docstring).
+    experiment : object, optional
+        An identification experiment in place of the balancing controller
+        (:mod:`frictionlab.realtime.experiment`): ``step(t, theta, arm,
+        arm_dot, y, x, v) -> u`` (m/s^2) is called in the tick instead of the
+        controller step, and may raise :class:`ExperimentEnd`.  The
+        ``not_upright`` and ``angle_limit`` checks are off (the pendulum hangs
+        or swings freely); every other check, the timing and the logging are
+        those of a balancing run.
 
     Attributes read by other threads (single-word updates, no locks): ``k``,
     ``ticks``, ``missed``, ``overruns``, ``rig_timeouts``, ``jitter``,
@@ -197,8 +217,9 @@ class Loop:
                  safety: Safety | None = None, scaling: RigScaling | None = None,
                  duration: float | None = None, realtime: bool = True,
                  manage_gc: bool = True, priority: int = 50, prewarm_us: float = 0.0,
-                 cpu: int | None = None):
+                 cpu: int | None = None, experiment=None):
         self.rig = rig
+        self.experiment = experiment
         self.clock = clock
         self.params = params
         self.safety = safety or Safety()
@@ -266,7 +287,7 @@ class Loop:
         # (a signal during the handshake) skips all that and stops at tick 0 at once.
         setup = self.stop_request is None
         p = self.params
-        if setup:
+        if setup and self.experiment is None:
             controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
         gc_was = gc.isenabled()
         if self.manage_gc and setup:
@@ -349,6 +370,8 @@ class Loop:
         jit_add, comp_add, rig_add = self.jitter.add, self.compute.add, self.rig_io.add
         n_ticks = self.n_ticks
         mailbox = self.mailbox
+        experiment = self.experiment
+        exp_step = experiment.step if experiment is not None else None
         params = self.params
         gp, cp = params.gp, params.cp
         w0 = gp[G_W0]
@@ -493,33 +516,48 @@ class Loop:
                 theta = ts * (y + tb)
                 arm = as_ * (x + 2.0 * wraps - x0)
                 arm_dot = vs * (v + vb)
-                if first:
-                    if not abs(theta) <= safety.start_tolerance:
-                        raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the start "
-                                    f"(tolerance {safety.start_tolerance} rad; no swing-up)", r)
-                    s = params.controller.init(theta)
-                    flags |= START
-                    first = False
-                if not abs(theta) <= angle_limit:
-                    raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
-                                f"{angle_limit} rad", r)
-                th_hat = s[S_X1]
-                thd_hat = w0 * s[S_X2]
-                arm_hat = s[S_ARM]
-                armd_hat = s[S_ARMDOT]
-                z_hat = s[S_ZHAT]
-                if ramp_k < ramp_n:
-                    ramp_k += 1
-                    if ramp_k == ramp_n:
-                        gp = params.gp
-                    else:
-                        gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
-                u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
-                if not -_FMAX <= u <= _FMAX:
-                    raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
-                                "from the estimates theta, theta', arm, arm', z = "
-                                f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, {armd_hat:.4g}, "
-                                f"{z_hat:.4g}", r)
+                if exp_step is not None:
+                    # an identification experiment: its own schedule and limits
+                    try:
+                        u = exp_step(k * h, theta, arm, arm_dot, y, x, v)
+                    except ExperimentEnd as end:
+                        raise _Stop(end.reason, end.detail, r) from None
+                    if first:
+                        flags |= START
+                        first = False
+                    th_hat = thd_hat = arm_hat = armd_hat = f_hat = z_hat = _NAN
+                    if not -_FMAX <= u <= _FMAX:
+                        raise _Stop("nonfinite_u", f"the experiment computed u = {float(u)!r}",
+                                    r)
+                else:
+                    if first:
+                        if not abs(theta) <= safety.start_tolerance:
+                            raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the "
+                                        f"start (tolerance {safety.start_tolerance} rad; no "
+                                        "swing-up)", r)
+                        s = params.controller.init(theta)
+                        flags |= START
+                        first = False
+                    if not abs(theta) <= angle_limit:
+                        raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
+                                    f"{angle_limit} rad", r)
+                    th_hat = s[S_X1]
+                    thd_hat = w0 * s[S_X2]
+                    arm_hat = s[S_ARM]
+                    armd_hat = s[S_ARMDOT]
+                    z_hat = s[S_ZHAT]
+                    if ramp_k < ramp_n:
+                        ramp_k += 1
+                        if ramp_k == ramp_n:
+                            gp = params.gp
+                        else:
+                            gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
+                    u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
+                    if not -_FMAX <= u <= _FMAX:
+                        raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
+                                    "from the estimates theta, theta', arm, arm', z = "
+                                    f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, "
+                                    f"{armd_hat:.4g}, {z_hat:.4g}", r)
                 u_da = us * u
                 if u_da > 1.0:
                     u_da = 1.0
