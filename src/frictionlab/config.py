@@ -126,7 +126,9 @@ class SimParams(Validated):
 
     _prefix = "sim."
 
-    initial_angle: float = param(0.05, "initial pendulum angle", "rad", lo=-1.0, hi=1.0)
+    initial_angle: float = param(0.05, "initial pendulum angle (pi: hanging down, at rest; "
+                                 "rig-sim's pendulum at the start of a session)", "rad",
+                                 lo=-math.pi, hi=math.pi)
     substeps: int | None = param(None, "arm and friction integration substeps per sampling "
                                  "period (None = the model's accurate default: 10, LuGre 6)",
                                  "1", lo=1, hi=10000, integer=True, optional=True)

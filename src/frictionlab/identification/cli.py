@@ -11,6 +11,7 @@ from .._validation import ParamError
 from ..cli import (
     UsageError,
     _add_config_args,
+    check_output_dir,
     check_output_path,
     check_workers,
     emit_json,
@@ -214,7 +215,8 @@ def cmd_limit_cycle(args) -> int:
 # ---------------------------------------------------------------------------
 
 _DEFAULT_FRICTION = {"stiction": "classical", "stribeck": "lugre",
-                     "free-oscillation": "classical", "control-scaling": "classical"}
+                     "free-oscillation": "classical", "control-scaling": "classical",
+                     "velocity-scale": "classical"}
 
 
 def _float_list(text: str, what: str) -> list[float]:
@@ -222,6 +224,89 @@ def _float_list(text: str, what: str) -> list[float]:
     if not vals:
         raise UsageError(f"{what}: give at least one value")
     return vals
+
+
+def _limits(args):
+    from ..realtime.experiment import Limits
+
+    try:
+        return Limits(max_speed=args.max_speed, max_travel=args.max_travel,
+                      max_u_da=args.max_u_da)
+    except ValueError as exc:
+        raise UsageError(str(exc).replace("limits.max_speed", "--max-speed")
+                         .replace("limits.max_travel", "--max-travel")
+                         .replace("limits.max_u_da", "--max-u-da")) from None
+
+
+def _rig_options(args) -> dict:
+    """The experiment options of the command line for the loop's experiments."""
+    name = args.experiment
+    if name == "stiction":
+        opts = {"step": args.step, "hold": args.hold, "slide": args.slide, "push": args.push}
+        if args.coulomb_levels:
+            opts["coulomb_levels"] = _float_list(args.coulomb_levels, "--coulomb-levels")
+        return opts
+    if name in ("stribeck", "velocity-scale"):
+        opts = {"gain": args.gain, "hold": args.hold}
+        if args.references:
+            opts["references"] = _float_list(args.references, "--references")
+        return opts
+    if name == "free-oscillation":
+        return {"amplitude": args.amplitude if args.amplitude_given else None,
+                "duration": args.duration}
+    levels = _float_list(args.levels, "--levels") if args.levels else None
+    return {"levels": levels}
+
+
+def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
+    """Run ``exp`` through the loop with progress on stderr; (log, run summary).
+
+    A run that does not finish (a fault, a limit, a signal) is reported and
+    ends the command with exit status 1; its log is kept.
+    """
+    from ..realtime import RigError
+    from ..realtime_cli import _RunSignals, interface_stats
+    from .logs import read_log
+    from .onrig import run_on_rig
+
+    err = sys.stderr
+    lim = exp.limits
+    if clock is None:
+        print(f"identify experiment {exp.name} on {backend}: the motor will move the arm "
+              f"(limits: arm speed {lim.max_speed:g} rad/s, travel {lim.max_travel:g} rad, "
+              f"|u_DA| {lim.max_u_da:g}); Ctrl-C stops it with the motor at zero",
+              file=err)
+    tty = err.isatty() and not args.quiet
+    last = [None]
+
+    def poll(e, upd=None):
+        if upd is not None:
+            upd(e.progress)
+        elif e.phase != last[0] and not args.quiet:
+            last[0] = e.phase
+            print(f"  {100 * e.progress:3.0f} %  {e.phase}", file=err)
+
+    with _RunSignals() as signals, progress_bar(exp.name, tty and clock is None) as upd:
+        def on_start(ctl):
+            signals.ctl = ctl
+
+        try:
+            st = run_on_rig(exp, cfg, backend, log_dir=log_dir, clock=clock,
+                            realtime=not args.no_realtime, on_start=on_start,
+                            poll=lambda e: poll(e, upd if tty else None))
+        except (RigError, OSError) as exc:
+            print(f"frictionlab identify experiment: error: {exc}", file=err)
+            raise SystemExit(1) from None
+    summary = interface_stats(st)
+    summary["stop_detail"] = st.get("stop_detail")
+    if st["stop_reason"] != "finished":
+        print(f"frictionlab identify experiment: {exp.name} stopped before it finished: "
+              f"{st['stop_reason']} ({st.get('stop_detail') or ''}); the motor was set to "
+              f"zero; log kept: {st['log']}", file=err)
+        raise SystemExit(1)
+    if clock is None:
+        print(f"  done: {st['ticks']} ticks, {st['missed']} missed; log {st['log']}", file=err)
+    return read_log(st["log"], cfg.design.h), summary
 
 
 def cmd_experiment(args) -> int:
@@ -235,13 +320,48 @@ def cmd_experiment(args) -> int:
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     if args.log and args.save:
         raise UsageError("--save only applies to --simulate runs")
+    if args.backend and args.save:
+        raise UsageError("--save only applies to --simulate runs (a --backend run is logged "
+                         "in --log-dir)")
     warnings: list[str] = []
+    run_info = None
+    marks: dict = {}
     if args.log:
         from .logs import log_warnings, read_log
+        from .onrig import experiment_marks
 
         log = read_log(args.log, cfg.design.h)
         warnings += log_warnings(args.log)
+        marks = experiment_marks(args.log)
         source = args.log
+    elif args.backend or name == "velocity-scale":
+        from .onrig import make_rig_experiment
+
+        if args.backend is None and args.save and not args.save.endswith(".csv"):
+            raise UsageError("--save: a simulated velocity-scale run is saved as .csv")
+        try:
+            exp = make_rig_experiment(name, cfg, _limits(args), **_rig_options(args))
+        except ValueError as exc:
+            raise UsageError(f"{name}: {exc}") from None
+        if args.backend is None:
+            # --simulate: the same loop on the simulated rig, on a fake clock (no waiting)
+            import tempfile
+
+            from ..realtime import FakeClock
+
+            with tempfile.TemporaryDirectory() as tmp:
+                log, run_info = _run_experiment(exp, cfg, "sim", tmp, args, clock=FakeClock())
+                if args.save:
+                    import shutil
+
+                    shutil.copyfile(run_info["log"], args.save)
+                run_info["log"] = None
+            source = "simulated"
+        else:
+            check_output_dir(args.log_dir, "--log-dir")
+            log, run_info = _run_experiment(exp, cfg, args.backend, args.log_dir, args)
+            source = args.backend
+        marks = dict(exp.marks)
     else:
         if name == "stiction":
             log = ex.simulate_stiction(cfg, step=args.step, hold=args.hold)
@@ -259,24 +379,19 @@ def cmd_experiment(args) -> int:
         source = "simulated"
         if args.save:
             log.save(args.save)
-    ku = cfg.plant.input_gain
+    from .onrig import analyse_log
+
     try:
-        if name == "stiction":
-            res = ex.analyse_stiction(log, input_gain=ku, arm_length=cfg.plant.arm_length)
-        elif name == "stribeck":
-            res = ex.analyse_stribeck(log, input_gain=ku)
-        elif name == "free-oscillation":
-            res = ex.analyse_free_oscillation(log, max_amplitude=args.max_amplitude)
-        else:
-            res = ex.analyse_control_scaling(log, coulomb=cfg.friction.coulomb,
-                                             arm_length=cfg.plant.arm_length)
+        res = analyse_log(name, log, cfg, marks=marks, max_amplitude=args.max_amplitude)
     except IdentificationError as exc:
-        raise UsageError(f"{name}: {exc}") from None
+        where = f" (log kept: {run_info['log']})" if run_info and run_info.get("log") else ""
+        raise UsageError(f"{name}: {exc}{where}") from None
     if args.plot:
         from . import plots
 
         appendix = {"stiction": "App. E.1", "stribeck": "App. E.2",
-                    "free-oscillation": "App. A", "control-scaling": "App. B.4"}[name]
+                    "free-oscillation": "App. A", "control-scaling": "App. B.4",
+                    "velocity-scale": "App. B.3"}[name]
         title = plots.experiment_title(
             f"identify experiment {name} ({appendix})",
             f"log {args.log}" if args.log else "simulated rig", None if args.log else cfg)
@@ -286,8 +401,10 @@ def cmd_experiment(args) -> int:
             plots.plot_stribeck(res, args.plot, title)
         elif name == "free-oscillation":
             plots.plot_free_oscillation(log, res, args.plot, title)
-        else:
+        elif name == "control-scaling":
             plots.plot_control_scaling(log, res, args.plot, title)
+        else:
+            raise UsageError("--plot: no figure for velocity-scale")
     warnings += res.get("warnings", [])
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -296,6 +413,8 @@ def cmd_experiment(args) -> int:
     out["source"] = source
     if args.save:
         out["saved"] = args.save
+    if run_info is not None:
+        out["run"] = run_info
     if args.plot:
         out["plot"] = args.plot
     if args.json:
@@ -363,14 +482,21 @@ def register_cli(sub) -> None:
     q.set_defaults(func=cmd_limit_cycle)
 
     e = isub.add_parser(
-        "experiment", help="the simple experiments of App. A, B.4 and E",
-        description="Run a simple identification experiment of App. A, B.4 or E on the "
-                    "simulated rig (--simulate, the default) or analyse a recorded log.")
+        "experiment", help="the simple experiments of App. A, B.3, B.4 and E",
+        description="Run a simple identification experiment of App. A, B.3, B.4 or E on the "
+                    "simulated rig (--simulate, the default), on a rig through the real-time "
+                    "loop (--backend), or analyse a recorded log (--log).  Exit status 1 "
+                    "when a --backend run stops before it finished (a fault, a limit, a "
+                    "signal; the motor is zeroed and the log kept).")
     e.add_argument("experiment", choices=EXPERIMENTS)
     src = e.add_mutually_exclusive_group()
     src.add_argument("--log", metavar="FILE", help="analyse a recorded log (.csv or .dat)")
     src.add_argument("--simulate", action="store_true",
                      help="run the experiment on the simulated rig (default)")
+    src.add_argument("--backend", metavar="sim|udp://HOST:PORT|serial://DEVICE", default=None,
+                     help="run the experiment on a rig through the real-time loop (the loop "
+                          "of `frictionlab run`: same timing, safety and logging), then "
+                          "analyse its log")
     _add_config_args(e, friction=False)
     e.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default=None,
                    help="friction of the simulated rig (default: classical; lugre for "
@@ -385,14 +511,36 @@ def register_cli(sub) -> None:
                    help="stribeck: velocity references in rad/s (both signs are run)")
     e.add_argument("--gain", type=float, default=20.0,
                    help="stribeck: P gain of the velocity loop (default 20)")
-    e.add_argument("--amplitude", type=float, default=0.25,
-                   help="free-oscillation: initial deflection in rad (default 0.25)")
+    e.add_argument("--amplitude", type=float, default=None,
+                   help="free-oscillation: initial deflection in rad (default 0.25; on a "
+                        "rig the swing the excitation reaches, default 0.12)")
     e.add_argument("--max-amplitude", type=float, default=0.15,
                    help="free-oscillation: peaks above this are not used (default 0.15)")
     e.add_argument("--duration", type=float, default=None,
                    help="free-oscillation: recorded seconds (default 12)")
     e.add_argument("--levels", metavar="U1,U2,...",
-                   help="control-scaling: constant u values (default 3,4,5,7,9)")
+                   help="control-scaling: constant u values (default 3,4,5,7,9; on a rig "
+                        "their signs alternate)")
+    e.add_argument("--coulomb-levels", metavar="F1,F2,...",
+                   help="stiction on a rig: fractions of the breakaway u held while the arm "
+                        "slides (default 0.3,0.4,...,0.9)")
+    e.add_argument("--slide", type=float, default=0.8,
+                   help="stiction on a rig: seconds each Coulomb level is held (default 0.8)")
+    e.add_argument("--push", type=float, default=1.5,
+                   help="stiction on a rig: arm speed in rad/s of the motor's push before a "
+                        "slide (default 1.5)")
+    g = e.add_argument_group("on a rig (--backend)")
+    g.add_argument("--log-dir", default="runs",
+                   help="where the run is logged (default ./runs)")
+    g.add_argument("--max-speed", type=float, default=15.0, metavar="RAD/S",
+                   help="stop when the arm is faster than this (default 15)")
+    g.add_argument("--max-travel", type=float, default=60.0, metavar="RAD",
+                   help="stop when the arm is farther than this from its start (default 60)")
+    g.add_argument("--max-u-da", type=float, default=0.5, metavar="U_DA",
+                   help="largest |u_DA| commanded, u is clipped (default 0.5)")
+    g.add_argument("--no-realtime", action="store_true",
+                   help="do not ask for SCHED_FIFO priority")
+    e.add_argument("--quiet", action="store_true", help="no progress on stderr")
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=_experiment_entry)
 
@@ -402,12 +550,18 @@ def register_cli(sub) -> None:
 _EXPERIMENT_OPTIONS = {"step": "--step", "hold": "--hold", "gain": "--gain",
                        "amplitude": "--amplitude", "duration": "--duration",
                        "references": "--references", "levels": "--levels",
-                       "max_amplitude": "--max-amplitude"}
+                       "max_amplitude": "--max-amplitude", "slide": "--slide",
+                       "push": "--push", "coulomb_levels": "--coulomb-levels"}
 
 
 def _experiment_entry(args) -> int:
     if args.hold is None:
-        args.hold = 2.0 if args.experiment == "stribeck" else 0.25
+        args.hold = 2.0 if args.experiment in ("stribeck", "velocity-scale") else 0.25
+    args.amplitude_given = args.amplitude is not None
+    if args.amplitude is None:
+        args.amplitude = 0.25
+    finite("--slide", args.slide, 0.0)
+    finite("--push", args.push, 0.0)
     finite("--step", args.step, 0.0)
     finite("--gain", args.gain, 0.0)
     finite("--amplitude", args.amplitude)

@@ -54,7 +54,8 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
     experiment : RigExperiment
         From :func:`make_rig_experiment` (one run per object).
     cfg : Config
-        Design (h), ``rig.*`` scaling, and, for ``sim``, the simulated plant.
+        Design (h), ``rig.*`` scaling, and, for ``sim``, the simulated plant
+        (its pendulum starts hanging at rest, ``sim.initial_angle`` = pi).
     backend : str or Rig
         ``sim``, ``udp://HOST:PORT``, ``serial://DEVICE`` or a rig object.
     log_dir : path
@@ -84,6 +85,9 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
     if not isinstance(experiment, RigExperiment):
         raise TypeError("experiment must be a RigExperiment")
     fake = clock is not None
+    if backend == "sim":
+        # the simulated rig's pendulum hangs at rest, as a rig's does before an experiment
+        cfg = cfg.with_values({"sim.initial_angle": math.pi})
     ctl = RealtimeController(cfg, backend, log_dir=log_dir, clock=clock,
                              realtime=realtime and not fake, manage_gc=not fake,
                              scaling=rig_scaling(cfg),
