@@ -177,6 +177,14 @@ def _noise_level(y: np.ndarray) -> float:
     return float(1.4826 * mad / math.sqrt(6.0))
 
 
+def _quantum(y: np.ndarray) -> float:
+    """The step of a quantised signal: the most common smallest change between samples
+    (the 10th percentile of the nonzero absolute differences; 0 if it never changes)."""
+    d = np.abs(np.diff(y[np.isfinite(y)]))
+    d = d[d > 1e-12]
+    return float(np.percentile(d, 10)) if len(d) else 0.0
+
+
 def _runs(u: np.ndarray) -> list[tuple[int, int]]:
     """Maximal runs [a, b) of equal consecutive values of ``u``."""
     if len(u) == 0:
@@ -418,7 +426,10 @@ def _steady_points(t, u, v, chunk: float, v_min: float) -> np.ndarray:
     """
     h = float(np.median(np.diff(t)))
     n = max(8, round(chunk / h))
-    sig_v, sig_u = _noise_level(v), _noise_level(u)
+    # noise, and the converters' resolution (a quantised signal at rest has no second
+    # differences but its steps; under a P loop u moves in steps of gain x quantum)
+    tol_v = 8.0 * _noise_level(v) + 2.0 * _quantum(v) + 1e-9
+    tol_u = 8.0 * _noise_level(u) + 2.0 * _quantum(u) + 1e-9
     pts = []
     for a in range(0, len(t) - n + 1, n):
         s = slice(a, a + n)
@@ -426,9 +437,9 @@ def _steady_points(t, u, v, chunk: float, v_min: float) -> np.ndarray:
         vm, um = float(vv.mean()), float(uu.mean())
         if abs(vm) < v_min or np.mean(np.sign(vv) != np.sign(vm)) > 0.05:
             continue
-        if np.ptp(vv) > 0.02 * abs(vm) + 8.0 * sig_v + 1e-9:
+        if np.ptp(vv) > 0.02 * abs(vm) + tol_v:
             continue
-        if np.ptp(uu) > 0.05 * abs(um) + 8.0 * sig_u + 1e-9:
+        if np.ptp(uu) > 0.05 * abs(um) + tol_u:
             continue
         pts.append((vm, um, n))
     return np.array(pts).reshape(-1, 3)

@@ -35,18 +35,21 @@ def rig_scaling(cfg: Config) -> RigScaling:
     return sc if isinstance(sc, RigScaling) else RigScaling()
 
 
-def make_rig_experiment(name: str, cfg: Config, limits=None, **options):
+def make_rig_experiment(name: str, cfg: Config, limits=None, *,
+                        scaling: RigScaling | None = None, **options):
     """The experiment ``name`` for the loop, with ``cfg``'s period, k_u and omega_0."""
     from ..realtime.experiment import make_experiment
 
     if name == "free-oscillation":
         options.setdefault("omega0", cfg.design.omega0)
-    return make_experiment(name, cfg.design.h, rig_scaling(cfg).u_scale, limits, **options)
+    sc = scaling or rig_scaling(cfg)
+    return make_experiment(name, cfg.design.h, sc.u_scale, limits, **options)
 
 
 def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=None,
                realtime: bool = True, sim_lockstep: bool = False, on_start=None,
-               poll=None, poll_interval: float = 0.5) -> dict:
+               poll=None, poll_interval: float = 0.5,
+               scaling: RigScaling | None = None) -> dict:
     """Run ``experiment`` through the real-time loop; return the run's statistics.
 
     Parameters
@@ -68,6 +71,8 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
     poll : callable, optional
         ``poll(experiment)`` every ``poll_interval`` s while the run goes on
         (progress display); real-time runs only.
+    scaling : RigScaling, optional
+        The conversion factors the loop assumes (default ``cfg``'s ``rig.*``).
 
     Returns
     -------
@@ -90,7 +95,7 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
         cfg = cfg.with_values({"sim.initial_angle": math.pi})
     ctl = RealtimeController(cfg, backend, log_dir=log_dir, clock=clock,
                              realtime=realtime and not fake, manage_gc=not fake,
-                             scaling=rig_scaling(cfg),
+                             scaling=scaling or rig_scaling(cfg),
                              sim_lockstep=sim_lockstep or fake, experiment=experiment)
     if on_start is not None:
         on_start(ctl)
