@@ -269,7 +269,8 @@ def cmd_experiment(args) -> int:
             res = ex.analyse_free_oscillation(log, max_amplitude=args.max_amplitude)
         else:
             res = ex.analyse_control_scaling(log, coulomb=cfg.friction.coulomb,
-                                             arm_length=cfg.plant.arm_length)
+                                             arm_length=cfg.plant.arm_length,
+                                             nominal_u_scale=cfg.rig.u_scale)
     except IdentificationError as exc:
         raise UsageError(f"{name}: {exc}") from None
     if args.plot:
