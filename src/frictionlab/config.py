@@ -1,7 +1,8 @@
 """Run configuration: every parameter of a run, addressable by ``section.field`` keys.
 
-The keys are those of ``shared/INTERFACE.md`` (``plant.omega0``,
-``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``...).
+The keys are the public parameter keys of docs/cli.md (``plant.omega0``,
+``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``,
+``rig.theta_scale``...).
 A configuration is built from, in order: the thesis defaults, the design
 preset (``fast``/``slow``), the per-model friction defaults, a TOML file, and
 ``--set KEY=VALUE`` overrides (applied in order, the later winning).
@@ -27,6 +28,7 @@ from ._validation import ParamError, Validated, param
 from .design import DesignSpec, preset
 from .friction import KINDS, FrictionParams
 from .plant import PlantParams
+from .rig import RigScaling
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -169,6 +171,7 @@ class Config:
     compensation: FrictionParams = dataclasses.field(
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
     sim: SimParams = dataclasses.field(default_factory=SimParams)
+    rig: RigScaling = dataclasses.field(default_factory=RigScaling)
 
     def __post_init__(self) -> None:
         if self.friction_kind not in PLANT_FRICTION_KINDS:
@@ -216,9 +219,9 @@ class Config:
         return out
 
 
-_SECTIONS = ("plant", "design", "friction", "compensation", "sim")
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
-            "compensation": FrictionParams, "sim": SimParams}
+            "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
@@ -441,7 +444,7 @@ def build_config(
         Plant friction model and compensator.
     config_file : path, optional
         TOML file with ``[plant]``, ``[design]``, ``[friction]``,
-        ``[compensation]``, ``[sim]`` tables.
+        ``[compensation]``, ``[sim]``, ``[rig]`` tables.
     sets : iterable of ``"KEY=VALUE"`` or ``(key, value)``
         Overrides, applied in order.
     """

@@ -88,7 +88,7 @@ from gymnasium.vector.utils import batch_space
 from ._jit import jit
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .friction import KINDS
-from .rig import RigScaling, quantize
+from .rig import quantize
 from .simulation import _pack_plant, _quanta, plant_tick
 
 __all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "FurutaEnv",
@@ -226,7 +226,7 @@ class _Settings:
                                                                    sets=list(sets))
         self.observation = observation
         self.action = action
-        self.scaling = RigScaling()
+        self.scaling = self.base.rig
         self.u_max = self.scaling.u_max
         self.ranges, self.kinds = _check_randomization(self.base, randomize)
         if observation == "si":

@@ -75,7 +75,7 @@ from .controller import (
 from .design import design as make_design
 from .friction import KINDS, LUGRE, NONE, P_K, lugre_force, lugre_step_exact, static_force
 from .plant import accelerations_sc
-from .rig import RigScaling, quantize
+from .rig import quantize
 
 __all__ = [
     "COLUMNS",
@@ -402,14 +402,15 @@ def _pack_plant(cfg: Config) -> np.ndarray:
 
 def _quanta(cfg: Config) -> np.ndarray:
     if cfg.sim.quantization:
-        return np.array(RigScaling().quanta())
+        return np.array(cfg.rig.quanta())
     return np.zeros(3)
 
 
 def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Controller:
     """The controller a configuration describes."""
     d = make_design(cfg.design, cfg.plant)
-    return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal)
+    return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal,
+                      u_max=cfg.rig.u_max)
 
 
 def simulate_config(

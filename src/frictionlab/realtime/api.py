@@ -95,7 +95,7 @@ class RealtimeController:
         self.cpu = cpu
         if not 0 <= prewarm_us < cfg.design.h * 1e6 / 2:
             raise ValueError(f"prewarm_us must be in [0, h/2), got {prewarm_us}")
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or cfg.rig
         if isinstance(backend, str) and backend != "sim":
             _check_backend(backend)
         self._params = ControlParams.from_config(cfg)

@@ -223,7 +223,7 @@ class Loop:
         self.clock = clock
         self.params = params
         self.safety = safety or Safety()
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or params.cfg.rig
         h = params.cfg.design.h
         self.h = h
         self.h_ns = round(h * 1e9)

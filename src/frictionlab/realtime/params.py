@@ -156,7 +156,7 @@ class ControlParams:
                                   compensation=params[kind])
         d = design(spec, cfg.plant)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
-                          error_signal=error_signal)
+                          error_signal=error_signal, u_max=cfg.rig.u_max)
         gp, cp = ctrl.pack()
         gp.flags.writeable = False
         cp.flags.writeable = False

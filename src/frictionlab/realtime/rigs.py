@@ -211,7 +211,7 @@ class SimRig(Rig):
         self.cfg = cfg
         self.lockstep = lockstep
         self.realtime_plant = not lockstep  # in lockstep the plant waits for the loop
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or cfg.rig
         self.plant = SimulatedPlant(cfg)
         self.plant_friction = cfg.friction_kind
         self._arm_offset = arm_offset

@@ -118,7 +118,7 @@ class RigEmulator:
             raise ValueError(f"watchdog must be > 0 s, got {watchdog}")
         self.cfg = cfg
         self.clock = clock
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or cfg.rig
         self.h = cfg.design.h
         self.dt_ns = max(1, round(self.h / cfg.substeps * 1e9))
         self._ratio = cfg.pendulum_ratio
