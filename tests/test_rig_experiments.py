@@ -24,8 +24,11 @@ from frictionlab.rig import RigScaling
 
 #: The rig's hidden true values (all differ from the defaults).
 TRUE = {"friction.stiction": 1.9, "friction.coulomb": 1.25, "plant.omega0": 6.25,
-        "plant.input_gain": 0.82, "sim.initial_angle": math.pi, "sim.seed": 3}
+        "plant.input_gain": 0.82, "sim.initial_angle": math.pi, "sim.seed": 3,
+        "rig.velocity_scale": 30.5, "rig.velocity_bias": 0.031}
 TRUE_SCALING = RigScaling(velocity_scale=30.5, velocity_bias=0.031)
+#: The velocity channel is calibrated first (velocity-scale); the later steps know it.
+KNOWN_CHANNEL = {"rig.velocity_scale": 30.5, "rig.velocity_bias": 0.031}
 #: Short schedules (a few simulated seconds each).
 FAST = {
     "stiction": {"step": 0.05, "hold": 0.1, "coulomb_levels": (0.5, 0.7, 0.9), "slide": 0.5},
@@ -46,24 +49,20 @@ def assumed_config(name):
     known = {"stiction": {"plant.input_gain": TRUE["plant.input_gain"]},
              "stribeck": {"plant.input_gain": TRUE["plant.input_gain"]},
              "control-scaling": {"friction.coulomb": TRUE["friction.coulomb"]}}
-    return build_config("fast", "classical", sets=known.get(name, {}).items())
-
-
-def known_scaling(name):
-    """The velocity channel is calibrated first (velocity-scale); later steps use it."""
-    return RigScaling() if name == "velocity-scale" else TRUE_SCALING
+    sets = {**(KNOWN_CHANNEL if name != "velocity-scale" else {}), **known.get(name, {})}
+    return build_config("fast", "classical", sets=sets.items())
 
 
 def run_direct(name, tmp_path, *, friction="classical", faults=None, limits=None):
     clock = FakeClock()
-    emu = RigEmulator(rig_config(friction), clock, scaling=TRUE_SCALING)
+    emu = RigEmulator(rig_config(friction), clock)
     tx = DirectTransport(emu, clock)
     rig = FramedRig(tx, "direct", clock=clock)
     cfg = assumed_config(name)
     exp = make_rig_experiment(name, cfg, limits, **FAST[name])
     if faults:
         emu.control({"cmd": "fault", **faults})
-    st = run_on_rig(exp, cfg, rig, log_dir=tmp_path, clock=clock, scaling=known_scaling(name))
+    st = run_on_rig(exp, cfg, rig, log_dir=tmp_path, clock=clock)
     return st, exp, tx, emu, cfg
 
 
@@ -149,7 +148,7 @@ def test_u_da_limit_clips_every_command(tmp_path):
 def test_stop_request_during_an_experiment(tmp_path):
     """A stop (a signal, the console's Stop) ends the experiment with u = 0."""
     clock = FakeClock()
-    emu = RigEmulator(rig_config(), clock, scaling=TRUE_SCALING)
+    emu = RigEmulator(rig_config(), clock)
     tx = DirectTransport(emu, clock)
     rig = FramedRig(tx, "direct", clock=clock)
     cfg = assumed_config("stribeck")

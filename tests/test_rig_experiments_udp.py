@@ -9,11 +9,9 @@ import json
 import os
 import subprocess
 import sys
-import threading
-import tty
 
 import pytest
-from test_rig_experiments import TRUE, TRUE_SCALING, check
+from test_rig_experiments import KNOWN_CHANNEL, TRUE, check
 
 CLI = [sys.executable, "-m", "frictionlab"]
 #: The rig's hidden values as rig-sim settings.
@@ -33,6 +31,9 @@ KNOWN = {
     "stribeck": [f"plant.input_gain={TRUE['plant.input_gain']}"],
     "control-scaling": [f"friction.coulomb={TRUE['friction.coulomb']}"],
 }
+for _name in OPTIONS:
+    if _name != "velocity-scale":
+        KNOWN.setdefault(_name, []).extend(f"{k}={v}" for k, v in KNOWN_CHANNEL.items())
 
 
 def start_rig_sim(friction="classical", extra=()):
@@ -73,7 +74,7 @@ def identify(name, backend, tmp_path, extra=()):
 
 
 @pytest.mark.parametrize("name", ["stiction", "stribeck", "free-oscillation",
-                                  "control-scaling"])
+                                  "control-scaling", "velocity-scale"])
 def test_experiment_over_udp_recovers_hidden_values(name, tmp_path):
     proc, port = start_rig_sim("lugre" if name == "stribeck" else "classical")
     try:
@@ -87,55 +88,39 @@ def test_experiment_over_udp_recovers_hidden_values(name, tmp_path):
     check(name, res)
 
 
-def test_velocity_scale_over_udp_recovers_the_hidden_channel(tmp_path):
-    """The rig's velocity channel differs from the thesis's factors (a thread-served
-    emulator with hidden conversion factors)."""
-    from frictionlab.config import build_config
-    from frictionlab.identification.onrig import analyse_run, make_rig_experiment, run_on_rig
-    from frictionlab.realtime.clock import MonotonicClock
-    from frictionlab.realtime.rigsim import RigEmulator, serve_udp
-
-    emu = RigEmulator(build_config("fast", "classical", sets=TRUE.items()), MonotonicClock(),
-                      scaling=TRUE_SCALING)
-    stop_ev, addr = threading.Event(), []
-    th = threading.Thread(target=serve_udp, args=(emu, "127.0.0.1", 0, stop_ev),
-                          kwargs={"ready": addr.append}, daemon=True)
-    th.start()
-    try:
-        while not addr:
-            th.join(0.01)
-        cfg = build_config("fast", "classical")
-        exp = make_rig_experiment("velocity-scale", cfg, references=(2.0, 4.0, 6.0), hold=0.8)
-        st = run_on_rig(exp, cfg, f"udp://127.0.0.1:{addr[0][1]}", log_dir=tmp_path,
-                        realtime=False)
-    finally:
-        stop_ev.set()
-        th.join(5)
-    assert st["stop_reason"] == "finished", st["stop_detail"]
-    check("velocity-scale", analyse_run("velocity-scale", st["log"], cfg))
+#: A rig-sim on one end of a pty pair, in its own process (so that it never waits for
+#: the test's GIL): prints the other end's device name, serves until stdin closes.
+PTY_RIG = """
+import json, os, sys, threading, tty
+from frictionlab.config import build_config
+from frictionlab.realtime.clock import MonotonicClock
+from frictionlab.realtime.osrt import try_realtime_priority
+from frictionlab.realtime.rigsim import RigEmulator, serve_stream
+master, slave = os.openpty()
+tty.setraw(slave)
+emu = RigEmulator(build_config("fast", "classical", sets=json.loads(sys.argv[1]).items()),
+                  MonotonicClock())
+stop = threading.Event()
+threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
+try_realtime_priority(40, None)
+print(os.ttyname(slave), flush=True)
+serve_stream(emu, master, stop)
+"""
 
 
 def test_experiment_over_serial_through_a_pty_pair(tmp_path):
     """A real-rig run of --backend serial:// through a pty pair: the emulated rig serves
-    the master end (in a thread), the command opens the slave device."""
-    from frictionlab.config import build_config
-    from frictionlab.realtime.clock import MonotonicClock
-    from frictionlab.realtime.rigsim import RigEmulator, serve_stream
-
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    emu = RigEmulator(build_config("fast", "classical", sets=TRUE.items()), MonotonicClock())
-    stop_ev = threading.Event()
-    th = threading.Thread(target=serve_stream, args=(emu, master, stop_ev), daemon=True)
-    th.start()
+    the master end, the command opens the slave device, end to end."""
+    proc = subprocess.Popen([sys.executable, "-c", PTY_RIG, json.dumps(TRUE)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     try:
-        r = identify("control-scaling", f"serial://{os.ttyname(slave)}?baud=115200",
-                     tmp_path)
+        device = proc.stdout.readline().strip()
+        assert device.startswith("/dev/"), proc.stderr.read()
+        r = identify("control-scaling", f"serial://{device}", tmp_path)
     finally:
-        stop_ev.set()
-        th.join(5)
-        os.close(master)
-        os.close(slave)
+        proc.stdin.close()
+        stop(proc)
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert res["run"]["stop_reason"] == "finished"
