@@ -160,3 +160,43 @@ def test_stop_request_during_an_experiment(tmp_path):
     assert st["stop_reason"] == "signal"
     assert commands(tx)[-1][1] == 0.0
     assert emu.u_da == 0.0
+
+
+def test_angle_scales_guided_laps_with_the_emulated_hand(tmp_path):
+    """App. B.1/B.2: the experiment asks for a lap of the pendulum, then of the arm, and
+    waits; the emulated rig's hand turns them (hidden conversion factors)."""
+    true = {"rig.theta_scale": 3.05, "rig.theta_bias": 0.47, "rig.arm_scale": 27.0}
+    clock = FakeClock()
+    emu = RigEmulator(rig_config(**true), clock)
+    rig = FramedRig(DirectTransport(emu, clock), "direct", clock=clock)
+    cfg = build_config("fast", "classical")
+    exp = make_rig_experiment("angle-scales", cfg, wait=30.0)
+    prompts = []
+
+    def operator():  # reads the instructions every 0.1 s and does what they say
+        while exp.prompts:
+            p = exp.prompts.popleft()
+            prompts.append(p["text"])
+            assert emu.control({"cmd": "hand", **p["hand"]})["ok"]
+        clock.call_at(clock.now_ns() + 100_000_000, operator)
+
+    operator()
+    st = run_on_rig(exp, cfg, rig, log_dir=tmp_path, clock=clock)
+    assert st["stop_reason"] == "finished", st["stop_detail"]
+    assert len(prompts) == 2 and "pendulum" in prompts[0] and "arm" in prompts[1]
+    res = analyse_run("angle-scales", st["log"], cfg)
+    within(res["theta_scale"], true["rig.theta_scale"], 0.01)
+    within(res["theta_bias"], true["rig.theta_bias"], 0.01)
+    within(res["arm_scale"], true["rig.arm_scale"], 0.01)
+
+
+def test_angle_scales_without_the_operator_stops_at_the_wait_limit(tmp_path):
+    clock = FakeClock()
+    emu = RigEmulator(rig_config(), clock)
+    rig = FramedRig(DirectTransport(emu, clock), "direct", clock=clock)
+    cfg = build_config("fast", "classical")
+    exp = make_rig_experiment("angle-scales", cfg, wait=2.0)
+    st = run_on_rig(exp, cfg, rig, log_dir=tmp_path, clock=clock)
+    assert st["stop_reason"] == "experiment_limit"
+    assert "operator" in st["stop_detail"]
+    assert emu.u_da == 0.0

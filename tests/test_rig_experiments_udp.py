@@ -24,6 +24,7 @@ OPTIONS = {
     "free-oscillation": ["--duration", "5"],
     "control-scaling": ["--levels", "4,6,8"],
     "velocity-scale": ["--references", "2,4,6", "--hold", "0.8"],
+    "angle-scales": ["--hand", "--wait", "30"],
 }
 #: What the experimenter already knows from earlier steps of the guide.
 KNOWN = {
@@ -126,3 +127,19 @@ def test_experiment_over_serial_through_a_pty_pair(tmp_path):
     assert res["run"]["stop_reason"] == "finished"
     assert res["source"].startswith("serial://")
     check("control-scaling", res)
+
+
+def test_angle_scales_over_udp_with_rig_sim_playing_the_hand(tmp_path):
+    """The guided laps of App. B.1/B.2 against rig-sim, which plays the operator's hand
+    (--hand) and has hidden angle factors."""
+    true = {"rig.theta_scale": 3.05, "rig.theta_bias": 0.47, "rig.arm_scale": 27.0}
+    proc, port = start_rig_sim(extra=[a for k, v in true.items() for a in ("--set", f"{k}={v}")])
+    try:
+        r = identify("angle-scales", f"udp://127.0.0.1:{port}", tmp_path)
+    finally:
+        stop(proc)
+    assert r.returncode == 0, r.stderr
+    assert ">>> turn the pendulum one full lap" in r.stderr
+    res = json.loads(r.stdout)
+    for k, v in true.items():
+        assert abs(res[k.split(".")[1]] - v) <= 0.01 * abs(v), (k, res)

@@ -216,7 +216,7 @@ def cmd_limit_cycle(args) -> int:
 
 _DEFAULT_FRICTION = {"stiction": "classical", "stribeck": "lugre",
                      "free-oscillation": "classical", "control-scaling": "classical",
-                     "velocity-scale": "classical"}
+                     "velocity-scale": "classical", "angle-scales": "classical"}
 
 
 def _float_list(text: str, what: str) -> list[float]:
@@ -254,6 +254,8 @@ def _rig_options(args) -> dict:
     if name == "free-oscillation":
         return {"amplitude": args.amplitude if args.amplitude_given else None,
                 "duration": args.duration}
+    if name == "angle-scales":
+        return {"wait": args.wait}
     levels = _float_list(args.levels, "--levels") if args.levels else None
     return {"levels": levels}
 
@@ -293,8 +295,10 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
         try:
             st = run_on_rig(exp, cfg, backend, log_dir=log_dir, clock=clock,
                             realtime=not args.no_realtime, on_start=on_start,
-                            poll=lambda e: poll(e, upd if tty else None))
-        except (RigError, OSError) as exc:
+                            poll=lambda e: poll(e, upd if tty else None),
+                            on_prompt=lambda p: print(f">>> {p['text']}", file=err),
+                            hand=args.hand)
+        except (RigError, OSError, RuntimeError) as exc:
             print(f"frictionlab identify experiment: error: {exc}", file=err)
             raise SystemExit(1) from None
     summary = interface_stats(st)
@@ -318,6 +322,8 @@ def cmd_experiment(args) -> int:
                        sets=parse_sets(args.sets))
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    if args.plot and name in ("velocity-scale", "angle-scales"):
+        raise UsageError(f"--plot: no figure for {name}")
     if args.log and args.save:
         raise UsageError("--save only applies to --simulate runs")
     if args.backend and args.save:
@@ -334,6 +340,9 @@ def cmd_experiment(args) -> int:
         warnings += log_warnings(args.log)
         marks = experiment_marks(args.log)
         source = args.log
+    elif name == "angle-scales" and not args.backend:
+        raise UsageError("angle-scales needs --backend (a rig, or rig-sim over UDP with "
+                         "--hand) or --log: its laps are turned by hand")
     elif args.backend or name == "velocity-scale":
         from .onrig import make_rig_experiment
 
@@ -391,7 +400,7 @@ def cmd_experiment(args) -> int:
 
         appendix = {"stiction": "App. E.1", "stribeck": "App. E.2",
                     "free-oscillation": "App. A", "control-scaling": "App. B.4",
-                    "velocity-scale": "App. B.3"}[name]
+                    "velocity-scale": "App. B.3", "angle-scales": "App. B.1-B.2"}[name]
         title = plots.experiment_title(
             f"identify experiment {name} ({appendix})",
             f"log {args.log}" if args.log else "simulated rig", None if args.log else cfg)
@@ -404,7 +413,7 @@ def cmd_experiment(args) -> int:
         elif name == "control-scaling":
             plots.plot_control_scaling(log, res, args.plot, title)
         else:
-            raise UsageError("--plot: no figure for velocity-scale")
+            raise UsageError(f"--plot: no figure for {name}")
     warnings += res.get("warnings", [])
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -482,7 +491,7 @@ def register_cli(sub) -> None:
     q.set_defaults(func=cmd_limit_cycle)
 
     e = isub.add_parser(
-        "experiment", help="the simple experiments of App. A, B.3, B.4 and E",
+        "experiment", help="the simple experiments of App. A, B and E",
         description="Run a simple identification experiment of App. A, B.3, B.4 or E on the "
                     "simulated rig (--simulate, the default), on a rig through the real-time "
                     "loop (--backend), or analyse a recorded log (--log).  Exit status 1 "
@@ -540,6 +549,11 @@ def register_cli(sub) -> None:
                    help="largest |u_DA| commanded, u is clipped (default 0.5)")
     g.add_argument("--no-realtime", action="store_true",
                    help="do not ask for SCHED_FIFO priority")
+    g.add_argument("--hand", action="store_true",
+                   help="angle-scales: let rig-sim (over UDP) play the operator's hand for "
+                        "the laps it asks for")
+    g.add_argument("--wait", type=float, default=120.0, metavar="S",
+                   help="angle-scales: longest wait for the operator per step (default 120)")
     e.add_argument("--quiet", action="store_true", help="no progress on stderr")
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=_experiment_entry)

@@ -28,6 +28,7 @@ stribeck           ``t``, ``u``, ``arm_dot_m``
 free-oscillation   ``t``, ``theta_m``
 control-scaling    ``t``, ``u``, ``arm_dot_m``
 velocity-scale     ``t``, ``arm_m``, ``v`` (the raw velocity channel)
+angle-scales       ``t``, ``y``, ``x`` (raw) and the run's marks
 =================  ==========================================
 """
 
@@ -47,6 +48,7 @@ from ..simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory
 __all__ = [
     "EXPERIMENTS",
     "IdentificationError",
+    "analyse_angle_scales",
     "analyse_control_scaling",
     "analyse_free_oscillation",
     "analyse_stiction",
@@ -61,7 +63,7 @@ __all__ = [
 
 #: Experiment names of ``frictionlab identify experiment``.
 EXPERIMENTS = ("stiction", "stribeck", "free-oscillation", "control-scaling",
-               "velocity-scale")
+               "velocity-scale", "angle-scales")
 
 _I = {name: i for i, name in enumerate(COLUMNS)}
 
@@ -810,6 +812,71 @@ def analyse_velocity_scale(log: Any, *, chunk: float = 0.25, v_min: float = 0.5)
     return {"velocity_scale": float(slope), "velocity_bias": float(icpt / slope),
             "residual_rms": float(np.sqrt(np.mean(res * res))),
             "points": [[float(a), float(b)] for a, b in p], "warnings": warnings}
+
+
+# ---------------------------------------------------------------------------
+# B.1, B.2: the angle channels (a lap by hand)
+# ---------------------------------------------------------------------------
+
+
+def _unwrap_raw(r: np.ndarray) -> np.ndarray:
+    """Undo the +-1 wrap-around of a raw angle channel (jumps of more than 1)."""
+    d = np.diff(r)
+    steps = np.where(d > 1.0, -2.0, np.where(d < -1.0, 2.0, 0.0))
+    return r + np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def analyse_angle_scales(log: Any, marks: Mapping[str, float]) -> dict:
+    r"""Scale and bias of the pendulum angle and scale of the arm angle (App. B.1, B.2).
+
+    The log is the guided ``angle-scales`` run: the pendulum hanging at rest
+    (``pendulum_before_*`` marks), one lap by hand, hanging at rest again
+    (``pendulum_after_*``), then the arm turned exactly one lap and held
+    (``arm_after_*``).  The raw channels are unwrapped (a jump of more than 1
+    is the converter's wrap-around, 2 units); a lap is :math:`2\pi` rad, so
+
+    * ``theta_scale`` = :math:`2\pi/|\Delta y|`,
+    * ``theta_bias``: the hanging pendulum is at :math:`	heta = \pi`, so
+      :math:`b = \pi/s_	heta - y_{hang}`, wrapped into [-1, 1) (the
+      convention of ``rig.theta_bias``: :math:`	heta = s_	heta(y + b)`),
+    * ``arm_scale`` = :math:`2\pi/|\Delta x|` (x before the arm's lap: its
+      rest during ``pendulum_after``).
+
+    Returns
+    -------
+    dict
+        ``theta_scale``, ``theta_bias``, ``arm_scale``, ``pendulum_lap_raw``,
+        ``arm_lap_raw``, ``warnings``.
+    """
+    t = _time(log)
+    y = _unwrap_raw(_signal(log, "y"))
+    x = _unwrap_raw(_signal(log, "x"))
+    need = ("pendulum_before_start", "pendulum_before_end", "pendulum_after_start",
+            "pendulum_after_end", "arm_after_start", "arm_after_end")
+    missing = [k for k in need if k not in marks]
+    if missing:
+        raise IdentificationError(f"the run has no {missing[0]!r} mark (is it a complete "
+                                  "angle-scales run? its sidecar holds the marks)")
+
+    def mean(sig, a, b):
+        sel = (t >= marks[a]) & (t <= marks[b])
+        if not sel.any():
+            raise IdentificationError(f"no samples between the marks {a} and {b}")
+        return float(sig[sel].mean())
+
+    y0 = mean(y, "pendulum_before_start", "pendulum_before_end")
+    y1 = mean(y, "pendulum_after_start", "pendulum_after_end")
+    x0 = mean(x, "pendulum_after_start", "pendulum_after_end")
+    x1 = mean(x, "arm_after_start", "arm_after_end")
+    span_y, span_x = y1 - y0, x1 - x0
+    if abs(span_y) < 0.5 or abs(span_x) < 1e-3:
+        raise IdentificationError("no lap in the log (the readings before and after hardly "
+                                  "differ)")
+    ts = 2.0 * math.pi / abs(span_y)
+    y_hang = (y0 + 1.0) % 2.0 - 1.0
+    tb = (math.pi / ts - y_hang + 1.0) % 2.0 - 1.0
+    return {"theta_scale": ts, "theta_bias": tb, "arm_scale": 2.0 * math.pi / abs(span_x),
+            "pendulum_lap_raw": span_y, "arm_lap_raw": span_x, "warnings": []}
 
 
 def estimates_only(result: Mapping[str, Any]) -> dict[str, float]:

@@ -49,7 +49,8 @@ def make_rig_experiment(name: str, cfg: Config, limits=None, *,
 def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=None,
                realtime: bool = True, sim_lockstep: bool = False, on_start=None,
                poll=None, poll_interval: float = 0.5,
-               scaling: RigScaling | None = None) -> dict:
+               scaling: RigScaling | None = None, on_prompt=None,
+               hand: bool = False) -> dict:
     """Run ``experiment`` through the real-time loop; return the run's statistics.
 
     Parameters
@@ -73,6 +74,12 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
         (progress display); real-time runs only.
     scaling : RigScaling, optional
         The conversion factors the loop assumes (default ``cfg``'s ``rig.*``).
+    on_prompt : callable, optional
+        ``on_prompt(prompt)`` for each instruction of a guided step
+        (``{"text", "hand"}``), e.g. to print it; real-time runs only.
+    hand : bool
+        Let the rig play the operator's hand for each guided step
+        (``rig-sim`` over UDP: :meth:`RealtimeController.hand`).
 
     Returns
     -------
@@ -103,7 +110,14 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
         if fake:
             return ctl.run()
         ctl.start()
-        while not ctl.wait(poll_interval):
+        prompts = experiment.prompts
+        while not ctl.wait(0.05 if prompts or hand or on_prompt else poll_interval):
+            while prompts:
+                prompt = prompts.popleft()
+                if on_prompt is not None:
+                    on_prompt(prompt)
+                if hand:
+                    ctl.hand(prompt["hand"])
             if poll is not None:
                 poll(experiment)
     finally:
@@ -146,7 +160,7 @@ def _finite_rows(log: Any, names: tuple[str, ...]) -> dict[str, np.ndarray]:
 #: Signals each analysis reads.
 SIGNALS = {"stiction": ("t", "u", "arm_dot_m"), "stribeck": ("t", "u", "arm_dot_m"),
            "free-oscillation": ("t", "theta_m"), "control-scaling": ("t", "u", "arm_dot_m"),
-           "velocity-scale": ("t", "arm_m", "v")}
+           "velocity-scale": ("t", "arm_m", "v"), "angle-scales": ("t", "y", "x")}
 
 
 def analyse_log(name: str, log: Any, cfg: Config, *, marks: dict | None = None,
@@ -171,6 +185,8 @@ def analyse_log(name: str, log: Any, cfg: Config, *, marks: dict | None = None,
                                           nominal_u_scale=rig_scaling(cfg).u_scale)
     if name == "velocity-scale":
         return ex.analyse_velocity_scale(data)
+    if name == "angle-scales":
+        return ex.analyse_angle_scales(data, marks)
     raise ValueError(f"unknown experiment {name!r}")
 
 

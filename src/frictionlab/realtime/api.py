@@ -368,6 +368,15 @@ class RealtimeController:
         rig.push(float(kick))
         self._event("push", kick=float(kick))
 
+    def hand(self, action: dict) -> None:
+        """The emulated operator's hand (``rig-sim`` over UDP: a lap of the pendulum or
+        the arm, a push; see :data:`.rigsim.HAND`); ``RigError`` on another rig."""
+        rig = self._rig
+        if not self.running or rig is None:
+            raise RuntimeError("the hand needs a running controller")
+        rig.hand(dict(action))
+        self._event("hand", **{k: v for k, v in action.items() if k != "event"})
+
     # --- Save Data ------------------------------------------------------------------
 
     def record_start(self) -> None:

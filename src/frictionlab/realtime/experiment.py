@@ -30,7 +30,18 @@ loops) are the thesis's experiments:
 ``velocity-scale``  App. B.3: a P velocity loop at a few references of both
                     signs; the arm angle (its scale known) gives the true
                     velocity that the raw velocity channel is compared with
+``angle-scales``    App. B.1/B.2, guided: the motor stays off; the operator is
+                    asked to turn the pendulum one lap (hanging to hanging)
+                    and then the arm exactly one lap; the experiment waits
+                    for each (at most ``wait`` s) and the raw readings before
+                    and after give ``rig.theta_scale``, ``rig.theta_bias``
+                    and ``rig.arm_scale``
 ==================  ===========================================================
+
+Guided steps: an instruction for the operator is appended to
+:attr:`RigExperiment.prompts` (``{"text": ..., "hand": {...}}``, where
+``hand`` is what ``rig-sim``'s emulated hand would do, :data:`.rigsim.HAND`);
+the runner prints it and, against ``rig-sim``, may play the hand.
 
 Limits (:class:`Limits`): the experiment stops with reason
 ``experiment_limit`` when the measured arm speed exceeds ``max_speed`` or the
@@ -52,6 +63,7 @@ per tick.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -60,6 +72,7 @@ from .loop import ExperimentEnd
 
 __all__ = [
     "EXPERIMENT_CLASSES",
+    "AngleScales",
     "ControlScaling",
     "FreeOscillation",
     "Limits",
@@ -118,6 +131,7 @@ class RigExperiment:
         self.phase = "waiting for the first reading"
         self.marks: dict[str, float] = {}
         self._gen: Iterator[float] | None = None
+        self.prompts: deque[dict] = deque()
         self.t = self.theta = self.arm = self.arm_dot = 0.0
         self.y = self.x = self.v = 0.0
         self.arm0 = 0.0
@@ -437,9 +451,98 @@ class VelocityScale(RigExperiment):
         yield from self.coast()
 
 
+class AngleScales(RigExperiment):
+    """App. B.1/B.2 as guided steps: a lap of the pendulum, then one of the arm, by hand.
+
+    The motor stays off (u = 0).  Each step waits for the reading to change by
+    more than ``min_change`` of a lap and come to rest again (its range over
+    ``settle`` s below ``rest_band``), at most ``wait`` s; the readings at
+    rest before and after are marked for the analysis
+    (:func:`frictionlab.identification.experiments.analyse_angle_scales`).
+
+    Parameters
+    ----------
+    wait : float
+        Longest wait for the operator per step (s); then ``experiment_limit``.
+    settle : float
+        Seconds of rest that end a step.
+    lap_seconds : float
+        How long the emulated hand takes for a lap (``rig-sim`` only).
+    """
+
+    name = "angle-scales"
+    signals = ("t", "y", "x")
+
+    def __init__(self, h, u_scale=-0.022, limits=None, *, wait: float = 120.0,
+                 settle: float = 1.0, lap_seconds: float = 2.0):
+        super().__init__(h, u_scale, limits)
+        check_range("wait", wait, 1.0, 3600.0)
+        check_range("settle", settle, 0.1, 10.0)
+        check_range("lap_seconds", lap_seconds, 0.05, 60.0)
+        self.wait, self.settle, self.lap_seconds = float(wait), float(settle), float(lap_seconds)
+
+    def _rest(self, raw: str, band: float, moved_from: float | None, min_change: float):
+        """u = 0 until the unwrapped raw reading ``raw`` ('y' or 'x') has moved more than
+        ``min_change`` from ``moved_from`` (None: no move needed) and then stayed within
+        ``band`` for ``settle`` s.  Marks ``<raw>_rest<i>_start/_end``."""
+        n_settle = self._ticks(self.settle)
+        window: deque[float] = deque(maxlen=n_settle)
+        prev = getattr(self, raw)
+        wraps = 0
+        n = 0
+        moved = moved_from is None
+        limit = self._ticks(self.wait)
+        while True:
+            cur = getattr(self, raw)
+            d = cur - prev
+            if d > 1.0:
+                wraps -= 1
+            elif d < -1.0:
+                wraps += 1
+            prev = cur
+            val = cur + 2.0 * wraps
+            window.append(val)
+            if not moved and abs(val - moved_from) > min_change:
+                moved = True
+                window.clear()
+            if moved and len(window) == n_settle and max(window) - min(window) <= band:
+                return sum(window) / len(window), wraps
+            n += 1
+            if n > limit:
+                raise ExperimentEnd("experiment_limit", f"the operator did not finish in "
+                                    f"{self.wait:g} s ({self.phase})")
+            yield 0.0
+
+    def schedule(self):
+        self.phase = "let the pendulum hang still and the arm rest"
+        t0 = self.t
+        y0, _ = yield from self._rest("y", 0.005, None, 0.0)
+        self.marks["pendulum_before_start"] = t0
+        self.marks["pendulum_before_end"] = self.t
+        self.phase = ("turn the pendulum one full lap by hand, from hanging to hanging, then "
+                      "let it hang still")
+        self.prompts.append({"text": self.phase, "hand": {"lap": "pendulum",
+                                                          "seconds": self.lap_seconds}})
+        self.progress = 0.2
+        # settle: the unwrapped raw angle has moved more than 3/4 of the full range
+        yield from self._rest("y", 0.02, y0, 1.5)
+        self.marks["pendulum_after_start"] = self.t - self.settle
+        self.marks["pendulum_after_end"] = self.t
+        self.progress = 0.5
+        self.phase = "turn the arm exactly one lap by hand and hold it still"
+        x0 = self.x
+        self.marks["arm_before"] = self.t
+        self.prompts.append({"text": self.phase, "hand": {"lap": "arm",
+                                                          "seconds": self.lap_seconds}})
+        yield from self._rest("x", 0.002, x0, 0.02)
+        self.marks["arm_after_start"] = self.t - self.settle
+        self.marks["arm_after_end"] = self.t
+        self.progress = 1.0
+
+
 #: Experiment name -> class.
 EXPERIMENT_CLASSES = {c.name: c for c in (Stiction, Stribeck, FreeOscillation, ControlScaling,
-                                          VelocityScale)}
+                                          VelocityScale, AngleScales)}
 
 
 def make_experiment(name: str, h: float, u_scale: float = -0.022,

@@ -20,6 +20,9 @@ writes the DAC value u_DA to.  The interface (:class:`Rig`):
     Stop the motor and release the connection.
 ``push(kick) -> None``
     Emulated rigs only: add ``kick`` rad/s to the pendulum's velocity.
+``hand(action) -> None``
+    ``rig-sim`` over UDP only: the operator's hand (a lap of the pendulum or
+    the arm, App. B.1/B.2; :data:`.rigsim.HAND`).
 
 Backends (:func:`open_rig` parses the ``--backend`` string):
 
@@ -181,6 +184,11 @@ class Rig(ABC):
 
     def push(self, kick: float) -> None:
         raise RigError(f"push needs an emulated rig; {self.name} is not one")
+
+    def hand(self, action: dict) -> None:
+        """The emulated operator's hand (``rig-sim``'s CONTROL ``hand``)."""
+        raise RigError(f"the operator's hand can be played by rig-sim over UDP only; "
+                       f"{self.name} is not one: do it by hand")
 
     def counters(self) -> dict:
         """Backend-specific counters for the run's statistics."""
@@ -620,6 +628,15 @@ class FramedRig(Rig):
         reply = send_control(self.tx.addr[0], self.tx.addr[1], {"cmd": "fault", "push": kick})
         if not reply.get("ok"):
             raise RigError(f"rig refused the push: {reply.get('error')}")
+
+    def hand(self, action: dict) -> None:
+        if not self.emulated or not isinstance(self.tx, UdpTransport):
+            return super().hand(action)
+        from .rigsim import send_control
+
+        reply = send_control(self.tx.addr[0], self.tx.addr[1], {"cmd": "hand", **action})
+        if not reply.get("ok"):
+            raise RigError(f"rig refused the hand: {reply.get('error')}")
 
     def counters(self) -> dict:
         return {"late_replies": self.late_replies, "ignored_frames": self.ignored,
