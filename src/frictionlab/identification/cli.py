@@ -350,6 +350,8 @@ def cmd_experiment(args) -> int:
             raise UsageError("--save: a simulated velocity-scale run is saved as .csv")
         try:
             exp = make_rig_experiment(name, cfg, _limits(args), **_rig_options(args))
+        except ParamError:
+            raise  # named after its option by _experiment_entry
         except ValueError as exc:
             raise UsageError(f"{name}: {exc}") from None
         if args.backend is None:
@@ -565,7 +567,8 @@ _EXPERIMENT_OPTIONS = {"step": "--step", "hold": "--hold", "gain": "--gain",
                        "amplitude": "--amplitude", "duration": "--duration",
                        "references": "--references", "levels": "--levels",
                        "max_amplitude": "--max-amplitude", "slide": "--slide",
-                       "push": "--push", "coulomb_levels": "--coulomb-levels"}
+                       "push": "--push", "coulomb_levels": "--coulomb-levels",
+                       "wait": "--wait"}
 
 
 def _experiment_entry(args) -> int:
