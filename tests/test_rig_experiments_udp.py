@@ -143,3 +143,35 @@ def test_angle_scales_over_udp_with_rig_sim_playing_the_hand(tmp_path):
     res = json.loads(r.stdout)
     for k, v in true.items():
         assert abs(res[k.split(".")[1]] - v) <= 0.01 * abs(v), (k, res)
+
+
+def test_sigint_during_an_experiment_zeroes_the_motor_and_keeps_the_log(tmp_path):
+    """Ctrl-C in the middle of `identify experiment --backend sim`: exit status 1, the
+    reason and the kept log named, the log's last row (the stop) has u_DA = 0."""
+    import signal
+    import time
+
+    from frictionlab.realtime.datalog import read_csv_log
+
+    proc = subprocess.Popen([*CLI, "identify", "experiment", "stribeck", "--backend", "sim",
+                             "--log-dir", str(tmp_path), "--no-realtime", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        while "velocity loop" not in line:  # progress: the motor is being driven
+            line = proc.stderr.readline()
+            assert line, "no progress"
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 1, stderr
+    assert stdout == ""
+    assert "stopped before it finished: signal" in stderr
+    log = stderr.split("log kept: ")[1].split()[0]
+    rows = read_csv_log(log)
+    assert rows["u_da"][-1] == 0.0 and int(rows["flags"][-1]) & 32  # the STOP row
+    assert any(abs(u) > 0 for u in rows["u_da"][:-1])

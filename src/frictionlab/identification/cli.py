@@ -346,6 +346,13 @@ def cmd_experiment(args) -> int:
     elif args.backend or name == "velocity-scale":
         from .onrig import make_rig_experiment
 
+        if args.backend not in (None, "sim"):
+            from ..realtime.api import _check_backend
+
+            try:
+                _check_backend(args.backend)
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
         if args.backend is None and args.save and not args.save.endswith(".csv"):
             raise UsageError("--save: a simulated velocity-scale run is saved as .csv")
         try:
