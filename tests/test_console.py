@@ -996,3 +996,41 @@ def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
         for s in idle:
             s.close()
         served.close()
+
+
+def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
+    """The Experiments panel: refused without confirm (the motor moves), bad options and
+    limits refused at their field, a confirmed run goes through the loop on the connected
+    rig and its estimate arrives in the status."""
+    cfg = build_config("fast", "classical", sets=[("plant.omega0", 6.3)])
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05)
+    body = {"name": "free-oscillation", "options": {"duration": 6.0}}
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        r = client.post("/api/experiment", json=body)
+        assert r.status_code == 422 and r.json()["confirm_required"] is True
+        assert "arm will move" in r.json()["detail"]
+        assert not ctl.running and client.get("/api/status").json()["ticks"] == 0
+        r = client.post("/api/experiment", json={**body, "options": {"bogus": 1},
+                                                  "confirm": True})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "options"
+        r = client.post("/api/experiment", json={**body, "limits": {"max_u_da": 2},
+                                                  "confirm": True})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "limits"
+        r = client.post("/api/experiment", json={"name": "nonsense", "confirm": True})
+        assert r.status_code == 422
+        r = client.post("/api/experiment", json={**body, "confirm": True})
+        assert r.status_code == 200, r.json()
+        deadline = time.monotonic() + 120
+        while True:
+            exp = client.get("/api/status").json()["console"]["experiment"]
+            if exp["state"] != "running" or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        assert exp["state"] == "done", exp
+        assert abs(exp["estimates"]["omega0"] - 6.3) < 0.02 * 6.3
+        assert exp["log"] and os.path.exists(exp["log"])
+        st = client.get("/api/status").json()
+        assert st["stop_reason"] == "finished" and st["experiment"]["progress"] == 1.0
+    ctl.close()

@@ -205,6 +205,29 @@ class PushRequest(_Request):
         return v
 
 
+#: Experiments the console's Experiments panel runs (``identify experiment`` names).
+EXPERIMENT_NAMES = ("stiction", "stribeck", "free-oscillation", "control-scaling",
+                    "velocity-scale", "angle-scales")
+
+
+class ExperimentRequest(_Request):
+    """The Experiments panel: run an identification experiment on the connected rig.
+
+    ``options`` are the experiment's own (``step``, ``hold``, ``references``,
+    ... as in ``identify experiment``; checked by the experiment), ``limits``
+    the fields of :class:`frictionlab.realtime.experiment.Limits`
+    (``max_speed``, ``max_travel``, ``max_u_da``).  The motor moves the arm,
+    so the request is refused (422, ``confirm_required``) unless ``confirm``.
+    """
+
+    name: Literal["stiction", "stribeck", "free-oscillation", "control-scaling",
+                  "velocity-scale", "angle-scales"]
+    options: dict[str, Number | list[Number]] = Field(default_factory=dict, max_length=20)
+    limits: dict[Literal["max_speed", "max_travel", "max_u_da"], Number] = Field(
+        default_factory=dict)
+    confirm: Confirm = False
+
+
 class RecordNameRequest(_Request):
     """The ``out>`` prompt: the recording's file name, without extension."""
 

@@ -97,9 +97,6 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
     if not isinstance(experiment, RigExperiment):
         raise TypeError("experiment must be a RigExperiment")
     fake = clock is not None
-    if backend == "sim":
-        # the simulated rig's pendulum hangs at rest, as a rig's does before an experiment
-        cfg = cfg.with_values({"sim.initial_angle": math.pi})
     ctl = RealtimeController(cfg, backend, log_dir=log_dir, clock=clock,
                              realtime=realtime and not fake, manage_gc=not fake,
                              scaling=scaling or rig_scaling(cfg),

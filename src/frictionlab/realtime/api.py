@@ -6,6 +6,7 @@ See the package docstring (:mod:`frictionlab.realtime`) for the API summary.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 import threading
@@ -80,6 +81,9 @@ class RealtimeController:
                  log_formats: tuple[str, ...] = ("csv",), experiment=None):
         self.cfg = cfg
         self.experiment = experiment
+        #: The experiment of the current (or last) run: ``experiment``, or the one given
+        #: to :meth:`start` for that run.
+        self.run_experiment = experiment
         self.log_formats = tuple(log_formats)
         self.sim_lockstep = sim_lockstep
         self.backend = backend
@@ -123,9 +127,15 @@ class RealtimeController:
 
     # --- life cycle ---------------------------------------------------------------
 
-    def start(self) -> None:
-        """Start a run in the loop thread (open the rig, the log, go)."""
-        loop = self._prepare()
+    def start(self, experiment=None) -> None:
+        """Start a run in the loop thread (open the rig, the log, go).
+
+        ``experiment`` (a :class:`~.experiment.RigExperiment`, one run per
+        object) runs in place of the balancing controller for this run only
+        (the console's Experiments panel); on the ``sim`` backend its
+        pendulum then starts hanging.
+        """
+        loop = self._prepare(experiment)
         self._thread = threading.Thread(target=self._execute, args=(loop,),
                                         name="frictionlab-rt", daemon=True)
         self._thread.start()
@@ -174,14 +184,21 @@ class RealtimeController:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _prepare(self) -> Loop:
+    def _prepare(self, experiment=None) -> Loop:
         with self._lock:
             if self._closed:
                 raise RuntimeError("the controller is closed")
             if self.running:
                 raise RuntimeError("the controller is already running")
             self._stop_asked = None
-            rig = (open_rig(self.backend, self.cfg, lockstep=self.sim_lockstep)
+            experiment = experiment if experiment is not None else self.experiment
+            self.run_experiment = experiment
+            rig_cfg = self.cfg
+            if experiment is not None and self.backend == "sim":
+                # the simulated rig's pendulum hangs at rest, as a rig's does before an
+                # experiment
+                rig_cfg = rig_cfg.with_values({"sim.initial_angle": math.pi})
+            rig = (open_rig(self.backend, rig_cfg, lockstep=self.sim_lockstep)
                    if isinstance(self.backend, str)
                    else self.backend)
             rig.open(h=self.cfg.design.h, cancel=lambda: self._stop_asked is not None)
@@ -190,7 +207,7 @@ class RealtimeController:
                             scaling=self.scaling, duration=self.duration,
                             realtime=self.realtime, manage_gc=self.manage_gc,
                             prewarm_us=self.prewarm_us, cpu=self.cpu,
-                            experiment=self.experiment)
+                            experiment=experiment)
                 self._writer = None
                 if self.log_dir is not None:
                     self._writer = self._open_log(loop)
@@ -444,10 +461,10 @@ class RealtimeController:
             "recording": bool(self._writer is not None and self._writer.recording),
             "safety": dataclasses.asdict(self.safety),
         }
-        if self.experiment is not None:
-            out["experiment"] = {**self.experiment.describe(),
-                                 "progress": self.experiment.progress,
-                                 "phase": self.experiment.phase}
+        exp = self.run_experiment
+        if exp is not None:
+            out["experiment"] = {**exp.describe(), "progress": exp.progress,
+                                 "phase": exp.phase}
         if loop is None:
             out.update({"stop_reason": None, "ticks": 0, "missed": 0, "overruns": 0,
                         "t": 0.0})
@@ -504,8 +521,8 @@ class RealtimeController:
                          "switch_interval_s": _SWITCH_INTERVAL,
                          "blas_single_threaded": self.blas_single_threaded},
             "events": list(self.events),
-            "experiment": (None if self.experiment is None
-                           else self.experiment.describe()),
+            "experiment": (None if self.run_experiment is None
+                           else self.run_experiment.describe()),
         }
 
 
