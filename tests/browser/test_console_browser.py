@@ -516,6 +516,27 @@ def test_save_data_records_names_and_downloads(console, page):
     assert len(csv_text.splitlines()) == data.shape[0] + 1
 
 
+def test_experiments_panel_runs_an_experiment_on_the_connected_rig(page):
+    """Experiments panel: refused while the loop balances; after Stop, Run asks for
+    confirmation (the motor moves), the live progress shows, and the estimate arrives."""
+    if status(page)["running"]:
+        page.locator("#start").click()  # Stop
+        wait_until(lambda: not status(page)["running"], what="the loop stopped")
+    page.locator("#experiment-name").select_option("control-scaling")
+    page.locator("#experiment-options").fill("{nope")
+    page.locator("#experiment-run").click()
+    expect(page.locator("#experiment-options-error")).to_contain_text("JSON object")
+    page.locator("#experiment-options").fill('{"levels": [4, 6]}')
+    page.locator("#experiment-run").click()
+    expect(page.locator("#confirm-title")).to_have_text("The experiment drives the motor")
+    page.locator("#confirm-apply").click()
+    expect(page.locator("#experiment-msg")).to_contain_text("control-scaling: done",
+                                                            timeout=60_000)
+    expect(page.locator("#experiment-result")).to_contain_text("input_gain = 1.0")
+    assert status(page)["stop_reason"] == "finished"
+    ensure_running(page)
+
+
 def test_exit_stops_the_loop_and_ends_the_server(console, page):
     exit_button = page.locator("#exit")
     exit_button.click()

@@ -136,7 +136,9 @@
   // The server refuses a change that would make the loop unstable or saturate u (422 with
   // confirm_required, the reason and what would pass); the operator may apply it anyway.
   let confirmResolve = null;
-  function confirmUnsafe(data) {
+  function confirmUnsafe(data, title, apply) {
+    $("confirm-title").textContent = title || "The model predicts this change is unsafe";
+    $("confirm-apply").textContent = apply || "Apply anyway";
     $("confirm-text").textContent = data.detail;
     $("confirm").hidden = false;
     $("confirm-cancel").focus();
@@ -295,6 +297,54 @@
     const emulated = st.backend === "sim" || String(st.backend || "").startsWith("udp://");
     $("push").disabled = !running || !emulated;
     $("push").title = emulated ? "disturb the pendulum" : "only on simulated rigs";
+    showExperiment(st, running);
+  }
+
+  // --- Experiments panel: progress while it runs, the estimate when done ----------------------
+  function showExperiment(st, running) {
+    $("experiment-run").disabled = running;
+    const e = st.console && st.console.experiment;
+    if (!e) return;
+    const live = st.experiment;
+    if (e.state === "running") {
+      const pct = live ? Math.round(100 * (live.progress || 0)) : 0;
+      setMsg("experiment-msg", `${e.name}: ${pct} % - ${live ? live.phase : ""}`);
+      $("experiment-result").textContent = "";
+    } else {
+      setMsg("experiment-msg", `${e.name}: ${e.message || e.state}`, e.state !== "done");
+      const lines = [];
+      for (const [k, v] of Object.entries(e.estimates || {})) {
+        lines.push(`${k} = ${v === null ? "-" : Number(v).toPrecision(5)}`);
+      }
+      for (const w of e.warnings || []) lines.push(`warning: ${w}`);
+      if (e.log) lines.push(`log: ${e.log}`);
+      $("experiment-result").textContent = lines.join("\n");
+    }
+  }
+
+  async function runExperiment() {
+    let options = {};
+    try {
+      options = JSON.parse($("experiment-options").value || "{}");
+      if (typeof options !== "object" || options === null || Array.isArray(options)) throw new Error("an object");
+    } catch (err) {
+      setError($("experiment-options"), 'options must be a JSON object, e.g. {"hold": 0.2}');
+      return;
+    }
+    setError($("experiment-options"), "");
+    const body = { name: $("experiment-name").value, options };
+    let r = await api("POST", "/api/experiment", body);
+    if (!r.ok && r.data && r.data.confirm_required) {
+      if (!(await confirmUnsafe(r.data, "The experiment drives the motor", "Run"))) { setMsg("experiment-msg", "cancelled"); return; }
+      r = await api("POST", "/api/experiment", { ...body, confirm: true });
+    }
+    if (!r.ok) {
+      const e = (r.data && r.data.errors && r.data.errors[0]) || {};
+      if (e.field === "options") setError($("experiment-options"), e.message);
+      setMsg("experiment-msg", "refused: " + ((r.data && r.data.detail) || "invalid input"), true);
+      return;
+    }
+    showStatus(r.data.status);
   }
 
   // --- plot ------------------------------------------------------------------------------------
@@ -560,6 +610,8 @@
       else setMsg("push-msg", `pushed ${r0.value} rad/s`);
     });
     $("kick").addEventListener("input", () => setError($("kick"), ""));
+    $("experiment-run").addEventListener("click", runExperiment);
+    $("experiment-options").addEventListener("input", () => setError($("experiment-options"), ""));
 
     $("confirm-apply").addEventListener("click", () => closeConfirm(true));
     $("confirm-cancel").addEventListener("click", () => closeConfirm(false));
