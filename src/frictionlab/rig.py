@@ -39,8 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._jit import jit
+from . import sensor as _S
 from ._validation import ParamError, Validated, check_range, param
+from .sensor import ADC_BITS, ADC_STEP, quantize
 
 __all__ = [
     "ADC_BITS",
@@ -49,8 +50,6 @@ __all__ = [
     "unwrap_raw",
     "wrap_raw",
 ]
-
-ADC_BITS = 12
 
 
 @dataclass(frozen=True)
@@ -92,18 +91,21 @@ class RigScaling(Validated):
         b = check_range("arm_bias", self.arm_bias, -1.0, 1.0)
         object.__setattr__(self, "arm_bias", b)
 
-    # --- raw -> SI -------------------------------------------------------
+    # --- raw -> SI (the laws of frictionlab.sensor, element-wise) ------------
     def theta(self, y):
         """Pendulum angle (rad) from the raw reading y."""
-        return self.theta_scale * (np.asarray(y, dtype=float) + self.theta_bias)
+        return _S.theta_from_raw.py_func(np.asarray(y, dtype=float), self.theta_scale,
+                                         self.theta_bias)
 
     def arm(self, x):
-        """Arm angle (rad) from the raw reading x."""
-        return self.arm_scale * (np.asarray(x, dtype=float) - self.arm_bias)
+        """Arm angle (rad) from the raw reading x (unwrapped)."""
+        return _S.arm_from_raw.py_func(np.asarray(x, dtype=float), self.arm_bias,
+                                       self.arm_scale)
 
     def arm_velocity(self, v):
         """Arm velocity (rad/s) from the raw reading v."""
-        return self.velocity_scale * (np.asarray(v, dtype=float) + self.velocity_bias)
+        return _S.velocity_from_raw.py_func(np.asarray(v, dtype=float), self.velocity_scale,
+                                            self.velocity_bias)
 
     def u_da(self, u):
         """DAC value for the control signal u (m/s^2), saturated at [-1, 1]."""
@@ -112,16 +114,19 @@ class RigScaling(Validated):
     # --- SI -> raw (the emulated rig) -------------------------------------
     def raw_theta(self, theta):
         """Raw pendulum reading for angle theta (wrapped into [-1, 1))."""
-        return wrap_raw(np.asarray(theta, dtype=float) / self.theta_scale - self.theta_bias)
+        return wrap_raw(_S.theta_to_raw.py_func(np.asarray(theta, dtype=float),
+                                                self.theta_scale, self.theta_bias))
 
     def raw_arm(self, arm):
         """Raw arm reading for angle Omega (wrapped into [-1, 1))."""
-        return wrap_raw(np.asarray(arm, dtype=float) / self.arm_scale + self.arm_bias)
+        return wrap_raw(_S.arm_to_raw.py_func(np.asarray(arm, dtype=float), self.arm_scale,
+                                              self.arm_bias))
 
     def raw_arm_velocity(self, arm_dot):
         """Raw velocity reading (clipped to the ADC range [-1, 1])."""
-        return np.clip(np.asarray(arm_dot, dtype=float) / self.velocity_scale
-                       - self.velocity_bias, -1.0, 1.0)
+        return np.clip(_S.velocity_to_raw.py_func(np.asarray(arm_dot, dtype=float),
+                                                  self.velocity_scale, self.velocity_bias),
+                       -1.0, 1.0)
 
     def u_from_da(self, u_da):
         """Control signal (m/s^2) the DAC value corresponds to."""
@@ -134,28 +139,17 @@ class RigScaling(Validated):
 
     def quanta(self) -> tuple[float, float, float]:
         """SI size of one ADC step for (theta, Omega, Omega_dot)."""
-        q = 2.0 / 2**ADC_BITS
+        q = ADC_STEP
         return self.theta_scale * q, self.arm_scale * q, self.velocity_scale * q
 
 
 def wrap_raw(r):
-    """Wrap raw values into [-1, 1) like the pendulum and arm channels."""
-    return (np.asarray(r, dtype=float) + 1.0) % 2.0 - 1.0
+    """Wrap raw values into [-1, 1) like the pendulum and arm channels
+    (:func:`frictionlab.sensor.wrap`)."""
+    return _S.wrap.py_func(np.asarray(r, dtype=float))
 
 
 def unwrap_raw(previous: float, current: float) -> float:
-    """Undo a wrap between two consecutive raw samples (jumps of more than 1)."""
-    d = current - previous
-    if d > 1.0:
-        return current - 2.0
-    if d < -1.0:
-        return current + 2.0
-    return current
-
-
-@jit
-def quantize(value, step):
-    """Round ``value`` to a multiple of ``step`` (``step <= 0``: unchanged)."""
-    if step <= 0.0:
-        return value
-    return np.floor(value / step + 0.5) * step
+    """Undo a wrap between two consecutive raw samples (jumps of more than 1;
+    :func:`frictionlab.sensor.unwrap`)."""
+    return current + 2.0 * _S.unwrap.py_func(previous, current, 0)

@@ -75,7 +75,7 @@ from .controller import (
 from .design import design as make_design
 from .friction import KINDS, LUGRE, NONE, P_K, lugre_force, lugre_step_exact, static_force
 from .plant import accelerations_sc
-from .rig import quantize
+from .sensor import SensorParams, measure, sensor_params
 
 __all__ = [
     "COLUMNS",
@@ -209,33 +209,21 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
 
 
 @jit
-def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed, quanta,
+def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
          fall_angle, out, record):
-    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, mem).
+    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, mem, x0).
 
     ``x`` (plant state) and ``s`` (controller state) are advanced in place;
     ``mem`` is the friction model's memory (:func:`plant_tick`) at the start,
-    returned at the end.
+    returned at the end.  The measurements are :func:`frictionlab.sensor.measure`
+    with the sensor ``sp`` at sample numbers ``n0, n0 + 1, ...``; ``x0`` is its
+    arm zero (taken at sample 0, returned for a continuation chunk).
     Row k of ``out`` receives the signals of tick k when ``record`` is true.
-    The noise generator is seeded with ``seed`` unless it is negative (a
-    continuation chunk of the same run keeps drawing from the same stream).
     """
     h = gp[11]
-    noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
-    if noisy and seed >= 0:
-        np.random.seed(seed)
     w0 = gp[8]
     for k in range(n_ticks):
-        th_m = x[0]
-        arm_m = x[2]
-        armd_m = x[3]
-        if noisy:
-            th_m += noise[0] * np.random.standard_normal()
-            arm_m += noise[1] * np.random.standard_normal()
-            armd_m += noise[2] * np.random.standard_normal()
-        th_m = quantize(th_m, quanta[0])
-        arm_m = quantize(arm_m, quanta[1])
-        armd_m = quantize(armd_m, quanta[2])
+        th_m, arm_m, armd_m, x0 = measure(sp, x[0], x[2], x[3], n0 + k, x0)
         th_hat = s[S_X1]
         thd_hat = w0 * s[S_X2]
         arm_hat = s[2]
@@ -262,8 +250,8 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed
         if record:
             out[k, 15] = f_mean
         if not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
-            return k + 1, 1, mem
-    return n_ticks, 0, mem
+            return k + 1, 1, mem, x0
+    return n_ticks, 0, mem, x0
 
 
 @dataclass(frozen=True)
@@ -400,10 +388,10 @@ def _pack_plant(cfg: Config) -> np.ndarray:
     return np.array([p.omega0, p.zeta, p.g, p.arm_length, p.input_gain])
 
 
-def _quanta(cfg: Config) -> np.ndarray:
-    if cfg.sim.quantization:
-        return np.array(cfg.rig.quanta())
-    return np.zeros(3)
+def make_sensor(cfg: Config) -> SensorParams:
+    """The sensor a configuration describes (``rig.*``, ``sim.quantization``,
+    ``sim.noise``, ``sim.seed``; the arm's raw zero :data:`~frictionlab.sensor.ARM_START`)."""
+    return sensor_params(cfg.rig, cfg.sim.quantization, cfg.sim.noise, cfg.sim.seed)
 
 
 def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Controller:
@@ -457,27 +445,25 @@ def simulate_config(
     s = ctrl.init(cfg.sim.initial_angle)
     assert s.shape == (NS,)
     out = np.zeros((n, NC)) if record else np.zeros((1, NC))
-    noise = np.full(3, cfg.sim.noise)
+    sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)
     fp = cfg.friction.pack()
     pp = _pack_plant(cfg)
-    q = _quanta(cfg)
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
     if progress is None:
-        done, status, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, noise,
-                               cfg.sim.seed, q, cfg.sim.fall_angle, out, record)
+        done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                  0, 0.0, cfg.sim.fall_angle, out, record)
     else:
-        # chunks of whole ticks; only the first seeds the noise, the others go on
-        # drawing from the same stream, so a chunked run is the unchunked one bit
-        # for bit (nothing else draws from numba's generator in between)
+        # chunks of whole ticks; the noise of sample n is a function of (seed, n), and
+        # the arm's zero x0 is carried over, so a chunked run is the unchunked one bit
+        # for bit
         chunk = max(1, n // 50)
-        done, status, mem = 0, 0, 0.0
+        done, status, mem, x0 = 0, 0, 0.0, 0.0
         while done < n and status == 0:
             m = min(chunk, n - done)
             view = out[done:done + m] if record else out
-            seed = cfg.sim.seed if done == 0 else -1
-            d, status, mem = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, noise,
-                                  seed, q, cfg.sim.fall_angle, view, record)
+            d, status, mem, x0 = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                      done, x0, cfg.sim.fall_angle, view, record)
             done += d
             progress(done / n)
     data = out[:done] if record else out[:0]

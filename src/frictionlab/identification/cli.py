@@ -72,9 +72,67 @@ def parse_weights(items: list[str]) -> dict[str, float]:
 MAX_MEASURED_BYTES = 16 << 20
 
 
+#: The fields of a ``frictionlab features`` object that make an experiment.
+_EXPERIMENT_FIELDS = ("design", "set", "features", "name")
+
+
+def _as_experiment(obj: dict) -> dict:
+    """The experiment in a ``frictionlab features`` object (its extra fields dropped)."""
+    return {k: obj[k] for k in _EXPERIMENT_FIELDS if k in obj}
+
+
+def _design_h(sets) -> float | None:
+    for key, value in reversed(parse_sets(sets)):
+        if key == "design.h":
+            return _float(value, "--set design.h")
+    return None
+
+
+def _log_experiment(path: str, h: float | None, window: float | None = None,
+                    design: str | None = None, what: str = "--measured") -> dict:
+    from .runlog import run_log_features
+
+    try:
+        return run_log_features(path, window=window, h=h, design=design)
+    except ValueError as exc:
+        raise UsageError(f"{what} {path}: {exc}") from None
+
+
+def load_measured(paths, sets=()) -> list:
+    """The experiments of every ``--measured`` file: a JSON object ``{"experiments":
+    [...]}``, one ``frictionlab features`` object, or a run log (``.csv``/``.dat``,
+    its features over the last half; a ``.dat`` takes ``design.h`` from ``sets``
+    when it has no sidecar)."""
+    from .limit_cycle import parse_experiments
+
+    items: list = []
+    for path in [paths] if isinstance(paths, str) else paths:
+        if path.endswith((".csv", ".dat")):
+            feats = _log_experiment(path, _design_h(sets))
+            if feats["status"] == "fell":
+                raise UsageError(f"--measured {path}: the run fell (stop reason "
+                                 f"{feats['stop_reason']}); it has no limit cycle")
+            items.append(_as_experiment(feats))
+            continue
+        obj = _load_json(path)
+        if isinstance(obj, dict) and "experiments" not in obj and "features" in obj:
+            items.append(_as_experiment(obj))
+        elif isinstance(obj, dict) and isinstance(obj.get("experiments"), list):
+            items.extend(_as_experiment(e) if isinstance(e, dict) and "status" in e else e
+                         for e in obj["experiments"])
+        else:
+            parse_experiments(obj)  # says what is wrong
+            items.append(obj)
+    return parse_experiments({"experiments": items})
+
+
 def _load_measured(path: str):
     from .limit_cycle import parse_experiments
 
+    return parse_experiments(_load_json(path))
+
+
+def _load_json(path: str):
     try:
         with open(path, "rb") as fh:
             raw = fh.read(MAX_MEASURED_BYTES + 1)
@@ -89,7 +147,7 @@ def _load_measured(path: str):
         raise UsageError(f"--measured {path} is not valid JSON: {exc}") from None
     except RecursionError:
         raise UsageError(f"--measured {path} is not valid JSON: nested too deeply") from None
-    return parse_experiments(obj)
+    return obj
 
 
 #: Largest ``--maxiter`` and ``--popsize`` (per fitted key) of ``identify limit-cycle``:
@@ -120,7 +178,7 @@ def _never(*args, **kwargs):  # pragma: no cover - validation only
 def cmd_limit_cycle(args) -> int:
     from .limit_cycle import LimitCycleProblem, check_fit_keys, fit_limit_cycle
 
-    experiments = _load_measured(args.measured)
+    experiments = load_measured(args.measured, args.sets)
     keys = check_fit_keys([k.strip() for k in args.fit.split(",") if k.strip()])
     bounds = parse_bounds(args.bounds)
     weights = parse_weights(args.weights)
@@ -444,8 +502,51 @@ def cmd_experiment(args) -> int:
     return 0
 
 
+def cmd_features(args) -> int:
+    if args.window is not None:
+        finite("--window", args.window, 0.0)
+    h = _design_h(args.sets)
+    for key, _ in parse_sets(args.sets):
+        if key != "design.h":
+            raise UsageError(f"--set {key}: features takes only design.h (the period of a "
+                             ".dat without its sidecar)")
+    out = _log_experiment(args.log, h, args.window, args.design, what="features:")
+    if args.json:
+        emit_json(out)
+        return 0
+    for note in out["notes"]:
+        print(f"frictionlab features: note: {note}", file=sys.stderr)
+    print(f"{out['name']}: {out['design']} design, {out['status']} "
+          f"(last {out['window']:.3g} s)")
+    for k, v in out["features"].items():
+        print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+    return 0
+
+
+def register_features_cli(sub) -> None:
+    """Add ``frictionlab features`` to the parser."""
+    p = sub.add_parser(
+        "features", help="limit-cycle features of a run log (for identify limit-cycle)",
+        description="The limit-cycle features 'frictionlab simulate' reports, measured on a "
+                    "'frictionlab run' log (its .csv, or its .dat), with the design from the "
+                    "run's sidecar: one experiment as 'identify limit-cycle --measured' "
+                    "takes it (docs/identification.md).")
+    p.add_argument("log", metavar="LOG", help="the run's .csv or .dat")
+    p.add_argument("--window", type=float, default=None, metavar="S",
+                   help="analyse the last S seconds (default: the last half of the log)")
+    p.add_argument("--design", choices=("fast", "slow"), default=None,
+                   help="the run's design preset (default: the sidecar's; required for a "
+                        "log without a sidecar)")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="design.h=SECONDS: the sampling period of a .dat without a sidecar")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_features)
+
+
 def register_cli(sub) -> None:
-    """Add ``identify limit-cycle`` and ``identify experiment`` to the parser."""
+    """Add ``identify limit-cycle`` and ``identify experiment`` (and ``features``)
+    to the parser."""
+    register_features_cli(sub)
     p = sub.add_parser("identify", help="friction and process identification (Sec. 5, "
                                         "App. A, B, E)")
     isub = p.add_subparsers(dest="identify_command", metavar="METHOD")
@@ -455,9 +556,12 @@ def register_cli(sub) -> None:
         "limit-cycle", help="fit parameter keys to measured limit-cycle features",
         description="Fit parameter keys to measured limit-cycle features of one or more "
                     "experiments (differential evolution, then least squares).")
-    q.add_argument("--measured", required=True, metavar="FILE.json",
+    q.add_argument("--measured", required=True, action="append", metavar="FILE",
                    help='{"experiments": [{"design": "fast"|"slow", "set": {...}, '
-                        '"features": {"peak1": ..., ...}}, ...]} (see examples/table1.json)')
+                        '"features": {"peak1": ..., ...}}, ...]} (see examples/table1.json), '
+                        "the output of 'frictionlab features', or a run log (.csv, or .dat "
+                        "with its sidecar or --set design.h) whose features are measured over "
+                        "its last half; repeatable, the experiments of all are fitted together")
     q.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
                    help="plant friction model of the simulations (default: classical)")
     q.add_argument("--fit", required=True, metavar="KEY[,KEY...]",

@@ -43,7 +43,8 @@ import numpy as np
 from .._validation import ParamError, check_range
 from ..config import Config
 from ..rig import RigScaling
-from ..simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory
+from ..sensor import measure
+from ..simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory, make_sensor
 
 __all__ = [
     "EXPERIMENTS",
@@ -93,7 +94,9 @@ MAX_LEVELS = 100
 class _Recorder:
     """Steps a :class:`SimulatedPlant` and records one row of COLUMNS per tick.
 
-    The measured signals get ``sim.noise`` (seeded by ``sim.seed``); the
+    The measured signals are the simulator's (:func:`frictionlab.sensor.measure`:
+    ``sim.noise`` seeded by ``sim.seed``, the 12-bit converter with
+    ``sim.quantization``, the ``rig.*`` factors; sample n = tick n); the
     controller-estimate columns stay zero (the experiments run open loop).
     """
 
@@ -104,8 +107,8 @@ class _Recorder:
         self.state = self.plant.init(theta0=theta0)
         self.rows: list[np.ndarray] = []
         self.max_rows = round(MAX_EXPERIMENT_S / self.plant.h)
-        self.noise = cfg.sim.noise
-        self.rng = np.random.default_rng(cfg.sim.seed)
+        self.sensor = make_sensor(cfg)
+        self._x0 = 0.0
 
     @property
     def h(self) -> float:
@@ -113,10 +116,8 @@ class _Recorder:
 
     def measure(self) -> tuple[float, float, float]:
         x = self.state.x
-        th, arm, ad = float(x[0]), float(x[2]), float(x[3])
-        if self.noise > 0:
-            e = self.noise * self.rng.standard_normal(3)
-            th, arm, ad = th + e[0], arm + e[1], ad + e[2]
+        th, arm, ad, self._x0 = measure(self.sensor, float(x[0]), float(x[2]), float(x[3]),
+                                        len(self.rows), self._x0)
         return th, arm, ad
 
     def step(self, u: float, measured: tuple[float, float, float] | None = None) -> None:

@@ -8,13 +8,14 @@ nanoseconds on the monotonic clock, so there is no drift):
    latest deadline that has passed (never a burst of catch-up ticks),
    count the skipped ones as *missed* and record the stall;
 3. read the rig's raw (y, x, v), check them (finite, inside [-1, 1]),
-   convert them to SI with App. B (:class:`frictionlab.rig.RigScaling`;
-   the arm channel is unwrapped and its bias x_0 captured at the first tick,
-   so Omega = 0 at the start), check the angle limit;
+   convert them to SI with App. B (the laws of :mod:`frictionlab.sensor`
+   with the ``rig.*`` factors; the arm channel is unwrapped and its bias
+   x_0 captured at the first tick, so Omega = 0 at the start), check the
+   angle limit;
 4. run the compiled controller step - the simulator's own code
    (:func:`frictionlab.controller.controller_step`: u from the predicted
    estimates, saturation, observer update);
-5. write u_DA = -0.022 u (saturated to [-1, 1]); *compute* = u written -
+5. write u_DA = k_u u (``rig.u_scale``, saturated to [-1, 1]); *compute* = u written -
    wake-up, less the time spent reading the rig (*rig*: request to reply
    over UDP/serial, the plant's step for ``sim``), which is measured
    separately; an *overrun* is a u written after the next deadline;
@@ -86,6 +87,7 @@ import traceback
 from collections import deque
 from dataclasses import dataclass
 
+from .. import sensor
 from .._validation import Validated, param
 from ..controller import (
     G_COMP,
@@ -363,6 +365,11 @@ class Loop:
         echo_bad = 0
         commanded = False
         sc = self.scaling
+        # App. B.5 from the sensor model, as plain Python (no dispatch in the tick)
+        theta_si = sensor.theta_from_raw.py_func
+        arm_si = sensor.arm_from_raw.py_func
+        velocity_si = sensor.velocity_from_raw.py_func
+        unwrap = sensor.unwrap.py_func
         ts, tb = sc.theta_scale, sc.theta_bias
         as_ = sc.arm_scale
         vs, vb = sc.velocity_scale, sc.velocity_bias
@@ -507,15 +514,11 @@ class Loop:
                     x0 = x
                     self.x0 = x0
                 else:
-                    d = x - x_prev
-                    if d > 1.0:
-                        wraps -= 1
-                    elif d < -1.0:
-                        wraps += 1
+                    wraps = unwrap(x_prev, x, wraps)
                 x_prev = x
-                theta = ts * (y + tb)
-                arm = as_ * (x + 2.0 * wraps - x0)
-                arm_dot = vs * (v + vb)
+                theta = theta_si(y, ts, tb)
+                arm = arm_si(x + 2.0 * wraps, x0, as_)
+                arm_dot = velocity_si(v, vs, vb)
                 if exp_step is not None:
                     # an identification experiment: its own schedule and limits
                     try:

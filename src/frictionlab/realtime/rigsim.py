@@ -13,8 +13,12 @@ running in real time:
   which it arrives.
 * **Raw signals.**  Readings are App. B raw values: the angle and arm
   channels wrap around at +-1, the velocity channel clips, all three are
-  quantised to 12 bits and carry ``sim.noise`` (SI units) of Gaussian noise.
-  The arm starts at the raw reading :data:`~frictionlab.realtime.rigs.ARM_START`
+  quantised to 12 bits and carry ``sim.noise`` (SI units) of Gaussian noise,
+  through the one sensor model :mod:`frictionlab.sensor` with the ``rig.*``
+  factors as the rig's true ones; the noise of a reading is that of the
+  request's sequence number (the loop's tick), so a reading at tick k is the
+  simulator's at tick k for the same state and ``sim.seed``.
+  The arm starts at the raw reading :data:`~frictionlab.sensor.ARM_START`
   (the controller captures it as x_0).
 * **Sessions.**  ``HELLO`` starts a session: the "operator" balances the
   pendulum upright (``sim.initial_angle``, at rest; the arm stays where it
@@ -103,7 +107,7 @@ class RigEmulator:
         Plant, friction, ``design.h``, ``sim.substeps`` (integration quantum
         ``h / substeps``; the pendulum steps every ``Config.pendulum_ratio``
         quanta, as in the simulator), ``sim.initial_angle``, ``sim.noise``,
-        ``sim.seed``.
+        ``sim.seed``, ``rig.*`` (the rig's true conversion factors).
     clock : object with ``now_ns()``
         Time source (the monotonic clock, or a fake one in tests).
     watchdog : float
@@ -344,7 +348,7 @@ class RigEmulator:
         self._advance(t)
         self.counts["samples"] += 1
         x = self.state.x
-        y, xr, v = self.adc.read(x[0], x[2], x[3])
+        y, xr, v = self.adc.read(x[0], x[2], x[3], seq)
         status = P.STATUS_EMULATED
         if self.held:
             status |= P.STATUS_HELD
@@ -404,7 +408,7 @@ class RigEmulator:
             self._advance(self.clock.now_ns())
             x = self.state.x
             if not self.adc.noise:
-                y, xr, v = self.adc.read(x[0], x[2], x[3])
+                y, xr, v = self.adc.read(x[0], x[2], x[3], count=False)
                 P.encode(P.MSG_SENSOR, 0, P.sensor_payload(y, xr, v, self.u_da, 0))
 
     # --- fault injection and status -------------------------------------------
