@@ -112,13 +112,18 @@ serve_stream(emu, master, stop)
 def test_experiment_over_serial_through_a_pty_pair(tmp_path):
     """A real-rig run of --backend serial:// through a pty pair: the emulated rig serves
     the master end, the command opens the slave device, end to end."""
-    proc = subprocess.Popen([sys.executable, "-c", PTY_RIG, json.dumps(TRUE)],
+    # a pty's bytes pass through the kernel's tty workqueue, which runs at normal
+    # priority: on a loaded machine a reply can take several ms, so this rig (and the
+    # controller) sample every 10 ms
+    proc = subprocess.Popen([sys.executable, "-c", PTY_RIG,
+                             json.dumps({**TRUE, "design.h": 0.01})],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
         device = proc.stdout.readline().strip()
         assert device.startswith("/dev/"), proc.stderr.read()
-        r = identify("control-scaling", f"serial://{device}", tmp_path)
+        r = identify("control-scaling", f"serial://{device}", tmp_path,
+                     extra=["--set", "design.h=0.01"])
     finally:
         proc.stdin.close()
         stop(proc)
