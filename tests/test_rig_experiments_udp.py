@@ -180,3 +180,32 @@ def test_sigint_during_an_experiment_zeroes_the_motor_and_keeps_the_log(tmp_path
     rows = read_csv_log(log)
     assert rows["u_da"][-1] == 0.0 and int(rows["flags"][-1]) & 32  # the STOP row
     assert any(abs(u) > 0 for u in rows["u_da"][:-1])
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--hand", "lap=leg"], "--hand: hand lap: 'pendulum' or 'arm'"),
+    (["--hand", "grip=1"], "--hand: unknown hand key 'grip'"),
+    (["--hand", "push=x"], "--hand push: 'x' is not a number"),
+    (["--hand", "lap=arm", "--hand-after", "-1"], "--hand-after"),
+])
+def test_rig_sim_scripted_hand_bad_input(args, message):
+    r = subprocess.run([*CLI, "rig-sim", "--port", "0", *args], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and message in r.stderr, r.stderr
+
+
+def test_rig_sim_scripted_hand_turns_the_arm_a_lap():
+    """`rig-sim --hand lap=arm --hand-after S`: the scripted hand acts S seconds after
+    start-up (the rig's status lists it among the applied actions)."""
+    from frictionlab.realtime.rigsim import send_control
+
+    proc, port = start_rig_sim(extra=["--hand", "lap=arm", "--hand", "seconds=0.5",
+                                      "--hand-after", "0.2"])
+    try:
+        import time
+
+        time.sleep(0.5)
+        st = send_control("127.0.0.1", port, {"cmd": "status"})
+    finally:
+        stop(proc)
+    assert any(a["fault"] == "hand_lap_arm" for a in st["applied"]), st

@@ -69,8 +69,8 @@ from .osrt import try_realtime_priority
 from .protocol import Frame, FrameError
 from .rigs import ARM_START, AdcModel, serial_settings
 
-__all__ = ["FAULTS", "HAND", "DirectTransport", "RigEmulator", "send_control", "serve_stream",
-           "serve_udp"]
+__all__ = ["FAULTS", "HAND", "DirectTransport", "RigEmulator", "hand_error", "send_control",
+           "serve_stream", "serve_udp"]
 
 #: Fault-injection keys of ``{"cmd": "fault", ...}`` (plus ``"after": seconds``).
 FAULTS = {
@@ -96,6 +96,28 @@ HAND = {
     "push": "add this many rad/s to the pendulum's velocity",
     "push_arm": "add this many rad/s to the arm's velocity",
 }
+
+
+def hand_error(msg: dict) -> str | None:
+    """What is wrong with a ``{"cmd": "hand", ...}`` object (:data:`HAND`), or None."""
+    keys = {k: v for k, v in msg.items() if k not in ("cmd", "after")}
+    unknown = sorted(set(keys) - set(HAND))
+    if unknown:
+        return f"unknown hand key {unknown[0]!r}; known: {', '.join(HAND)}"
+    if not keys:
+        return f"hand: say what to do ({', '.join(HAND)})"
+    if "lap" in keys and keys["lap"] not in ("pendulum", "arm"):
+        return f"hand lap: 'pendulum' or 'arm', got {keys['lap']!r}"
+    for k in ("seconds", "direction", "push", "push_arm"):
+        if k in keys:
+            v = keys[k]
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                return f"hand {k}: {v!r} is not a finite number"
+    if "seconds" in keys and not 0.05 <= keys["seconds"] <= 60:
+        return f"hand seconds: must be in [0.05, 60], got {keys['seconds']!r}"
+    if "direction" in keys and keys["direction"] == 0:
+        return "hand direction: +1 or -1"
+    return None
 
 
 class RigEmulator:
@@ -237,26 +259,6 @@ class RigEmulator:
                           "dir": 1.0 if msg.get("direction", 1) > 0 else -1.0,
                           "a0": float(self.state.x[i])}
             self._applied(f"hand_lap_{msg['lap']}", -1, float(msg.get("seconds", 2.0)))
-
-    def _hand_error(self, msg: dict) -> str | None:
-        keys = {k: v for k, v in msg.items() if k not in ("cmd", "after")}
-        unknown = sorted(set(keys) - set(HAND))
-        if unknown:
-            return f"unknown hand key {unknown[0]!r}; known: {', '.join(HAND)}"
-        if not keys:
-            return f"hand: say what to do ({', '.join(HAND)})"
-        if "lap" in keys and keys["lap"] not in ("pendulum", "arm"):
-            return f"hand lap: 'pendulum' or 'arm', got {keys['lap']!r}"
-        for k in ("seconds", "direction", "push", "push_arm"):
-            if k in keys:
-                v = keys[k]
-                if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                    return f"hand {k}: {v!r} is not a finite number"
-        if "seconds" in keys and not 0.05 <= keys["seconds"] <= 60:
-            return f"hand seconds: must be in [0.05, 60], got {keys['seconds']!r}"
-        if "direction" in keys and keys["direction"] == 0:
-            return "hand direction: +1 or -1"
-        return None
 
     # --- frames --------------------------------------------------------------
 
@@ -454,7 +456,7 @@ class RigEmulator:
             self._silent_until = None
             return {"ok": True}
         if cmd == "hand":
-            error = self._hand_error(msg)
+            error = hand_error(msg)
             if error:
                 return {"ok": False, "error": error}
             after = msg.get("after", 0)
@@ -655,7 +657,7 @@ def send_control(host: str, port: int, message: dict, timeout: float = 1.0) -> d
 def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,
                 serial_device: str | None = None, faults: dict | None = None,
                 fault_after: float = 0.0, realtime: bool = True, cpu: int | None = None,
-                announce=None) -> None:
+                announce=None, hand: dict | None = None) -> None:
     """The ``frictionlab rig-sim`` process: serve until SIGINT/SIGTERM."""
     import signal
 
@@ -674,6 +676,10 @@ def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,
         if fault_after:
             msg["after"] = fault_after
         reply = emulator.control(msg)
+        if not reply.get("ok"):
+            raise ValueError(reply.get("error"))
+    if hand:
+        reply = emulator.control(hand)  # {"cmd": "hand", ...} (``after`` from start-up)
         if not reply.get("ok"):
             raise ValueError(reply.get("error"))
     # serve in the main thread: a single-threaded process never waits for the GIL
