@@ -453,12 +453,18 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
     def full_status() -> dict:
         st = dict(controller.status())
         with console.lock:
-            if console.was_recording and not st.get("running") and console.pending is None:
-                # the run ended (a safety stop, say) while recording: the recording was
-                # closed under an automatic name; ask the page for its name
-                with contextlib.suppress(RuntimeError, ValueError, OSError):
-                    _pending(controller.record_stop(None))
-            console.was_recording = bool(st.get("recording"))
+            if not st.get("running"):
+                if console.was_recording and console.pending is None:
+                    # the run ended (a safety stop, say) while recording: the recording
+                    # was closed under an automatic name; ask the page for its name
+                    with contextlib.suppress(RuntimeError, ValueError, OSError):
+                        _pending(controller.record_stop(None))
+                console.was_recording = False
+            elif st.get("stop_reason") is None:
+                # only while the loop runs: once it has stopped, the log is closed (no
+                # longer recording) before the run counts as ended, and that must not
+                # hide the recording the run ended with
+                console.was_recording = bool(st.get("recording"))
         st["console"] = {
             "limit_cycle": hub.figures,
             "clients": len(hub.clients),
