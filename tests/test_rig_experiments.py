@@ -200,3 +200,21 @@ def test_angle_scales_without_the_operator_stops_at_the_wait_limit(tmp_path):
     assert st["stop_reason"] == "experiment_limit"
     assert "operator" in st["stop_detail"]
     assert emu.u_da == 0.0
+
+
+def test_a_run_log_is_analysed_again_with_its_marks(tmp_path):
+    """`identify experiment NAME --log RUN.csv` on a --backend run: the marks (where the
+    free decay starts) come from the run's sidecar, so the excitation is left out."""
+    import json
+    import subprocess
+    import sys
+
+    st, exp, _tx, _emu, _cfg = run_direct("free-oscillation", tmp_path)
+    assert st["stop_reason"] == "finished" and "free" in exp.marks
+    r = subprocess.run([sys.executable, "-m", "frictionlab", "identify", "experiment",
+                        "free-oscillation", "--log", st["log"], "--json"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    check("free-oscillation", res)
+    assert res["peaks"][0][0] >= exp.marks["free"]
