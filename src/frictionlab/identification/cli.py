@@ -605,7 +605,7 @@ def register_cli(sub) -> None:
 
     e = isub.add_parser(
         "experiment", help="the simple experiments of App. A, B and E",
-        description="Run a simple identification experiment of App. A, B.3, B.4 or E on the "
+        description="Run a simple identification experiment of App. A, B or E on the "
                     "simulated rig (--simulate, the default), on a rig through the real-time "
                     "loop (--backend), or analyse a recorded log (--log).  Exit status 1 "
                     "when a --backend run stops before it finished (a fault, a limit, a "
@@ -628,18 +628,19 @@ def register_cli(sub) -> None:
     e.add_argument("--step", type=float, default=0.02,
                    help="stiction: staircase step of u (default 0.02)")
     e.add_argument("--hold", type=float, default=None,
-                   help="seconds per level (stiction 0.25, stribeck 2)")
+                   help="seconds per level (stiction 0.25, stribeck and velocity-scale 2)")
     e.add_argument("--references", metavar="V1,V2,...",
-                   help="stribeck: velocity references in rad/s (both signs are run)")
+                   help="stribeck, velocity-scale: velocity references in rad/s (both signs "
+                        "are run)")
     e.add_argument("--gain", type=float, default=20.0,
-                   help="stribeck: P gain of the velocity loop (default 20)")
+                   help="stribeck, velocity-scale: P gain of the velocity loop (default 20)")
     e.add_argument("--amplitude", type=float, default=None,
                    help="free-oscillation: initial deflection in rad (default 0.25; on a "
                         "rig the swing the excitation reaches, default 0.12)")
     e.add_argument("--max-amplitude", type=float, default=0.15,
                    help="free-oscillation: peaks above this are not used (default 0.15)")
     e.add_argument("--duration", type=float, default=None,
-                   help="free-oscillation: recorded seconds (default 12)")
+                   help="free-oscillation: recorded seconds of free decay (default 12)")
     e.add_argument("--levels", metavar="U1,U2,...",
                    help="control-scaling: constant u values (default 3,4,5,7,9; on a rig "
                         "their signs alternate)")
