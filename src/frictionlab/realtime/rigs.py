@@ -120,6 +120,8 @@ class AdcModel:
         self.arm_offset = float(arm_offset)
         self.noise = float(noise)
         self.n = 0
+        # compile (or load) the converter now, not in the loop's first tick
+        adc(self.sensor, 0.0, 0.0, 0.0, 0)
 
     def read(self, theta: float, arm: float, arm_dot: float, n: int | None = None,
              count: bool = True) -> tuple[float, float, float]:
