@@ -231,7 +231,6 @@ class SimRig(Rig):
                             cfg.sim.noise, cfg.sim.seed)
         self.state = self.plant.init()
         self.plant.step(self.state, 0.0)  # compile before the loop starts
-        self.adc.read(0.0, 0.0, 0.0, count=False)  # and load the sensor's kernel
         self._k: int | None = None
         self.u_da = 0.0
         self._u = 0.0
