@@ -119,15 +119,18 @@ __all__ = [
 COMPENSATORS = ("coulomb", "classical", "lugre")
 
 
-def check_compensator(kind: str, params: FrictionParams) -> None:
+def check_compensator(kind: str, params: FrictionParams, *, h: float | None = None,
+                      arm_length: float | None = None) -> None:
     """Reject a compensator model that the compensator cannot run.
 
     The LuGre observer of eq. (19) divides by :math:`g(v) = s(v)/\\sigma_0`
     with the Stribeck level :math:`s(v) = F_C + (F_S - F_C)e^{-(v/v_S)^2}`.
     With :math:`F_S = F_C = 0` (for :math:`v \\ge 0`, or with the
     ``*_negative`` levels for :math:`v < 0`) :math:`s` vanishes for every v
-    and the observer is singular.  The other compensators accept any valid
-    :class:`FrictionParams`.
+    and the observer is singular.  The ``adaptive`` compensator must also
+    meet its law's stability conditions (:func:`frictionlab.adaptive.check_gains`,
+    with ``h`` and ``arm_length``: default the thesis's 5 ms and 0.21 m).
+    The other compensators accept any valid :class:`FrictionParams`.
 
     Parameters
     ----------
@@ -139,9 +142,21 @@ def check_compensator(kind: str, params: FrictionParams) -> None:
     Raises
     ------
     ConfigError
-        One line naming the ``compensation.*`` keys at fault.
+        One line naming the ``compensation.*`` keys at fault (a
+        :class:`~frictionlab.config.ConfigValueError` for a gain or level out
+        of the adaptive law's range).
     """
-    if kind != "lugre":
+    if kind == "adaptive":
+        from ._validation import ParamError
+        from .adaptive import check_gains
+        from .config import ConfigValueError
+
+        try:
+            check_gains(params, 0.005 if h is None else h,
+                        0.21 if arm_length is None else arm_length)
+        except ParamError as exc:
+            raise ConfigValueError(exc.field, exc.value, exc.allowed, str(exc)) from None
+    if kind not in ("lugre", "adaptive"):
         return
     fs_neg = params.stiction if params.stiction_negative is None else params.stiction_negative
     fc_neg = params.coulomb if params.coulomb_negative is None else params.coulomb_negative

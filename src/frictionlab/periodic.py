@@ -89,7 +89,7 @@ from .controller import (
     S_ZHAT,
     controller_step,
 )
-from .friction import KINDS, LUGRE, NONE, VISCOUS
+from .friction import KINDS, LUGRE, NONE, P_DRIFT, VISCOUS
 from .limit_cycles import LimitCycleFeatures, _crossings, features
 from .rig import quantize
 from .simulation import (
@@ -211,6 +211,7 @@ class _Loop:
         self.pp = _pack_plant(cfg)
         self.fkind = KINDS.index(cfg.friction_kind)
         self.fp = cfg.friction.pack()
+        self.fp[P_DRIFT] = 0.0  # periodic orbits of the plant at its starting levels
         self.quanta = _quanta(cfg)
         self.substeps, self.ratio = cfg.substeps, cfg.pendulum_ratio
         self.fall_angle = cfg.sim.fall_angle

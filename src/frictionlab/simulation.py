@@ -63,9 +63,13 @@ import numpy as np
 from ._jit import jit
 from .config import Config, build_config
 from .controller import (
+    ADAPTIVE,
     DEFAULT_ERROR_SIGNAL,
+    G_COMP,
     NS,
     S_ARMDOT,
+    S_FC_HAT,
+    S_FS_HAT,
     S_X1,
     S_X2,
     S_ZHAT,
@@ -73,7 +77,19 @@ from .controller import (
     controller_step,
 )
 from .design import design as make_design
-from .friction import KINDS, LUGRE, NONE, P_K, lugre_force, lugre_step_exact, static_force
+from .friction import (
+    KINDS,
+    LUGRE,
+    NONE,
+    P_DRIFT,
+    P_DRIFT_TIME,
+    P_K,
+    drifted_params,
+    lugre_force,
+    lugre_step_exact,
+    resolve_drift,
+    static_force,
+)
 from .plant import accelerations_sc
 from .rig import RigScaling, quantize
 
@@ -92,8 +108,10 @@ LOGGED = (
     "theta_m", "theta_hat", "theta_dot_hat", "u", "arm_m", "arm_dot_m", "arm_hat",
     "arm_dot_hat", "friction_hat", "z_hat",
 )
-#: All recorded columns: the ten logged signals, then the true plant signals.
-COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction")
+#: All recorded columns: the ten logged signals, the true plant signals, then the
+#: adaptive compensator's estimated levels (NaN with another compensator).
+COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction", "coulomb_hat",
+           "stiction_hat")
 NC = len(COLUMNS)
 
 STATUS = ("ok", "fell")
@@ -210,7 +228,7 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
 
 @jit
 def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed, quanta,
-         fall_angle, out, record):
+         fall_angle, out, record, k0=0):
     """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, mem).
 
     ``x`` (plant state) and ``s`` (controller state) are advanced in place;
@@ -219,12 +237,19 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed
     Row k of ``out`` receives the signals of tick k when ``record`` is true.
     The noise generator is seeded with ``seed`` unless it is negative (a
     continuation chunk of the same run keeps drawing from the same stream).
+    ``k0`` is the run's tick at the first of these ticks: the plant's
+    friction levels drift with the time ``(k0 + k) h`` when ``fp`` has a
+    drift with a resolved drift time (:func:`frictionlab.friction.resolve_drift`;
+    an unresolved one, NaN, is ignored).
     """
     h = gp[11]
     noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
     if noisy and seed >= 0:
         np.random.seed(seed)
     w0 = gp[8]
+    adaptive = gp[G_COMP] == ADAPTIVE
+    drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
+    fpt = fp.copy()
     for k in range(n_ticks):
         th_m = x[0]
         arm_m = x[2]
@@ -258,7 +283,11 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed
             out[k, 12] = x[2]
             out[k, 13] = x[3]
             out[k, 14] = x[4]
-        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
+            out[k, 16] = s[S_FC_HAT] if adaptive else np.nan
+            out[k, 17] = s[S_FS_HAT] if adaptive else np.nan
+        if drifting:
+            drifted_params(fp, (k0 + k) * h, fpt)
+        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         if record:
             out[k, 15] = f_mean
         if not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
@@ -343,11 +372,15 @@ class PlantState:
         state, or the LuGre friction of the last substep.
     friction : float
         Mean friction over the last sample (m/s^2).
+    tick : int
+        Samples stepped since :meth:`SimulatedPlant.init` (the clock of
+        ``friction.drift``).
     """
 
     x: np.ndarray
     memory: float = 0.0
     friction: float = 0.0
+    tick: int = 0
 
     @property
     def theta(self) -> float:
@@ -367,12 +400,17 @@ class SimulatedPlant:
     >>> st = plant.step(st, u=0.0)
     """
 
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config, duration: float | None = None):
         self.cfg = cfg
         self.h = cfg.design.h
         self._pp = _pack_plant(cfg)
         self._fkind = KINDS.index(cfg.friction_kind)
-        self._fp = cfg.friction.pack()
+        # friction.drift: over friction.drift_time, else to the end of the run
+        # (``duration``, default sim.duration)
+        self._fp = resolve_drift(cfg.friction.pack(),
+                                 cfg.sim.duration if duration is None else duration)
+        self._drifting = bool(self._fp[P_DRIFT] != 0.0)
+        self._fpt = self._fp.copy()
         self._substeps = cfg.substeps
         self._ratio = cfg.pendulum_ratio
 
@@ -384,15 +422,18 @@ class SimulatedPlant:
     def step(self, state: PlantState, u: float) -> PlantState:
         """Advance one sampling period with u held (returns a new state)."""
         x = state.x.copy()
+        fp = self._fp
+        if self._drifting:
+            fp = drifted_params(fp, state.tick * self.h, self._fpt)
         f, memory = plant_tick(x, float(u), state.memory, self._substeps, self._ratio, self.h,
-                               self._pp, self._fkind, self._fp)
-        return PlantState(x, memory, f)
+                               self._pp, self._fkind, fp)
+        return PlantState(x, memory, f, state.tick + 1)
 
     def push(self, state: PlantState, theta_dot_kick: float) -> PlantState:
         """Disturb the pendulum: add ``theta_dot_kick`` rad/s to its velocity."""
         x = state.x.copy()
         x[1] += theta_dot_kick
-        return PlantState(x, state.memory, state.friction)
+        return PlantState(x, state.memory, state.friction, state.tick)
 
 
 def _pack_plant(cfg: Config) -> np.ndarray:
@@ -458,7 +499,7 @@ def simulate_config(
     out = np.zeros((n, NC)) if record else np.zeros((1, NC))
     noise = np.full(3, cfg.sim.noise)
     fkind = KINDS.index(cfg.friction_kind)
-    fp = cfg.friction.pack()
+    fp = resolve_drift(cfg.friction.pack(), n * h)
     pp = _pack_plant(cfg)
     q = _quanta(cfg)
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
@@ -476,7 +517,7 @@ def simulate_config(
             view = out[done:done + m] if record else out
             seed = cfg.sim.seed if done == 0 else -1
             d, status, mem = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, noise,
-                                  seed, q, cfg.sim.fall_angle, view, record)
+                                  seed, q, cfg.sim.fall_angle, view, record, done)
             done += d
             progress(done / n)
     data = out[:done] if record else out[:0]
