@@ -105,6 +105,7 @@ from ._validation import ParamError
 from .friction import (
     P_ABW,
     P_ADEAD,
+    P_ADIST,
     P_AGAIN,
     P_AINNOV,
     P_AMAX,
@@ -125,8 +126,8 @@ __all__ = [
 ]
 
 #: Meaning of the adaptation status (controller state ``S_ADAPT``), index = code.
-ADAPT_STATES = ("off", "adapting", "stuck", "bad_signal", "saturated")
-A_OFF, A_ADAPTING, A_STUCK, A_BAD, A_SATURATED = range(5)
+ADAPT_STATES = ("off", "adapting", "stuck", "presliding", "bad_signal", "saturated")
+A_OFF, A_ADAPTING, A_STUCK, A_PRESLIDING, A_BAD, A_SATURATED = range(6)
 
 
 def max_gain(bandwidth: float, h: float, arm_length: float) -> float:
@@ -198,7 +199,7 @@ def regressor(v, p):
 
 
 @jit
-def adaptation_step(status, fc, fs, v_hat, v_prev, u_prev, v, p, h, arm_len, u_max):
+def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_len, u_max):
     """One tick of the adaptation law (see the module docstring).
 
     Parameters
@@ -211,6 +212,8 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, u_prev, v, p, h, arm_len, u_m
         The estimates :math:`\\hat F_C, \\hat F_S` of the last tick (m/s^2).
     v_hat, v_prev : float
         The predictor's and the measured arm velocity of the last tick (rad/s).
+    slide : float
+        How far the arm has slid (rad) since it last stopped or reversed.
     u_prev : float
         The control applied over the last interval (m/s^2).
     v : float
@@ -222,35 +225,39 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, u_prev, v, p, h, arm_len, u_m
 
     Returns
     -------
-    (status, fc, fs, v_hat)
-        The new status, estimates and this tick's predicted velocity.
+    (status, fc, fs, v_hat, slide)
+        The new status, estimates, this tick's predicted velocity and slid distance.
     """
     lo = p[P_AMIN]
     hi = p[P_AMAX]
     if status == 0.0 or not (math.isfinite(fc) and math.isfinite(fs)):
         v0 = v if math.isfinite(v) else 0.0
-        return (float(A_ADAPTING), min(max(p[P_FC], lo), hi), min(max(p[P_FS], lo), hi), v0)
+        return (float(A_ADAPTING), min(max(p[P_FC], lo), hi), min(max(p[P_FS], lo), hi), v0,
+                0.0)
     if not (math.isfinite(v_hat) and math.isfinite(v_prev)):
         v0 = v if math.isfinite(v) else 0.0
-        return float(A_BAD), fc, fs, v0
+        return float(A_BAD), fc, fs, v0, 0.0
     fv = p[P_FV] if v_prev >= 0.0 else p[P_FVN]
     phc, phs = regressor(v_prev, p)
     f_model = fc * phc + fs * phs + fv * v_prev
     lam = p[P_ABW]
     pred = v_hat + h * ((u_prev - f_model) / arm_len + lam * (v_prev - v_hat))
     if not math.isfinite(v):
-        return float(A_BAD), fc, fs, pred
+        return float(A_BAD), fc, fs, pred, 0.0
     if not math.isfinite(pred):
-        return float(A_BAD), fc, fs, v
+        return float(A_BAD), fc, fs, v, 0.0
     innov = v - pred
     dead = p[P_ADEAD]
     if abs(v_prev) < dead or abs(v) < dead or v * v_prev <= 0.0:
-        return float(A_STUCK), fc, fs, pred
-    if not abs(innov) <= p[P_AINNOV] or not math.isfinite(u_prev):
-        return float(A_BAD), fc, fs, pred
+        return float(A_STUCK), fc, fs, pred, 0.0
+    slide += 0.5 * h * (abs(v) + abs(v_prev))
+    if slide < p[P_ADIST]:
+        return float(A_PRESLIDING), fc, fs, pred, slide
     if abs(u_prev) >= u_max:
-        return float(A_SATURATED), fc, fs, pred
+        return float(A_SATURATED), fc, fs, pred, slide
+    if not abs(innov) <= p[P_AINNOV]:
+        return float(A_BAD), fc, fs, pred, slide
     step = p[P_AGAIN] * h * innov
     fc = min(max(fc - step * phc, lo), hi)
     fs = min(max(fs - step * phs, lo), hi)
-    return float(A_ADAPTING), fc, fs, pred
+    return float(A_ADAPTING), fc, fs, pred, slide

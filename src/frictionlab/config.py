@@ -224,7 +224,7 @@ _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
 #: The drift of the plant's levels (every model with a level).
 _DRIFT = {"drift", "drift_start", "drift_time"}
 #: The adaptive compensator's law (:mod:`frictionlab.adaptive`).
-_ADAPT = {"adaptation_gain", "adaptation_bandwidth", "adaptation_deadband",
+_ADAPT = {"adaptation_gain", "adaptation_bandwidth", "adaptation_deadband", "adaptation_distance",
           "adaptation_max_innovation", "adaptation_min", "adaptation_max"}
 #: Friction fields each *plant* model reads (LuGre's ``observer_gain`` is the k
 #: of eq. (19) with e = -theta, docs/model.md "The observer gain k in the plant").

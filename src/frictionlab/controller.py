@@ -35,12 +35,13 @@ idx   name           meaning
 11    ``S_FS_HAT``   adaptive law: estimated stiction level (m/s^2)
 12    ``S_ADAPT``    adaptive law: status (:data:`frictionlab.adaptive.ADAPT_STATES`;
                      0 = not started: the next tick starts it)
+13    ``S_SLIDE``    adaptive law: distance slid since the arm last stopped (rad)
 ====  =============  ==================================================
 
 Compensator ``adaptive``: the LuGre observer run with the levels that the
 law of :mod:`frictionlab.adaptive` estimates from the applied u and the
 measured arm velocity (one tick of the law, then the observer, in the same
-compiled step).  Zeroing entries 4-12 (:func:`reset_compensator`) restarts a
+compiled step).  Zeroing entries 4 and 5 and 8-13 (:func:`reset_compensator`) restarts a
 compensator from its parameters.
 """
 
@@ -84,8 +85,8 @@ __all__ = [
 ]
 
 S_X1, S_X2, S_ARM, S_ARMDOT, S_RELAY, S_ZHAT, S_FHAT, S_U = range(8)
-S_VHAT, S_VPREV, S_FC_HAT, S_FS_HAT, S_ADAPT = range(8, 13)
-NS = 13
+S_VHAT, S_VPREV, S_FC_HAT, S_FS_HAT, S_ADAPT, S_SLIDE = range(8, 14)
+NS = 14
 
 #: Compensator code of ``adaptive`` (after the friction model codes).
 ADAPTIVE = 6
@@ -162,8 +163,10 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     eq. (19) with the adapted levels (both directions) in place of the
     compensator's ``coulomb``/``stiction``.  Updates ``s`` in place.
     """
-    st, fc, fs, vh = adaptation_step(s[S_ADAPT], s[S_FC_HAT], s[S_FS_HAT], s[S_VHAT],
-                                     s[S_VPREV], s[S_U], v, cp, h, arm_len, u_max)
+    st, fc, fs, vh, slide = adaptation_step(s[S_ADAPT], s[S_FC_HAT], s[S_FS_HAT], s[S_VHAT],
+                                            s[S_VPREV], s[S_SLIDE], s[S_U], v, cp, h,
+                                            arm_len, u_max)
+    s[S_SLIDE] = slide
     s[S_ADAPT] = st
     s[S_FC_HAT] = fc
     s[S_FS_HAT] = fs
@@ -184,7 +187,7 @@ def reset_compensator(s: np.ndarray) -> None:
     adaptive law): the next tick starts the compensator afresh."""
     s[S_RELAY] = 0.0
     s[S_ZHAT] = 0.0
-    s[S_VHAT:S_ADAPT + 1] = 0.0
+    s[S_VHAT:S_SLIDE + 1] = 0.0
 
 
 @jit

@@ -114,8 +114,8 @@ P_FS, P_FC, P_FV, P_VS, P_S0, P_S1, P_K, P_BAND, P_EPS, P_FSN, P_FCN, P_FVN, P_V
 # drift of the plant's levels (NaN drift time: the run's duration, filled in by the runner)
 P_DRIFT, P_DRIFT_START, P_DRIFT_TIME = 13, 14, 15
 # the adaptive compensator's law (:mod:`frictionlab.adaptive`)
-P_AGAIN, P_ABW, P_ADEAD, P_AINNOV, P_AMIN, P_AMAX = range(16, 22)
-NP = 22
+P_AGAIN, P_ABW, P_ADEAD, P_AINNOV, P_AMIN, P_AMAX, P_ADIST = range(16, 23)
+NP = 23
 
 
 @dataclass(frozen=True)
@@ -164,7 +164,7 @@ class FrictionParams(Validated):
     drift_time: float | None = param(None, "plant only: how long the drift takes (None = to "
                                      "the end of the run; 0 = a step at drift_start)", "s",
                                      lo=0.0, hi=1e5, optional=True)
-    adaptation_gain: float = param(40.0, "adaptive compensator: gradient gain [gamma] of the "
+    adaptation_gain: float = param(200.0, "adaptive compensator: gradient gain [gamma] of the "
                                    "level estimates (0 = no adaptation); stable for "
                                    "gamma h^2 / L_1 < 4 - 2 lambda h",
                                    "m/s^2 per (rad/s) per s", lo=0.0, hi=1e7)
@@ -174,6 +174,10 @@ class FrictionParams(Validated):
     adaptation_deadband: float = param(0.1, "adaptive compensator: adaptation frozen while "
                                        "|arm velocity| is below this (stuck arm)", "rad/s",
                                        lo=0.0, hi=100.0)
+    adaptation_distance: float = param(0.1, "adaptive compensator: adaptation frozen until "
+                                       "the arm has slid this far since it last stopped or "
+                                       "reversed (pre-sliding: the bristles settle within a "
+                                       "few s(v)/sigma_0)", "rad", lo=0.0, hi=100.0)
     adaptation_max_innovation: float = param(1.0, "adaptive compensator: adaptation frozen "
                                              "while the velocity prediction error exceeds "
                                              "this (a bad signal)", "rad/s", lo=0.0, hi=1e3,
@@ -242,6 +246,7 @@ class FrictionParams(Validated):
         p[P_AINNOV] = self.adaptation_max_innovation
         p[P_AMIN] = self.adaptation_min
         p[P_AMAX] = self.adaptation_max
+        p[P_ADIST] = self.adaptation_distance
         return p
 
 
@@ -410,7 +415,7 @@ def lugre_step_exact(v, z, e, dt, p):
 
 @jit
 def drift_factor(t, p):
-    """Factor on the plant's friction levels at time ``t`` (``friction.drift``).
+    r"""Factor on the plant's friction levels at time ``t`` (``friction.drift``).
 
     :math:`1 + d\,\min(1, \max(0, (t - t_0)/T))` with d = ``drift``,
     :math:`t_0` = ``drift_start`` and T = ``drift_time`` (a NaN T must have
