@@ -241,7 +241,7 @@ def test_unstable_or_inconsistent_adaptation_settings_are_refused(key, value, ma
 
 def test_the_bound_follows_the_sampling_period():
     build_config("fast", "lugre", "adaptive", sets=["compensation.adaptation_gain=3e4"])
-    with pytest.raises(ConfigValueError, match="design.h = 0.01"):
+    with pytest.raises(ConfigValueError, match=r"design\.h = 0\.01"):
         build_config("fast", "lugre", "adaptive", sets=["design.h=0.01",
                                                          "compensation.adaptation_gain=3e4"])
 
@@ -261,7 +261,7 @@ def test_controller_step_freezes_the_estimates_on_an_injected_nan_and_recovers()
     before = s[S_FC_HAT], s[S_FS_HAT]
     controller_step(s, gp, cp, 0.0, 0.0, math.nan)
     assert s[S_ADAPT] == A_BAD and (s[S_FC_HAT], s[S_FS_HAT]) == before
-    for k in range(5):
+    for _ in range(5):
         controller_step(s, gp, cp, 0.0, 0.0, 1.5)
     assert np.all(np.isfinite(s[[S_FC_HAT, S_FS_HAT]]))
     assert 0.05 <= s[S_FC_HAT] <= 6.0
