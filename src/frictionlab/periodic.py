@@ -242,7 +242,7 @@ class _Loop:
         idx = [1, 2, 3, I_S + S_X1, I_S + S_X2, I_S + S_ARM, I_S + S_ARMDOT]
         if self.fkind == LUGRE:
             idx += [4, I_MEM]
-        if self.controller.compensation == "lugre":
+        if self.controller.compensation in ("lugre", "adaptive"):
             idx.append(I_S + S_ZHAT)
         return np.array(sorted(idx))
 
