@@ -83,6 +83,8 @@ from .friction import (
     NONE,
     P_DRIFT,
     P_DRIFT_TIME,
+    P_FC,
+    P_FS,
     P_K,
     drifted_params,
     lugre_force,
@@ -109,7 +111,9 @@ LOGGED = (
     "arm_dot_hat", "friction_hat", "z_hat",
 )
 #: All recorded columns: the ten logged signals, the true plant signals, then the
-#: adaptive compensator's estimated levels (NaN with another compensator).
+#: Coulomb and stiction levels the compensator used (the adaptive compensator's
+#: estimates; a fixed compensator's own ``compensation.coulomb``/``stiction``; 0
+#: without compensation).
 COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction", "coulomb_hat",
            "stiction_hat")
 NC = len(COLUMNS)
@@ -248,6 +252,9 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed
         np.random.seed(seed)
     w0 = gp[8]
     adaptive = gp[G_COMP] == ADAPTIVE
+    # the levels a fixed compensator uses (none: 0)
+    fc_fixed = cp[P_FC] if gp[G_COMP] != 0.0 else 0.0
+    fs_fixed = cp[P_FS] if gp[G_COMP] != 0.0 else 0.0
     drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
     fpt = fp.copy()
     for k in range(n_ticks):
@@ -283,8 +290,8 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed
             out[k, 12] = x[2]
             out[k, 13] = x[3]
             out[k, 14] = x[4]
-            out[k, 16] = s[S_FC_HAT] if adaptive else np.nan
-            out[k, 17] = s[S_FS_HAT] if adaptive else np.nan
+            out[k, 16] = s[S_FC_HAT] if adaptive else fc_fixed
+            out[k, 17] = s[S_FS_HAT] if adaptive else fs_fixed
         if drifting:
             drifted_params(fp, (k0 + k) * h, fpt)
         f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
