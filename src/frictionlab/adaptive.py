@@ -82,11 +82,15 @@ Safety
 * The adaptation is frozen (the estimates held, the predictor still
   running) while the arm is stuck or reverses (:math:`|v|` below
   ``adaptation_deadband`` at the start or the end of the interval, or the
-  sign changed: the static regressor does not describe pre-sliding and the
-  noise would bias the sign), while the signals are bad (a non-finite
-  reading, or a prediction error larger than ``adaptation_max_innovation``),
-  and when the control was saturated over the interval (the applied
-  acceleration is not what the law assumes on a rig).
+  sign changed: the noise would bias the regressor's sign), in pre-sliding
+  (until the arm has slid ``adaptation_distance`` since it last stopped: the
+  LuGre bristles settle within a few :math:`s(v)/\sigma_0` of travel, and
+  before that the friction is not the Stribeck curve the regressor
+  describes), while the signals are bad (a non-finite reading or
+  prediction, or a prediction error larger than
+  ``adaptation_max_innovation``), and when the control was saturated over
+  the interval (the applied acceleration is not what the law assumes on a
+  rig).
 
 The law's state lives in the controller's state vector (entries ``S_VHAT``,
 ``S_VPREV``, ``S_FC_HAT``, ``S_FS_HAT``, ``S_ADAPT`` of

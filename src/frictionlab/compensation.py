@@ -559,7 +559,8 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
 # ---------------------------------------------------------------------------
 
 #: Default search grids of ``frictionlab compensate tune`` around the values
-#: Sec. 6 explored (the thesis varied sigma0, sigma1 and k for LuGre).
+#: Sec. 6 explored (the thesis varied sigma0, sigma1 and k for LuGre; the
+#: adaptive compensator's grid varies its law's gains).
 DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
     "coulomb": [("compensation.coulomb", [1.1, 1.3, 1.5, 1.7, 1.9]),
                 ("compensation.hysteresis", [0.0, 0.01, 0.02, 0.05, 0.08, 0.12])],
@@ -570,6 +571,10 @@ DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
     "lugre": [("compensation.sigma0", [50.0, 100.0, 300.0, 1000.0]),
               ("compensation.sigma1", [2.0, 4.0, 6.0, 10.0]),
               ("compensation.observer_gain", [1.0, 3.0, 7.0, 15.0])],
+    # the adaptation law's gain and bandwidth, with and without eq. (19)'s correction
+    "adaptive": [("compensation.adaptation_gain", [50.0, 200.0, 1000.0]),
+                 ("compensation.adaptation_bandwidth", [10.0, 20.0, 50.0]),
+                 ("compensation.observer_gain", [0.0, 7.0])],
 }
 
 

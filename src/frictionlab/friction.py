@@ -54,6 +54,15 @@ Models
     :math:`\sigma_1(v) = \sigma_1 e^{-(v/v_d)^2}` of Sec. 3.3 (``sigma1_velocity``
     = :math:`v_d`).
 
+Drift
+-----
+``drift`` (with ``drift_start``, ``drift_time``) makes the *plant's* levels
+F_S, F_C, F_v (both directions) change linearly in time, or in a step, over a
+run (App. E.1: the friction changes as the rig warms up):
+:func:`drift_factor`, applied by the simulator through
+:func:`drifted_params`.  The ``adaptation_*`` fields belong to the adaptive
+compensator (:mod:`frictionlab.adaptive`).
+
 The pure force laws are numba-compiled functions over a packed parameter
 vector (:meth:`FrictionParams.pack`) so that the simulator, the observers and
 the real-time loop share them.  For interactive use each model is also a
