@@ -293,3 +293,25 @@ def test_adaptation_follows_a_drifting_plant_in_closed_loop():
     assert ad["stiction_hat"][-1] < 2.0 and np.all(fx["stiction_hat"] == 2.3)
     last = ad.t >= 30.0
     assert np.ptp(ad["theta"][last]) < 0.7 * np.ptp(fx["theta"][last])
+
+
+def test_python_api_runs_the_same_law_as_the_controller():
+    """make_compensator("adaptive"): init/step with explicit state, the same compiled
+    law; its gains are checked for its own h."""
+    from frictionlab.compensation import AdaptiveCompensator, make_compensator
+
+    c = make_compensator("adaptive", coulomb=1.0, adaptation_distance=0.0)
+    assert isinstance(c, AdaptiveCompensator)
+    st = c.init()
+    v, vs = 1.0, []
+    for _ in range(400):
+        f, st = c.step(st, v, u_prev=4.0)
+        # an arm whose friction is 1.55 + 0.07 v at v ~ 1 (beyond the Stribeck hump)
+        phc, phs = regressor(v, c._cp)
+        v += H * (4.0 - (1.55 * phc + 2.3 * phs + 0.07 * v)) / L1
+        vs.append(st.adaptation[2])
+    assert vs[0] == 1.0 and abs(vs[-1] - 1.55) < abs(vs[0] - 1.55)
+    assert math.isfinite(f) and st.z_hat != 0.0
+    make_compensator("adaptive", h=0.001, adaptation_bandwidth=1000.0)
+    with pytest.raises(ConfigValueError, match="adaptation_bandwidth"):
+        make_compensator("adaptive", h=0.005, adaptation_bandwidth=1000.0)

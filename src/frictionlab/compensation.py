@@ -234,7 +234,8 @@ class Compensator:
             raise ValueError("params must be a FrictionParams")
         if not (isinstance(self.h, int | float) and math.isfinite(self.h) and 0 < self.h <= 1):
             raise ValueError(f"h must be in (0, 1] s, got {self.h!r}")
-        check_compensator(self.kind, self.params)
+        check_compensator(self.kind, self.params, h=self.h,
+                          arm_length=getattr(self, "arm_length", None))
         object.__setattr__(self, "_cp", self.params.pack())
 
     @property
@@ -323,10 +324,6 @@ class AdaptiveCompensator(LuGreCompensator):
     kind: ClassVar[str] = "adaptive"
     arm_length: float = 0.21
     u_max: float = 1.0 / 0.022
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_compensator(self.kind, self.params, h=self.h, arm_length=self.arm_length)
 
     def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0, e: float = 0.0,
              u_prev: float = 0.0) -> tuple[float, CompensatorState]:
