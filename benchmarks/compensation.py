@@ -31,7 +31,10 @@ Measures:
   - ``off35``: compensation Coulomb level 1.0 on a plant with 1.55 (35 % off),
     30 s: the estimate F_C at 5, 10, 20 and 30 s and the peak-to-peak over
     15-20 s and 20-30 s, beside the fixed compensator started as far off and
-    the adaptive one started at 1.55.
+    the adaptive one started at 1.55;
+  - ``robustness``: fixed LuGre and adaptive (compensator defaults, k = 7 and
+    k = 0) on other plants and conditions, 40 s runs, seed 0: the status and
+    the peak-to-peak over the last 10 s.
 
 The last printed line is a JSON object.
 
@@ -136,7 +139,38 @@ def adaptive_figures(seeds: int) -> dict:
               f"{o['coulomb_hat_at_5_10_20_30s']}; p2p 15-20 s {o['adaptive_15_20']:.4f}, "
               f"20-30 s {o['adaptive_20_30']:.4f} (fixed {o['fixed_20_30']:.4f}, adaptive "
               f"started at 1.55 {o['adaptive_started_right_20_30']:.4f})", flush=True)
+    out["robustness"] = robustness()
     return out
+
+
+#: (design, plant friction, extra keys) of the robustness rows.
+ROBUSTNESS_CASES = [
+    ("fast", "classical", []), ("fast", "coulomb", []), ("slow", "lugre", []),
+    ("fast", "lugre", ["sim.noise=0.01"]), ("fast", "lugre", ["sim.quantization=1"]),
+    ("slow", "classical", ["friction.drift=-0.4"]), ("fast", "lugre", ["friction.drift=0.5"]),
+    ("fast", "lugre", ["friction.drift=-0.4", "friction.drift_time=0",
+                       "friction.drift_start=20"]),
+]
+
+
+def robustness() -> list[dict]:
+    """Fixed LuGre against adaptive on other plants and conditions (no fall allowed)."""
+    rows = []
+    for design, friction, extra in ROBUSTNESS_CASES:
+        row = {"design": design, "friction": friction, "set": extra}
+        for k in (7, 0):
+            for comp in ("lugre", "adaptive"):
+                cfg = build_config(design, friction, comp,
+                                   sets=[f"sim.noise={NOISE}", f"compensation.observer_gain={k}",
+                                         *extra])
+                tr = simulate_config(cfg, 40.0)
+                p = trajectory_features(tr, 10.0).interface_dict()["peak_to_peak"]
+                row[f"{comp}_k{k}"] = ("fell" if tr.status == "fell"
+                                       else None if p is None else round(p, 4))
+        rows.append(row)
+        print(f"{design} {friction} {' '.join(extra)}: " + ", ".join(
+            f"{k} {v}" for k, v in row.items() if k.endswith(("k7", "k0"))), flush=True)
+    return rows
 
 
 def main() -> None:
