@@ -43,9 +43,10 @@ errors stay bounded, :math:`\tilde v \to 0`, and :math:`\hat\theta \to
 \theta` when the arm's motion excites both regressors (it slides through
 the Stribeck region and beyond it, as in the limit cycles of Sec. 5).  This
 is the Lyapunov design of adaptive friction compensation of Canudas de Wit,
-Olsson, Astrom and Lischinsky (IEEE TAC 40(3), 1995, Sec. V) written as an
-identifier in the form of Ioannou and Sun, *Robust Adaptive Control*
-(1996), Sec. 4.3-4.5; slowly drifting levels give a tracking error of the
+Olsson, Astrom and Lischinsky ("A new model for control of systems with
+friction", IEEE TAC 40(3), 1995) written as a series-parallel identifier
+with a gradient law and projection (Ioannou and Sun, *Robust Adaptive
+Control*, 1996, ch. 4); slowly drifting levels give a tracking error of the
 order of the drift rate over the adaptation rate.
 
 Sampled at h (as the controller runs it): the prediction and the update at
