@@ -121,7 +121,7 @@ def adaptive_figures(seeds: int) -> dict:
             _, tr = ptp("adaptive", off, 30.0, s)
             est.append([float(tr["coulomb_hat"][round(t / tr.h) - 1]) for t in (5, 10, 20, 30)])
         res["off35"] = {
-            "coulomb_hat_at_5_10_20_30s": [round(v, 3) for v in np.mean(est, axis=0)],
+            "coulomb_hat_at_5_10_20_30s": [round(float(v), 3) for v in np.mean(est, axis=0)],
             "adaptive_15_20": mean("adaptive", off, 30.0, (15.0, 20.0))[0],
             "adaptive_20_30": mean("adaptive", off, 30.0, (20.0, 30.0))[0],
             "fixed_20_30": mean("lugre", off, 30.0, (20.0, 30.0))[0],
