@@ -315,3 +315,33 @@ def test_python_api_runs_the_same_law_as_the_controller():
     make_compensator("adaptive", h=0.001, adaptation_bandwidth=1000.0)
     with pytest.raises(ConfigValueError, match="adaptation_bandwidth"):
         make_compensator("adaptive", h=0.005, adaptation_bandwidth=1000.0)
+
+
+def test_a_glitch_in_the_velocity_reading_does_not_move_the_estimates():
+    """One reading 3 rad/s off (inside the ADC's range, so the loop runs on): the
+    law freezes at the glitch and on the interval that starts at it, so the
+    estimates end where the clean run's do."""
+    p = comp_params(coulomb=1.2)
+
+    def run(glitch_at):
+        status, fc, fs, vh, vp, slide, u_prev = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        v = 0.5
+        states = []
+        for k in range(1200):
+            meas = v + (3.0 if k == glitch_at else 0.0)
+            status, fc, fs, vh, slide = adaptation_step(status, fc, fs, vh, vp, slide, u_prev,
+                                                        meas, p, H, L1, 1e3)
+            states.append(status)
+            vp = meas
+            u = 8.0 * math.sin(2 * math.pi * 0.5 * k * H)
+            phc, phs = regressor(v, p)
+            v = v + H * (u - (1.55 * phc + 2.3 * phs + 0.07 * v)) / L1
+            u_prev = u
+        return fc, fs, states
+
+    k = 150  # sliding, adapting
+    clean = run(None)
+    assert clean[2][k] == A_ADAPTING
+    fc, fs, states = run(k)
+    assert states[k] == A_BAD and states[k + 1] in (A_BAD, A_PRESLIDING)
+    assert fc == pytest.approx(clean[0], abs=0.02) and fs == pytest.approx(clean[1], abs=0.02)

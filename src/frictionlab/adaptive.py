@@ -218,7 +218,8 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_l
     v_hat, v_prev : float
         The predictor's and the measured arm velocity of the last tick (rad/s).
     slide : float
-        How far the arm has slid (rad) since it last stopped or reversed.
+        How far the arm has slid (rad) since it last stopped or reversed
+        (-1 after a bad signal: the next interval does not adapt either).
     u_prev : float
         The control applied over the last interval (m/s^2).
     v : float
@@ -239,29 +240,33 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_l
         v0 = v if math.isfinite(v) else 0.0
         return (float(A_ADAPTING), min(max(p[P_FC], lo), hi), min(max(p[P_FS], lo), hi), v0,
                 0.0)
+    # after a bad signal ``slide`` is -1: the next interval starts at a reading
+    # that was not trusted, so it does not adapt either
     if not (math.isfinite(v_hat) and math.isfinite(v_prev)):
         v0 = v if math.isfinite(v) else 0.0
-        return float(A_BAD), fc, fs, v0, 0.0
+        return float(A_BAD), fc, fs, v0, -1.0
     fv = p[P_FV] if v_prev >= 0.0 else p[P_FVN]
     phc, phs = regressor(v_prev, p)
     f_model = fc * phc + fs * phs + fv * v_prev
     lam = p[P_ABW]
     pred = v_hat + h * ((u_prev - f_model) / arm_len + lam * (v_prev - v_hat))
     if not math.isfinite(v):
-        return float(A_BAD), fc, fs, pred, 0.0
+        return float(A_BAD), fc, fs, pred, -1.0
     if not math.isfinite(pred):
-        return float(A_BAD), fc, fs, v, 0.0
+        return float(A_BAD), fc, fs, v, -1.0
     innov = v - pred
-    dead = p[P_ADEAD]
-    if abs(v_prev) < dead or abs(v) < dead or v * v_prev <= 0.0:
-        return float(A_STUCK), fc, fs, pred, 0.0
-    slide += 0.5 * h * (abs(v) + abs(v_prev))
-    if slide < p[P_ADIST]:
-        return float(A_PRESLIDING), fc, fs, pred, slide
     if abs(u_prev) >= u_max:
         return float(A_SATURATED), fc, fs, pred, slide
     if not abs(innov) <= p[P_AINNOV]:
-        return float(A_BAD), fc, fs, pred, slide
+        return float(A_BAD), fc, fs, pred, -1.0
+    dead = p[P_ADEAD]
+    if abs(v_prev) < dead or abs(v) < dead or v * v_prev <= 0.0:
+        return float(A_STUCK), fc, fs, pred, 0.0
+    if slide < 0.0:
+        return float(A_PRESLIDING), fc, fs, pred, 0.0
+    slide += 0.5 * h * (abs(v) + abs(v_prev))
+    if slide < p[P_ADIST]:
+        return float(A_PRESLIDING), fc, fs, pred, slide
     step = p[P_AGAIN] * h * innov
     fc = min(max(fc - step * phc, lo), hi)
     fs = min(max(fs - step * phs, lo), hi)
