@@ -89,9 +89,10 @@ Safety
   before that the friction is not the Stribeck curve the regressor
   describes), while the signals are bad (a non-finite reading or
   prediction, or a prediction error larger than
-  ``adaptation_max_innovation``), and when the control was saturated over
-  the interval (the applied acceleration is not what the law assumes on a
-  rig).
+  ``adaptation_max_innovation``; also the interval that starts at such a
+  reading, and until the arm has slid ``adaptation_distance`` again), and
+  when the control was saturated over the interval (the applied
+  acceleration is not what the law assumes on a rig).
 
 The law's state lives in the controller's state vector (entries ``S_VHAT``,
 ``S_VPREV``, ``S_FC_HAT``, ``S_FS_HAT``, ``S_ADAPT`` of
