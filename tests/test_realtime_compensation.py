@@ -150,3 +150,46 @@ def test_switching_to_adaptive_mid_run_starts_it_from_its_parameters(tmp_path):
     ad = sidecar["adaptation"]
     assert ad["start"] == {"coulomb": 1.1, "stiction": 2.3}
     assert 0.05 <= ad["coulomb"] <= 6.0 and 0.05 <= ad["stiction"] <= 6.0
+
+
+def test_a_glitched_velocity_reading_does_not_move_the_adapted_levels(tmp_path):
+    """Fault injected at the rig: one arm-velocity reading 3 rad/s off while the law
+    adapts (inside the ADC's range, so the loop runs on).  The law freezes on it and
+    on the sample that starts at it: the adapted levels do not move, and the run goes
+    on to its end."""
+    from frictionlab.adaptive import A_ADAPTING, A_BAD, A_PRESLIDING, A_STUCK
+    from frictionlab.controller import S_ADAPT, S_FC_HAT, S_FS_HAT
+    from frictionlab.realtime.rigs import SimRig
+
+    cfg = build_config("fast", "lugre", "adaptive",
+                       sets=["compensation.observer_gain=0", "compensation.coulomb=1.2"])
+
+    class Glitch(SimRig):
+        ctl = None
+        glitch_at = None
+
+        def sample(self, k, deadline_ns):
+            r = super().sample(k, deadline_ns)
+            s = self.ctl._loop.state
+            if s is not None:  # the controller state after tick k - 1
+                self.trace[k] = s[[S_ADAPT, S_FC_HAT, S_FS_HAT]].copy()
+                if self.glitch_at is None and k >= 400 and s[S_ADAPT] == A_ADAPTING:
+                    self.glitch_at = k
+                    r = r._replace(v=r.v + 3.0 / self.scaling.velocity_scale)
+            return r
+
+    rig = Glitch(cfg, lockstep=True)
+    rig.trace = {}
+    ctl = RealtimeController(cfg, rig, log_dir=tmp_path, clock=FakeClock(), duration=8.0,
+                             realtime=False, manage_gc=False, sim_lockstep=True)
+    rig.ctl = ctl
+    stats = ctl.run()
+    assert stats["stop_reason"] == "duration"
+    k, tr = rig.glitch_at, rig.trace
+    assert k is not None, "the law never adapted after 2 s"
+    before, at, after = tr[k], tr[k + 1], tr[k + 2]
+    assert at[0] == A_BAD and after[0] in (A_BAD, A_PRESLIDING, A_STUCK)
+    np.testing.assert_array_equal(at[1:], before[1:])
+    np.testing.assert_array_equal(after[1:], before[1:])
+    log = read_csv_log(stats["log"])
+    assert np.all(np.isfinite(log["friction_hat"][:-1]))
