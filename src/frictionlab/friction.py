@@ -176,7 +176,7 @@ class FrictionParams(Validated):
     adaptation_gain: float = param(200.0, "adaptive compensator: gradient gain [gamma] of the "
                                    "level estimates (0 = no adaptation); stable for "
                                    "gamma h^2 / L_1 < 4 - 2 lambda h",
-                                   "m/s^2 per (rad/s) per s", lo=0.0, hi=1e7)
+                                   "m/(rad s^2)", lo=0.0, hi=1e7)
     adaptation_bandwidth: float = param(20.0, "adaptive compensator: bandwidth [lambda] of its "
                                         "arm-velocity predictor; stable for lambda h < 2",
                                         "1/s", lo=0.0, hi=1e5, lo_open=True)
