@@ -164,7 +164,8 @@ def test_schema_ranges_are_the_dataclasses_ranges():
         lo = fields[f["name"]]["lo"]
         assert f["lo"] == (None if lo is None or math.isinf(lo) else lo)
     assert sch["presets"]["slow"] == dataclasses.asdict(PRESETS["slow"])
-    assert set(sch["compensation"]["kinds"]) == {"coulomb", "classical", "lugre"}
+    assert set(sch["compensation"]["kinds"]) == {"coulomb", "classical", "lugre",
+                                                  "adaptive"}
 
 
 # --- access control ------------------------------------------------------------------------
@@ -490,6 +491,36 @@ def test_design_changes_and_refusals_through_the_api(app_and_controller):
     comp = client.get("/api/status").json()["compensation"]
     assert comp["kind"] == "classical" and comp["params"]["stiction"] == 2.0
     assert client.post("/api/push", json={"kick": 0.3}).status_code == 409  # not running
+
+
+def test_adaptive_compensation_through_the_api(app_and_controller):
+    """The Adaptive choice of the Friction Type: its fields in the schema, the
+    law's gains checked against its stability conditions (located at the field),
+    and its estimates in the status."""
+    client, _ctl, _ = app_and_controller
+    sch = client.get("/api/schema").json()["compensation"]
+    assert "adaptive" in sch["kinds"]
+    names = [f["name"] for f in sch["fields"]["adaptive"]]
+    assert names[:7] == [f["name"] for f in sch["fields"]["lugre"]]
+    assert "adaptation_gain" in names and "adaptation_bandwidth" in names
+    assert client.get("/api/status").json()["adaptation"] is None
+    r = client.post("/api/compensation", json={"kind": "adaptive", "params": {"coulomb": 1.2}})
+    assert r.status_code == 200, r.json()
+    st = r.json()["status"]
+    assert st["compensation"]["kind"] == "adaptive" and st["compensation"]["enabled"]
+    assert st["adaptation"] == {"start": {"coulomb": 1.2, "stiction": 2.3}, "coulomb": 1.2,
+                                "stiction": 2.3, "status": "off"}
+    r = client.post("/api/compensation", json={"params": {"adaptation_gain": 1e5}})
+    assert r.status_code == 422
+    err = r.json()["errors"][0]
+    assert err["field"] == "params.adaptation_gain"
+    assert "compensation.adaptation_gain = 100000 is out of range" in err["message"]
+    r = client.post("/api/compensation", json={"params": {"adaptation_bandwidth": 500.0}})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == (
+        "params.adaptation_bandwidth")
+    assert client.get("/api/status").json()["compensation"]["params"]["adaptation_gain"] == 200
+    r = client.post("/api/compensation", json={"enabled": False})
+    assert r.json()["status"]["adaptation"] is None
 
 
 @pytest.mark.parametrize("path, body, field, verdict", [

@@ -49,7 +49,7 @@ __all__ = [
 #: Plant friction models selectable with ``--friction``.
 PLANT_FRICTION_KINDS = KINDS
 #: Compensators selectable with ``--compensation``.
-COMPENSATOR_KINDS = ("none", "coulomb", "classical", "lugre")
+COMPENSATOR_KINDS = ("none", "coulomb", "classical", "lugre", "adaptive")
 
 
 class ConfigError(ValueError):
@@ -184,7 +184,8 @@ class Config:
         if self.compensation_kind != "none":
             from .compensation import check_compensator
 
-            check_compensator(self.compensation_kind, self.compensation)
+            check_compensator(self.compensation_kind, self.compensation, h=self.design.h,
+                              arm_length=self.plant.arm_length)
 
     @property
     def substeps(self) -> int:
@@ -226,6 +227,11 @@ _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionPara
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
+#: The drift of the plant's levels (every model with a level).
+_DRIFT = {"drift", "drift_start", "drift_time"}
+#: The adaptive compensator's law (:mod:`frictionlab.adaptive`).
+_ADAPT = {"adaptation_gain", "adaptation_bandwidth", "adaptation_deadband", "adaptation_distance",
+          "adaptation_max_innovation", "adaptation_min", "adaptation_max"}
 #: Friction fields each *plant* model reads (LuGre's ``observer_gain`` is the k
 #: of eq. (19) with e = -theta, docs/model.md "The observer gain k in the plant").
 PLANT_FIELDS = {
@@ -238,6 +244,9 @@ PLANT_FIELDS = {
     "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "sigma1_velocity", "observer_gain"} | _NEG,
 }
+for _kind in PLANT_FIELDS:
+    if _kind != "none":
+        PLANT_FIELDS[_kind] |= _DRIFT
 #: Friction fields each compensator reads.
 COMPENSATOR_FIELDS = {
     "none": set(),
@@ -246,6 +255,8 @@ COMPENSATOR_FIELDS = {
     | _NEG - {"viscous_negative"},
     "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "sigma1_velocity", "observer_gain"} | _NEG,
+    "adaptive": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+                 "sigma1_velocity", "observer_gain", "viscous_negative"} | _ADAPT,
 }
 
 

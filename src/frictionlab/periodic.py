@@ -89,7 +89,7 @@ from .controller import (
     S_ZHAT,
     controller_step,
 )
-from .friction import KINDS, LUGRE, NONE, VISCOUS
+from .friction import KINDS, LUGRE, NONE, P_DRIFT, VISCOUS
 from .limit_cycles import LimitCycleFeatures, _crossings, features
 from .sensor import arm_zero, reading
 from .simulation import (
@@ -209,6 +209,7 @@ class _Loop:
         self.pp = _pack_plant(cfg)
         self.fkind = KINDS.index(cfg.friction_kind)
         self.fp = cfg.friction.pack()
+        self.fp[P_DRIFT] = 0.0  # periodic orbits of the plant at its starting levels
         self.sensor = make_sensor(cfg)._replace(noise=0.0)
         self.x0 = arm_zero(self.sensor)
         self.substeps, self.ratio = cfg.substeps, cfg.pendulum_ratio
@@ -240,7 +241,7 @@ class _Loop:
         idx = [1, 2, 3, I_S + S_X1, I_S + S_X2, I_S + S_ARM, I_S + S_ARMDOT]
         if self.fkind == LUGRE:
             idx += [4, I_MEM]
-        if self.controller.compensation == "lugre":
+        if self.controller.compensation in ("lugre", "adaptive"):
             idx.append(I_S + S_ZHAT)
         return np.array(sorted(idx))
 

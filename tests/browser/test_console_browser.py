@@ -327,6 +327,34 @@ def test_friction_type_and_model_parameters(page):
     assert status(page)["compensation"]["params"]["stiction"] == 2.3
 
 
+def test_adaptive_friction_type_shows_its_estimates(page):
+    """The Adaptive choice: the LuGre fields and the law's, the adapted levels beside
+    the panel, and the friction estimate F-hat switched on in the plot."""
+    ensure_running(page)
+    button = page.locator("#compensation")
+    if button.get_attribute("aria-pressed") != "true":
+        button.click()
+        expect(button).to_have_text("Compensating")
+    page.select_option("#friction-type", "adaptive")
+    expect(page.locator("#friction-msg")).to_have_text("friction type adaptive")
+    expect(page.locator("#friction-adaptation_gain")).to_be_visible()
+    expect(page.locator("#friction-sigma0")).to_be_visible()
+    expect(page.locator("#error-signal")).to_be_visible()
+    expect(page.locator("#adapted")).to_be_visible()
+    wait_until(lambda: status(page)["adaptation"] and status(page)["adaptation"]["status"]
+               != "off", what="the adaptation running")
+    ad = status(page)["adaptation"]
+    shown = float(page.locator("#adapted-coulomb").inner_text())
+    assert 0.05 <= shown <= 6.0 and 0.05 <= ad["stiction"] <= 6.0
+    assert ui(page, 'shown("friction_hat")')
+    expect(page.locator('#signal-toggles [data-signal="friction_hat"]')).to_have_attribute(
+        "aria-pressed", "true")
+    # back to LuGre for the tests that follow: the estimates go away
+    page.select_option("#friction-type", "lugre")
+    expect(page.locator("#friction-msg")).to_have_text("friction type lugre")
+    expect(page.locator("#adapted")).to_be_hidden()
+
+
 def test_server_refusals_are_shown_beside_the_field(console, page):
     ensure_running(page)
     expect(page.locator("#friction-sigma0")).to_be_visible()  # LuGre, from the test above

@@ -51,6 +51,11 @@ COMPENSATOR_FIELDS = {
     "classical": ("stiction", "coulomb", "stribeck_velocity", "hysteresis"),
     "lugre": ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "observer_gain"),
+    # the LuGre observer's fields (coulomb, stiction: the starting values), then its law's
+    "adaptive": ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+                 "observer_gain", "adaptation_gain", "adaptation_bandwidth",
+                 "adaptation_deadband", "adaptation_distance", "adaptation_max_innovation",
+                 "adaptation_min", "adaptation_max"),
 }
 #: Allowed push (rad/s added to the pendulum's angular velocity).
 KICK_RANGE = (-3.0, 3.0)
@@ -141,6 +146,13 @@ class FrictionModelRequest(_Request):
     sigma1: Number | None = None
     observer_gain: Number | None = None
     hysteresis: Number | None = None
+    adaptation_gain: Number | None = None
+    adaptation_bandwidth: Number | None = None
+    adaptation_deadband: Number | None = None
+    adaptation_distance: Number | None = None
+    adaptation_max_innovation: Number | None = None
+    adaptation_min: Number | None = None
+    adaptation_max: Number | None = None
 
     @field_validator(*_ALL_COMP_FIELDS)
     @classmethod
@@ -164,7 +176,7 @@ class CompensationRequest(_Request):
 
     confirm: Confirm = False
     enabled: bool | None = Field(default=None, strict=True)
-    kind: Literal["coulomb", "classical", "lugre"] | None = None
+    kind: Literal["coulomb", "classical", "lugre", "adaptive"] | None = None
     params: FrictionModelRequest | None = None
     error_signal: Literal[ERROR_SIGNALS] | None = None  # type: ignore[valid-type]
 

@@ -145,7 +145,7 @@ class _Recorder:
         """Give the arm a push: set its velocity (the hand of App. E.1)."""
         x = self.state.x.copy()
         x[3] = velocity
-        self.state = PlantState(x, self.state.memory, self.state.friction)
+        self.state = PlantState(x, self.state.memory, self.state.friction, self.state.tick)
 
     @property
     def arm_dot(self) -> float:

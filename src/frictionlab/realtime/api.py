@@ -14,7 +14,9 @@ import time
 from concurrent.futures import Future
 from pathlib import Path
 
+from ..adaptive import ADAPT_STATES
 from ..config import Config
+from ..controller import S_ADAPT, S_FC_HAT, S_FS_HAT
 from ..rig import RigScaling
 from .clock import MonotonicClock
 from .datalog import LogWriter, link_no_clobber, writer_identity
@@ -198,7 +200,8 @@ class RealtimeController:
                 # the simulated rig's pendulum hangs at rest, as a rig's does before an
                 # experiment
                 rig_cfg = rig_cfg.with_values({"sim.initial_angle": math.pi})
-            rig = (open_rig(self.backend, rig_cfg, lockstep=self.sim_lockstep)
+            rig = (open_rig(self.backend, rig_cfg, lockstep=self.sim_lockstep,
+                            duration=self.duration)
                    if isinstance(self.backend, str)
                    else self.backend)
             rig.open(h=self.cfg.design.h, cancel=lambda: self._stop_asked is not None)
@@ -457,6 +460,7 @@ class RealtimeController:
             "friction": self._plant_friction(),
             **applied.describe(),
             "loop_check": applied.loop_check.to_json(),
+            "adaptation": self._adaptation(),
             "pending_changes": len(loop.mailbox) if loop is not None else 0,
             "recording": bool(self._writer is not None and self._writer.recording),
             "safety": dataclasses.asdict(self.safety),
@@ -474,6 +478,29 @@ class RealtimeController:
         out["t"] = loop.k * loop.h
         out["rt_note"] = loop.rt_note
         out.pop("stall_list", None)
+        return out
+
+    def _adaptation(self) -> dict | None:
+        """The adaptive compensator's estimates now (None with another compensator).
+
+        ``coulomb``/``stiction``: the adapted levels F_C, F_S (m/s^2) the
+        compensator uses; ``start``: the values it started from (its
+        ``compensation.*`` parameters); ``status``: what the law did at the
+        last tick (:data:`frictionlab.adaptive.ADAPT_STATES`: ``adapting``,
+        or frozen: ``stuck``, ``presliding``, ``bad_signal``, ``saturated``;
+        ``off``: not started yet).
+        """
+        loop = self._loop
+        params = loop.params if loop is not None else self._params
+        if params.comp_kind != "adaptive" or not params.comp_enabled:
+            return None
+        start = params.comp_params["adaptive"]
+        out = {"start": {"coulomb": start.coulomb, "stiction": start.stiction},
+               "coulomb": start.coulomb, "stiction": start.stiction, "status": "off"}
+        s = loop.state if loop is not None else None
+        if s is not None and s[S_ADAPT] > 0:
+            out.update(coulomb=float(s[S_FC_HAT]), stiction=float(s[S_FS_HAT]),
+                       status=ADAPT_STATES[int(s[S_ADAPT])])
         return out
 
     def _plant_friction(self) -> str | None:
@@ -508,6 +535,7 @@ class RealtimeController:
             "safety": dataclasses.asdict(self.safety),
             "initial": initial,
             "current": current,
+            "adaptation": self._adaptation(),
             "stop_reason": None if loop is None else loop.stop_reason,
             "stop_detail": None if loop is None else loop.stop_detail,
             "stop_tick": None if loop is None else loop.stop_tick,

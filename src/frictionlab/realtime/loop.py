@@ -23,8 +23,10 @@ nanoseconds on the monotonic clock, so there is no drift):
    (log writer, console subscriptions) without blocking;
 7. between ticks, after every tick (one without a reading too): apply
    pending parameter changes atomically (the mailbox; in effect from the
-   next tick), and the scheduled housekeeping (garbage collection once a
-   second, the host's steal time every 100 ms).
+   next tick; a change of compensator, or of the adaptive compensator's
+   parameters, restarts the compensator's state), and the scheduled
+   housekeeping (garbage collection once a second, the host's steal time
+   every 100 ms).
 
 Gain transitions: a change of the state-feedback gains L while the loop runs
 (a new design) moves L linearly from the gains in use to the new ones over
@@ -90,16 +92,17 @@ from dataclasses import dataclass
 from .. import sensor
 from .._validation import Validated, param
 from ..controller import (
+    ADAPTIVE,
     G_COMP,
     G_L,
     G_W0,
     S_ARM,
     S_ARMDOT,
-    S_RELAY,
     S_X1,
     S_X2,
     S_ZHAT,
     controller_step,
+    reset_compensator,
 )
 from ..rig import RigScaling
 from .osrt import normal_priority, try_realtime_priority
@@ -265,6 +268,9 @@ class Loop:
         self.sched_fifo = False
         self.x0: float | None = None
         self.traceback: str | None = None
+        #: The controller state (:mod:`frictionlab.controller`'s table) from the first
+        #: reading on, updated in place by each tick (for the sidecar's adapted levels).
+        self.state = None
 
     # --- requests from other threads -------------------------------------------
 
@@ -539,6 +545,7 @@ class Loop:
                                         f"start (tolerance {safety.start_tolerance} rad; no "
                                         "swing-up)", r)
                         s = params.controller.init(theta)
+                        self.state = s
                         flags |= START
                         first = False
                     if not abs(theta) <= angle_limit:
@@ -591,6 +598,7 @@ class Loop:
             # ---- between ticks ----
             if mailbox:
                 old_kind = gp[G_COMP]
+                old_cp = cp
                 applied = []
                 while mailbox:
                     applied.append(mailbox.popleft())
@@ -609,9 +617,11 @@ class Loop:
                     ramp_k = ramp_n
                 w0 = gp[G_W0]
                 comp_flag = COMPENSATE if params.comp_enabled else 0
-                if gp[G_COMP] != old_kind and s is not None:
-                    s[S_RELAY] = 0.0
-                    s[S_ZHAT] = 0.0
+                if s is not None and (gp[G_COMP] != old_kind or (
+                        gp[G_COMP] == ADAPTIVE and not (cp == old_cp).all())):
+                    # a new compensator, or new starting values of the adaptive one:
+                    # it starts afresh at the next tick
+                    reset_compensator(s)
                 pending_flags = CHANGED
                 self.changes_applied += len(applied)
                 for _p, fut in applied:

@@ -208,18 +208,22 @@ class SimRig(Rig):
         reproduces the simulator's whatever the machine's load.  Default
         False: the plant moves on in real time with u held, as a real one
         would.
+    duration : float, optional
+        The run's length (s): the time over which ``friction.drift`` acts
+        when ``friction.drift_time`` is unset (default ``sim.duration``).
     """
 
     name = "sim"
     emulated = True
 
     def __init__(self, cfg: Config, scaling: RigScaling | None = None,
-                 arm_offset: float = ARM_START, lockstep: bool = False):
+                 arm_offset: float = ARM_START, lockstep: bool = False,
+                 duration: float | None = None):
         self.cfg = cfg
         self.lockstep = lockstep
         self.realtime_plant = not lockstep  # in lockstep the plant waits for the loop
         self.scaling = scaling or cfg.rig
-        self.plant = SimulatedPlant(cfg)
+        self.plant = SimulatedPlant(cfg, duration)
         self.plant_friction = cfg.friction_kind
         self._arm_offset = arm_offset
         self._kicks: deque[float] = deque()
@@ -642,7 +646,8 @@ class FramedRig(Rig):
                 "paused_waits": self.paused_waits}
 
 
-def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
+def open_rig(spec: str, cfg: Config, *, lockstep: bool = False,
+             duration: float | None = None) -> Rig:
     """The rig a ``--backend`` string names (not yet opened).
 
     ``lockstep`` applies to ``sim`` (see :class:`SimRig`).
@@ -653,7 +658,7 @@ def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
         For an unknown scheme or a malformed address.
     """
     if spec == "sim":
-        return SimRig(cfg, lockstep=lockstep)
+        return SimRig(cfg, lockstep=lockstep, duration=duration)
     parts = urlsplit(spec)
     if parts.scheme == "udp":
         if not parts.hostname or parts.port is None:

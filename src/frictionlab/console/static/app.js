@@ -191,7 +191,7 @@
       panel.fields[f.name] = f;
       panel.inputs[f.name] = fieldRow(box, f, "friction", () => { panel.dirty = true; });
     }
-    $("error-signal-row").hidden = kind !== "lugre";
+    $("error-signal-row").hidden = kind !== "lugre" && kind !== "adaptive";
   }
 
   async function applyDesign(name) {
@@ -219,7 +219,7 @@
     const values = collect(panel);
     if (!values) { setMsg("friction-msg", "not applied: correct the marked fields", true); return; }
     const body = { params: values };
-    if (panel.kind === "lugre") body.error_signal = $("error-signal").value;
+    if (panel.kind === "lugre" || panel.kind === "adaptive") body.error_signal = $("error-signal").value;
     const r = await change("/api/compensation", body);
     if (r.ok) { panel.dirty = false; setMsg("friction-msg", r.confirmed ? "applied (unsafe, confirmed)" : "applied", r.confirmed); }
     else showServerErrors(panel, r.data, "friction-msg");
@@ -285,6 +285,18 @@
       fillInputs(panels.friction, comp.params || {}, force);
       const es = $("error-signal");
       if (document.activeElement !== es && comp.error_signal && !panels.friction.dirty) es.value = comp.error_signal;
+    }
+    // the adaptive compensator: its estimates beside the panel, and F̂ on the plot
+    const ad = st.adaptation;
+    $("adapted").hidden = !ad;
+    if (ad) {
+      $("adapted-coulomb").textContent = fmt(ad.coulomb);
+      $("adapted-stiction").textContent = fmt(ad.stiction);
+      $("adapted-status").textContent = String(ad.status).replace("_", " ");
+      if (!ui.estimateShown) {
+        ui.estimateShown = true;
+        showSignal("friction_hat");
+      }
     }
     const save = $("save");
     const recording = !!st.recording;
@@ -413,6 +425,17 @@
       const w = Math.max(320, box.clientWidth - 4);
       for (const c of Object.values(charts)) c.plot.setSize({ width: w, height: c.plot.height });
     });
+  }
+
+  // Turn a signal's curve on (as its toggle would), if it is off.
+  function showSignal(key) {
+    const s = SIGNALS.find((x) => x.key === key);
+    if (s.on) return;
+    s.on = true;
+    const b = document.querySelector(`#signal-toggles [data-signal="${key}"]`);
+    if (b) b.setAttribute("aria-pressed", "true");
+    const c = charts[s.group];
+    if (c) c.plot.setSeries(c.sigs.indexOf(s) + 1, { show: true });
   }
 
   function buildToggles() {
