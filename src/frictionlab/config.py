@@ -27,6 +27,7 @@ from ._validation import ParamError, Validated, param
 from .design import DesignSpec, preset
 from .friction import KINDS, FrictionParams
 from .plant import PlantParams
+from .swingup import SwingUpParams
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -126,7 +127,9 @@ class SimParams(Validated):
 
     _prefix = "sim."
 
-    initial_angle: float = param(0.05, "initial pendulum angle", "rad", lo=-1.0, hi=1.0)
+    initial_angle: float = param(0.05, "initial pendulum angle (pi = hanging; a start beyond "
+                                 "sim.fall_angle needs --swing-up)", "rad", lo=-math.pi,
+                                 hi=math.pi)
     substeps: int | None = param(None, "arm and friction integration substeps per sampling "
                                  "period (None = the model's accurate default: 10, LuGre 6)",
                                  "1", lo=1, hi=10000, integer=True, optional=True)
@@ -167,6 +170,7 @@ class Config:
     compensation: FrictionParams = dataclasses.field(
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
     sim: SimParams = dataclasses.field(default_factory=SimParams)
+    swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
 
     def __post_init__(self) -> None:
         if self.friction_kind not in PLANT_FRICTION_KINDS:
@@ -214,9 +218,9 @@ class Config:
         return out
 
 
-_SECTIONS = ("plant", "design", "friction", "compensation", "sim")
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "swingup")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
-            "compensation": FrictionParams, "sim": SimParams}
+            "compensation": FrictionParams, "sim": SimParams, "swingup": SwingUpParams}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
