@@ -64,6 +64,10 @@ class RealtimeController:
     sim_lockstep : bool
         ``sim`` backend: one plant step per executed tick (see
         :class:`~.rigs.SimRig`).
+    swing_up : bool
+        Runs start with the swing-up (``swingup.*`` of ``cfg``,
+        :mod:`frictionlab.swingup`); may be changed between runs (the
+        console's Swing up button sets it for the run it starts).
     """
 
     def __init__(self, cfg: Config, backend: str | Rig = "sim", *, log_dir="runs",
@@ -71,8 +75,9 @@ class RealtimeController:
                  realtime: bool = True, manage_gc: bool = True, fsync: bool = False,
                  scaling: RigScaling | None = None, prewarm_us: float = 0.0,
                  cpu: int | None = None, sim_lockstep: bool = False,
-                 log_formats: tuple[str, ...] = ("csv",)):
+                 log_formats: tuple[str, ...] = ("csv",), swing_up: bool = False):
         self.cfg = cfg
+        self.swing_up = swing_up
         self.log_formats = tuple(log_formats)
         self.sim_lockstep = sim_lockstep
         self.backend = backend
@@ -182,7 +187,8 @@ class RealtimeController:
                 loop = Loop(rig, self.clock, self._params, safety=self.safety,
                             scaling=self.scaling, duration=self.duration,
                             realtime=self.realtime, manage_gc=self.manage_gc,
-                            prewarm_us=self.prewarm_us, cpu=self.cpu)
+                            prewarm_us=self.prewarm_us, cpu=self.cpu,
+                            swingup=self.cfg.swingup if self.swing_up else None)
                 self._writer = None
                 if self.log_dir is not None:
                     self._writer = self._open_log(loop)
