@@ -18,7 +18,9 @@ running in real time:
   (the controller captures it as x_0).
 * **Sessions.**  ``HELLO`` starts a session: the "operator" balances the
   pendulum upright (``sim.initial_angle``, at rest; the arm stays where it
-  is) and holds it there until the first COMMAND arrives (no swing-up).
+  is) and holds it there until the first COMMAND arrives.  With
+  ``sim.initial_angle`` = pi (``rig-sim --hanging``) the pendulum hangs at
+  rest instead, for ``run --swing-up``.
   ``HELLO`` also forgets the last command's sequence number, so the new
   session's commands (numbered from 0 again) are applied.
 * **Watchdog.**  When no COMMAND has arrived for ``watchdog`` seconds
