@@ -290,3 +290,24 @@ def test_run_headless_swing_up_against_rig_sim_started_hanging_over_udp(tmp_path
     assert abs(theta[0]) > 3.0  # started hanging
     assert np.abs(theta[-100:]).max() < 0.35  # balancing at the end
     assert np.abs(log["u_da"]).max() <= 1.0
+
+
+def test_sweep_swing_up_writes_caught_and_catch_time(tmp_path):
+    import csv
+
+    out = tmp_path / "sw.csv"
+    args = ["sweep", "--swing-up", "--vary", "swingup.max_acceleration=1,10", "--duration", "6",
+            "--set", "swingup.time_limit=4", "--workers", "1", "--out", str(out),
+            "--no-progress", "--json"]
+    rc, res = cli_json(*args)
+    assert rc == 0 and res["rows"] == 2
+    rows = list(csv.DictReader(out.open()))
+    assert list(rows[0])[-4:] == ["status", "error", "caught", "catch_time"]
+    weak, strong = rows
+    # below the stiction level the arm never moves: not caught
+    assert weak["status"] == "not_caught" and weak["caught"] == "0" and weak["catch_time"] == ""
+    assert strong["status"] in ("limit_cycle", "settled") and strong["caught"] == "1"
+    assert 0 < float(strong["catch_time"]) < 4
+    # a finished file resumes with nothing to compute
+    rc, res = cli_json(*args[:-2], "--resume", "--no-progress", "--json")
+    assert rc == 0 and res["rows"] == 2
