@@ -121,9 +121,12 @@ class RealtimeController:
 
     # --- life cycle ---------------------------------------------------------------
 
-    def start(self) -> None:
-        """Start a run in the loop thread (open the rig, the log, go)."""
-        loop = self._prepare()
+    def start(self, swing_up: bool | None = None) -> None:
+        """Start a run in the loop thread (open the rig, the log, go).
+
+        ``swing_up`` True/False starts this run with/without the swing-up
+        (None: :attr:`swing_up`, the controller's setting)."""
+        loop = self._prepare(swing_up)
         self._thread = threading.Thread(target=self._execute, args=(loop,),
                                         name="frictionlab-rt", daemon=True)
         self._thread.start()
@@ -172,7 +175,8 @@ class RealtimeController:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _prepare(self) -> Loop:
+    def _prepare(self, swing_up: bool | None = None) -> Loop:
+        swing_up = self.swing_up if swing_up is None else bool(swing_up)
         with self._lock:
             if self._closed:
                 raise RuntimeError("the controller is closed")
@@ -188,7 +192,7 @@ class RealtimeController:
                             scaling=self.scaling, duration=self.duration,
                             realtime=self.realtime, manage_gc=self.manage_gc,
                             prewarm_us=self.prewarm_us, cpu=self.cpu,
-                            swingup=self.cfg.swingup if self.swing_up else None)
+                            swingup=self.cfg.swingup if swing_up else None)
                 self._writer = None
                 if self.log_dir is not None:
                     self._writer = self._open_log(loop)
@@ -434,12 +438,13 @@ class RealtimeController:
         }
         if loop is None:
             out.update({"stop_reason": None, "ticks": 0, "missed": 0, "overruns": 0,
-                        "t": 0.0})
+                        "t": 0.0, "swing_up": None})
             return out
         st = self._stats()
         out.update(st)
         out["t"] = loop.k * loop.h
         out["rt_note"] = loop.rt_note
+        out["swing_up"] = loop.swing_status()
         out.pop("stall_list", None)
         return out
 
