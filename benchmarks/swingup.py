@@ -3,10 +3,12 @@ r"""Swing-up robustness: success rate and catch time over randomised plants.
 Each of ``--n`` plants (default 200) draws, from a generator seeded with
 ``--seed``: the plant's Coulomb level F_C uniform in [0.5, 3] m/s^2, its
 stiction F_S uniform in [F_C, F_C + 1], its natural frequency omega0 uniform
-in [6.1, 7.5] rad/s (the design keeps omega0 = 6.8: a mismatch of -10 % to
-+10 %), and a measurement-noise seed; classical friction (thesis
-zero-velocity band), fast design, no compensation, measurement noise 0.002
-(rad, rad, rad/s), starting hanging at rest.  A plant is a success when the
+in [6.1, 7.5] rad/s (around the nominal 6.8), and a measurement-noise seed;
+classical friction (thesis zero-velocity band), the fast design with
+``design.omega0`` = ``--design-omega0`` (default 6.2, the low end of the
+plants' range: a mismatch of -2 % to +21 %), no compensation, the swing-up's
+defaults, measurement noise 0.002 (rad, rad, rad/s), starting hanging at
+rest.  A plant is a success when the
 run (``--duration`` s, default 20, the swing-up's time limit) reaches the
 balancing phase and is still balancing at the end (status ``limit_cycle``
 or ``settled``).
@@ -33,7 +35,12 @@ import numpy as np
 from frictionlab.config import build_config
 from frictionlab.swingup_sim import simulate_swingup, swingup_outcome
 
-DESIGN_OMEGA0 = 6.8
+#: The omega0 the plants' natural frequencies are drawn around (and the default design's).
+NOMINAL_OMEGA0 = 6.8
+#: The design's omega0 in this benchmark: the low end of the plants' range (the fast
+#: design tolerates a plant faster than designed, +21 %, but not one 5 % slower;
+#: docs/swingup.md).  ``--design-omega0 6.8`` gives the nominal design's numbers.
+DESIGN_OMEGA0 = 6.2
 
 
 def draw(n: int, seed: int) -> list[dict]:
@@ -54,7 +61,8 @@ def run_one(values: dict, duration: float, noise: float, design_omega0: float) -
     res = simulate_swingup(cfg, duration)
     status, _ = swingup_outcome(res)
     ok = status in ("limit_cycle", "settled")
-    return {**values, "status": status, "success": ok, "catch_time": res.swing_up_time,
+    return {**values, "design.omega0": design_omega0, "status": status, "success": ok,
+            "catch_time": res.swing_up_time,
             "catches": res.catches, "stop_reason": res.stop_reason,
             "max_u_swinging": res.max_u_swinging,
             "max_u": float(np.abs(res.trajectory["u"]).max())}
@@ -68,12 +76,14 @@ def plot(rows: list[dict], path: str) -> None:
 
     fc = np.array([r["friction.coulomb"] for r in rows])
     fs = np.array([r["friction.stiction"] for r in rows])
-    mis = np.array([100 * (r["plant.omega0"] / DESIGN_OMEGA0 - 1) for r in rows])
+    mis = np.array([100 * (r["plant.omega0"] / r["design.omega0"] - 1) for r in rows])
     ok = np.array([r["success"] for r in rows])
     tc = np.array([np.nan if r["catch_time"] is None else r["catch_time"] for r in rows])
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
+    fig.subplots_adjust(bottom=0.22, top=0.88, right=0.82)
     for ax, x, xl in ((axes[0], fc, "plant Coulomb level F_C (m/s$^2$)"),
-                      (axes[1], mis, "plant omega0 mismatch vs design 6.8 rad/s (%)")):
+                      (axes[1], mis, f"plant omega0 mismatch vs the design's "
+                                     f"{rows[0]['design.omega0']:g} rad/s (%)")):
         sc = ax.scatter(x[ok], fs[ok] - fc[ok], c=tc[ok], cmap="viridis", marker="o", s=28,
                         label="caught and balancing (colour: catch time)")
         if (~ok).any():
@@ -81,11 +91,13 @@ def plot(rows: list[dict], path: str) -> None:
                        label="failed")
         ax.set_xlabel(xl)
         ax.set_ylabel("F_S - F_C (m/s$^2$)")
-        ax.legend(loc="upper right", fontsize=8)
-    cb = fig.colorbar(sc, ax=axes, shrink=0.9)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=9)
+    cb = fig.colorbar(sc, cax=fig.add_axes((0.85, 0.22, 0.02, 0.66)))
     cb.set_label("catch time (s)")
-    fig.suptitle(f"Swing-up from hanging, fast design, classical friction, noise 0.002: "
-                 f"{ok.sum()}/{len(ok)} caught and balancing")
+    fig.suptitle(f"Swing-up from hanging, fast design (omega0 {rows[0]['design.omega0']:g} "
+                 f"rad/s), classical friction, noise 0.002: {ok.sum()}/{len(ok)} caught and "
+                 "balancing")
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -158,9 +158,9 @@ class SwingUpParams(Validated):
                                "s", lo=0.0, hi=60.0)
     time_limit: float = param(20.0, "stop (not_caught) when not balancing after this long",
                               "s", lo=0.0, hi=1e4, lo_open=True)
-    arm_stiffness: float = param(1.0, "arm-centring gain k_p on the arm angle while swinging",
+    arm_stiffness: float = param(2.0, "arm-centring gain k_p on the arm angle while swinging",
                                  "m/s^2/rad", lo=0.0, hi=1e3)
-    arm_damping: float = param(0.5, "arm-centring gain k_d on the arm velocity while swinging",
+    arm_damping: float = param(1.0, "arm-centring gain k_d on the arm velocity while swinging",
                                "m/s^2/(rad/s)", lo=0.0, hi=1e3)
     recentre_time: float = param(3.0, "time constant of the arm reference's return from the "
                                  "catch position to 0 (0 = at once)", "s", lo=0.0, hi=1e3)
