@@ -311,3 +311,17 @@ def test_sweep_swing_up_writes_caught_and_catch_time(tmp_path):
     # a finished file resumes with nothing to compute
     rc, res = cli_json(*args[:-2], "--resume", "--no-progress", "--json")
     assert rc == 0 and res["rows"] == 2
+
+
+def test_loop_swing_up_asked_to_stop_before_it_started_stops_with_that_reason(tmp_path):
+    from frictionlab.realtime import FakeClock, RealtimeController
+
+    cfg = build_config("fast", "classical", sets=[HANGING])
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), duration=1.0,
+                             realtime=False, manage_gc=False, sim_lockstep=True,
+                             swing_up=True)
+    ctl.stop("signal", "SIGINT")
+    loop = ctl._prepare()
+    loop.request_stop("signal", "SIGINT")
+    ctl._execute(loop)
+    assert ctl.last_stats["stop_reason"] == "signal" and ctl.last_stats["ticks"] == 0

@@ -275,6 +275,8 @@ class Loop:
         self.x0: float | None = None
         self.traceback: str | None = None
         self.swingup = swingup
+        self._sp = (None if swingup is None
+                    else SwingUp(params.controller, swingup).pack()[2])
         # swing-up state (read by other threads: phase code, catch tick)
         self.swing_w = None
         self.swing_caught_tick: int | None = None
@@ -305,9 +307,7 @@ class Loop:
         if setup:
             controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
             if self.swingup is not None:
-                sw = SwingUp(p.controller, self.swingup)
-                self._sp = sw.pack()[2]
-                w_, s_ = sw.init(0.0)
+                w_, s_ = SwingUp(p.controller, self.swingup).init(0.0)
                 swingup_step(w_, s_, p.gp, p.cp, self._sp, 0.0, 0.0, 0.0)
         gc_was = gc.isenabled()
         if self.manage_gc and setup:
@@ -405,7 +405,7 @@ class Loop:
         gp_ramp.flags.writeable = False
         s = None
         swing = self.swingup is not None
-        sp = self._sp if swing else None
+        sp = self._sp
         w = None
         first = True
         silent = unread = 0
