@@ -325,3 +325,10 @@ def test_loop_swing_up_asked_to_stop_before_it_started_stops_with_that_reason(tm
     loop.request_stop("signal", "SIGINT")
     ctl._execute(loop)
     assert ctl.last_stats["stop_reason"] == "signal" and ctl.last_stats["ticks"] == 0
+
+
+def test_cli_simulate_hanging_without_swing_up_falls_and_says_why(capsys):
+    rc = main(["simulate", "--set", "sim.initial_angle=3", "--duration", "1", "--json"])
+    cap = capsys.readouterr()
+    assert rc == 0 and json.loads(cap.out)["status"] == "fell"
+    assert "--swing-up" in cap.err and "sim.fall_angle" in cap.err

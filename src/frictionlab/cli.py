@@ -272,6 +272,11 @@ def cmd_simulate(args) -> int:
     finite("--window", args.window, 0.0)
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    if not args.swing_up and abs(cfg.sim.initial_angle) > cfg.sim.fall_angle:
+        note(args, f"frictionlab simulate: note: sim.initial_angle = "
+                   f"{cfg.sim.initial_angle:g} rad is beyond sim.fall_angle "
+                   f"({cfg.sim.fall_angle:g} rad): the run falls at once; --swing-up swings "
+                   "the pendulum up first")
     flush_notes(args)
     duration = cfg.sim.duration
     long_run = duration > 200 or args.progress
