@@ -34,6 +34,7 @@ def energy_rate(theta, theta_dot, u):
     return theta_dot * th_dd / W0**2 - theta_dot * math.sin(theta)
 
 
+@pytest.mark.slow
 def test_energy_law_sign_drives_energy_towards_the_target():
     rng = np.random.default_rng(0)
     e0 = 0.1
@@ -186,6 +187,7 @@ def test_cli_simulate_swing_up_json():
     assert "swing_up_time" not in out
 
 
+@pytest.mark.slow
 def test_loop_runs_the_simulators_swing_up_tick_for_tick(tmp_path):
     from frictionlab.realtime import FakeClock, RealtimeController
     from frictionlab.realtime.datalog import read_csv_log
