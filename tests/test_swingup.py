@@ -91,9 +91,13 @@ def test_from_hanging_at_rest_caught_and_balancing_within_10_s_with_noise():
     status = accepted(cfg, res)
     assert status in ("limit_cycle", "settled")
     assert np.abs(res.trajectory["theta"][-400:]).max() < 0.35
-    # the arm did stick while swinging (friction present throughout)
-    sw = phase == 0
-    assert np.any(np.abs(res.trajectory["arm_dot"][sw]) < 1e-9)
+    # friction acts throughout the swing: the arm slides against F_C, and its
+    # reversals (the law's sign flips) pass through zero velocity
+    sw = np.flatnonzero(phase == 0)[1:]
+    friction = np.abs(res.trajectory["friction"][sw])
+    assert np.mean(friction) > 0.9 * cfg.friction.coulomb
+    arm_dot = res.trajectory["arm_dot"][sw]
+    assert np.sum(arm_dot[1:] * arm_dot[:-1] < 0) >= 2
 
 
 def test_time_limit_stops_a_swing_that_does_not_catch():
