@@ -338,3 +338,19 @@ def test_cli_simulate_hanging_without_swing_up_falls_and_says_why(capsys):
     cap = capsys.readouterr()
     assert rc == 0 and json.loads(cap.out)["status"] == "fell"
     assert "--swing-up" in cap.err and "sim.fall_angle" in cap.err
+
+
+def test_loop_angle_limit_applies_once_balancing(tmp_path):
+    from frictionlab.realtime import FakeClock, RealtimeController
+
+    cfg = build_config("fast", "classical", sets=[HANGING])
+    clock = FakeClock()
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=clock, duration=6.0,
+                             realtime=False, manage_gc=False, sim_lockstep=True,
+                             swing_up=True)
+    # balancing from about 2 s on (caught at 0.98 s, settle 1 s): push it over at 4 s
+    clock.call_at(clock.now_ns() + round(4.0025e9), lambda: ctl.push(6.0))
+    st = ctl.run()
+    assert st["stop_reason"] == "angle_limit"
+    assert st["swing_up"]["phase"] == "balancing"
+    assert 4.0 < st["stop_tick"] * cfg.design.h < 4.6

@@ -137,6 +137,7 @@ STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_readin
                 "rig_silent", "not_upright", "rig_fault", "nonfinite_u", "paused",
                 "log_failed", "exception", "not_caught", "arm_travel", "arm_speed")
 _NAN = math.nan
+_TWO_PI = 2.0 * math.pi
 _FMAX = sys.float_info.max
 _rt_warned = False
 
@@ -549,7 +550,9 @@ class Loop:
                     s = params.controller.init(theta)
                     flags |= START
                     first = False
-                if not abs(theta) <= angle_limit and (not swing or w[W_PHASE] == BALANCING):
+                if not abs(theta) <= angle_limit and (
+                        not swing or (w[W_PHASE] == BALANCING
+                                      and not abs(math.remainder(theta, _TWO_PI)) <= angle_limit)):
                     raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
                                 f"{angle_limit} rad", r)
                 th_hat = s[S_X1]
@@ -575,7 +578,7 @@ class Loop:
                     elif ph == BALANCING:
                         if self.swing_caught_tick is None:
                             self.swing_caught_tick = int(w[W_CATCH])
-                    elif ph != BALANCING:
+                    else:
                         code = STOP_CODES[int(w[W_STOP])]
                         raise _Stop(code, _swing_stop_detail(code, self.swingup, arm,
                                                              arm_dot), r)
