@@ -29,6 +29,7 @@ from .design import DesignSpec, preset
 from .friction import KINDS, FrictionParams
 from .plant import PlantParams
 from .rig import RigScaling
+from .swingup import SwingUpParams
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -129,7 +130,8 @@ class SimParams(Validated):
     _prefix = "sim."
 
     initial_angle: float = param(0.05, "initial pendulum angle (pi: hanging down, at rest; "
-                                 "rig-sim's pendulum at the start of a session)", "rad",
+                                 "rig-sim's pendulum at the start of a session; a start "
+                                 "beyond sim.fall_angle needs --swing-up)", "rad",
                                  lo=-math.pi, hi=math.pi)
     substeps: int | None = param(None, "arm and friction integration substeps per sampling "
                                  "period (None = the model's accurate default: 10, LuGre 6)",
@@ -173,6 +175,7 @@ class Config:
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
     sim: SimParams = dataclasses.field(default_factory=SimParams)
     rig: RigScaling = dataclasses.field(default_factory=RigScaling)
+    swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
 
     def __post_init__(self) -> None:
         if self.friction_kind not in PLANT_FRICTION_KINDS:
@@ -221,9 +224,10 @@ class Config:
         return out
 
 
-_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig")
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig", "swingup")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
-            "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling}
+            "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling,
+            "swingup": SwingUpParams}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}

@@ -46,7 +46,8 @@ Output files
 chunk), reads them back for ``--resume``, and at the end rewrites the file in
 sweep order (atomically).  Columns: the varied keys, the seven features of
 :data:`frictionlab.limit_cycles.FEATURES`, ``status``, ``error`` (a
-``reduce``'s extra columns are not written).  A
+``reduce``'s extra columns are not written, except the swing-up sweep's
+``caught`` and ``catch_time``).  A
 ``.parquet`` output is written at the end from all rows; while the sweep runs
 the rows go to the crash-safe CSV journal ``FILE.parquet.partial.csv``.
 A sidecar ``FILE.meta.json`` records the base configuration, duration and
@@ -87,7 +88,9 @@ __all__ = [
 #: Sweep modes: Cartesian product of the value lists, or one key at a time.
 MODES = ("grid", "oat")
 #: Row statuses: the three of ``frictionlab simulate`` plus ``error``.
-STATUSES = ("limit_cycle", "settled", "fell", "error")
+STATUSES = ("limit_cycle", "settled", "fell", "not_caught", "error")
+#: The extra columns of a swing-up sweep (:func:`reduce_swingup`).
+SWINGUP_COLUMNS = ("caught", "catch_time")
 
 #: Largest number of points per task.
 MAX_CHUNK = 50
@@ -304,6 +307,26 @@ def reduce_features(cfg: Config, duration: float | None,
     feats = run_features(cfg, duration, window)
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
     out["status"] = feats.status
+    return out
+
+
+def reduce_swingup(cfg: Config, duration: float | None,
+                   window: float | None) -> dict[str, Any]:
+    """The reduction of a swing-up run (``sweep --swing-up``).
+
+    Returns the features and status of
+    :func:`frictionlab.swingup_sim.swingup_outcome` (``not_caught`` when it
+    never reached the balancing phase) and ``caught`` (1 when it did, else 0)
+    and ``catch_time`` (s, the catch that led to balancing; ``None`` if none).
+    """
+    from .swingup_sim import simulate_swingup, swingup_outcome
+
+    res = simulate_swingup(cfg, duration)
+    status, feats = swingup_outcome(res, window)
+    out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
+    out["status"] = status
+    out["caught"] = int(res.balanced)
+    out["catch_time"] = res.swing_up_time
     return out
 
 
@@ -790,9 +813,10 @@ def evaluate(
 # ---------------------------------------------------------------------------
 
 
-def columns(keys: Sequence[str]) -> list[str]:
-    """CSV columns: the varied keys, the features, ``status``, ``error``."""
-    return [*keys, *FEATURES, "status", "error"]
+def columns(keys: Sequence[str], extra: Sequence[str] = ()) -> list[str]:
+    """CSV columns: the varied keys, the features, ``status``, ``error``, then ``extra``
+    (:data:`SWINGUP_COLUMNS` for a swing-up sweep)."""
+    return [*keys, *FEATURES, "status", "error", *extra]
 
 
 def _header_mismatch(path: str, found: Sequence[str], cols: Sequence[str]) -> ConfigError:
@@ -854,14 +878,16 @@ class SweepFile:
     meta : dict
         What produced the rows (base configuration, duration, window); stored
         in ``FILE.meta.json`` and compared on resume.
+    extra : sequence of str
+        Columns after ``error`` (:data:`SWINGUP_COLUMNS`).
     """
 
-    def __init__(self, path: str, keys: Sequence[str], meta: dict):
+    def __init__(self, path: str, keys: Sequence[str], meta: dict, extra: Sequence[str] = ()):
         if not path.endswith((".csv", ".parquet")):
             raise ConfigError(f"--out {path}: the extension must be .csv or .parquet")
         self.path = path
         self.keys = list(keys)
-        self.cols = columns(keys)
+        self.cols = columns(keys, extra)
         self.meta = meta
         self.parquet = path.endswith(".parquet")
         self.journal = path + ".partial.csv" if self.parquet else path

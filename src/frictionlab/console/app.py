@@ -7,6 +7,9 @@ HTTP API (JSON; every ``POST`` body is a JSON object, ``{}`` when empty):
 ``GET /api/status``            controller status + running limit-cycle figures
 ``GET /api/schema``            fields, units and allowed ranges of every panel
 ``POST /api/start``            Start (``409`` when running, ``502`` when the rig fails)
+``POST /api/swingup``          Swing up: Start with the swing-up from hanging (``409``
+                               when running); the status's ``swing_up.phase`` is
+                               ``swinging``, ``caught``, ``balancing`` (or ``stopped``)
 ``POST /api/stop``             Stop (reason ``user``)
 ``POST /api/design``           State Feedback / Kalman Filter panels, Fast / Slow (+ confirm)
 ``POST /api/compensation``     Compensation on/off, Friction Type, Friction Model (+ confirm)
@@ -547,11 +550,21 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
 
     @app.post("/api/start")
     def start(body: dict | None = None):
+        return _start(None)
+
+    @app.post("/api/swingup")
+    def swingup(body: dict | None = None):
+        return _start(True)
+
+    def _start(swing_up: bool | None) -> dict:
         _guard_exited()
         if controller.running:
             raise _error(409, "the controller is already running")
         try:
-            controller.start()
+            if swing_up is None:
+                controller.start()
+            else:
+                controller.start(swing_up=swing_up)
         except RuntimeError as exc:  # includes RigError
             code = 409 if "already running" in str(exc) or "closed" in str(exc) else 502
             raise _error(code, str(exc)) from None

@@ -73,6 +73,10 @@ class RealtimeController:
         the run ends with reason ``finished`` when its schedule is done.
         Its ``describe()`` goes into the sidecar (``experiment``) and
         :meth:`status`, its ``progress`` into :meth:`status`.
+    swing_up : bool
+        Runs start with the swing-up (``swingup.*`` of ``cfg``,
+        :mod:`frictionlab.swingup`); may be changed between runs (the
+        console's Swing up button sets it for the run it starts).
     """
 
     def __init__(self, cfg: Config, backend: str | Rig = "sim", *, log_dir="runs",
@@ -80,12 +84,14 @@ class RealtimeController:
                  realtime: bool = True, manage_gc: bool = True, fsync: bool = False,
                  scaling: RigScaling | None = None, prewarm_us: float = 0.0,
                  cpu: int | None = None, sim_lockstep: bool = False,
-                 log_formats: tuple[str, ...] = ("csv",), experiment=None):
+                 log_formats: tuple[str, ...] = ("csv",), experiment=None,
+                 swing_up: bool = False):
         self.cfg = cfg
         self.experiment = experiment
         #: The experiment of the current (or last) run: ``experiment``, or the one given
         #: to :meth:`start` for that run.
         self.run_experiment = experiment
+        self.swing_up = swing_up
         self.log_formats = tuple(log_formats)
         self.sim_lockstep = sim_lockstep
         self.backend = backend
@@ -129,15 +135,17 @@ class RealtimeController:
 
     # --- life cycle ---------------------------------------------------------------
 
-    def start(self, experiment=None) -> None:
+    def start(self, experiment=None, swing_up: bool | None = None) -> None:
         """Start a run in the loop thread (open the rig, the log, go).
 
         ``experiment`` (a :class:`~.experiment.RigExperiment`, one run per
         object) runs in place of the balancing controller for this run only
         (the console's Experiments panel); on the ``sim`` backend its
-        pendulum then starts hanging.
+        pendulum then starts hanging.  ``swing_up`` True/False starts this run
+        with/without the swing-up (None: :attr:`swing_up`, the controller's
+        setting).
         """
-        loop = self._prepare(experiment)
+        loop = self._prepare(experiment, swing_up)
         self._thread = threading.Thread(target=self._execute, args=(loop,),
                                         name="frictionlab-rt", daemon=True)
         self._thread.start()
@@ -186,7 +194,8 @@ class RealtimeController:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _prepare(self, experiment=None) -> Loop:
+    def _prepare(self, experiment=None, swing_up: bool | None = None) -> Loop:
+        swing_up = self.swing_up if swing_up is None else bool(swing_up)
         with self._lock:
             if self._closed:
                 raise RuntimeError("the controller is closed")
@@ -210,7 +219,9 @@ class RealtimeController:
                             scaling=self.scaling, duration=self.duration,
                             realtime=self.realtime, manage_gc=self.manage_gc,
                             prewarm_us=self.prewarm_us, cpu=self.cpu,
-                            experiment=experiment)
+                            experiment=experiment,
+                            swingup=(self.cfg.swingup if swing_up and experiment is None
+                                     else None))
                 self._writer = None
                 if self.log_dir is not None:
                     self._writer = self._open_log(loop)
@@ -471,12 +482,13 @@ class RealtimeController:
                                  "phase": exp.phase}
         if loop is None:
             out.update({"stop_reason": None, "ticks": 0, "missed": 0, "overruns": 0,
-                        "t": 0.0})
+                        "t": 0.0, "swing_up": None})
             return out
         st = self._stats()
         out.update(st)
         out["t"] = loop.k * loop.h
         out["rt_note"] = loop.rt_note
+        out["swing_up"] = loop.swing_status()
         out.pop("stall_list", None)
         return out
 

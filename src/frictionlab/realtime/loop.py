@@ -105,11 +105,36 @@ from ..controller import (
     reset_compensator,
 )
 from ..rig import RigScaling
+from ..swingup import (
+    BALANCING,
+    CAUGHT,
+    PHASES,
+    STOP_CODES,
+    SWINGING,
+    W_CATCH,
+    W_NCATCH,
+    W_PHASE,
+    W_STOP,
+    SwingUp,
+    SwingUpParams,
+    swingup_step,
+)
 from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
 from .protocol import STATUS_HELD, STATUS_WATCHDOG
 from .rigs import BadReading, Rig
-from .samples import CHANGED, COMPENSATE, MISSED, NO_READING, OVERRUN, START, STOP, Sample
+from .samples import (
+    CAUGHT_FLAG,
+    CHANGED,
+    COMPENSATE,
+    MISSED,
+    NO_READING,
+    OVERRUN,
+    START,
+    STOP,
+    SWINGING_FLAG,
+    Sample,
+)
 from .stats import Histogram, StallLog
 
 __all__ = ["STOP_REASONS", "ExperimentEnd", "Loop", "Safety"]
@@ -117,8 +142,10 @@ __all__ = ["STOP_REASONS", "ExperimentEnd", "Loop", "Safety"]
 #: Every stop reason the loop records.
 STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_reading",
                 "rig_silent", "not_upright", "rig_fault", "nonfinite_u", "paused",
-                "log_failed", "exception", "finished", "experiment_limit")
+                "log_failed", "exception", "finished", "experiment_limit", "not_caught",
+                "arm_travel", "arm_speed")
 _NAN = math.nan
+_TWO_PI = 2.0 * math.pi
 _FMAX = sys.float_info.max
 _rt_warned = False
 
@@ -211,6 +238,13 @@ class Loop:
         ``not_upright`` and ``angle_limit`` checks are off (the pendulum hangs
         or swings freely); every other check, the timing and the logging are
         those of a balancing run.
+    swingup : SwingUpParams, optional
+        Start hanging (or anywhere) and swing up (:mod:`frictionlab.swingup`,
+        the simulator's compiled :func:`~frictionlab.swingup.swingup_step`):
+        no ``not_upright`` check at the start, the angle limit only once the
+        phase is ``balancing``, and the swing-up's own stops ``not_caught``
+        (its time limit, counted in executed ticks), ``arm_travel`` and
+        ``arm_speed``.
 
     Attributes read by other threads (single-word updates, no locks): ``k``,
     ``ticks``, ``missed``, ``overruns``, ``rig_timeouts``, ``jitter``,
@@ -222,7 +256,8 @@ class Loop:
                  safety: Safety | None = None, scaling: RigScaling | None = None,
                  duration: float | None = None, realtime: bool = True,
                  manage_gc: bool = True, priority: int = 50, prewarm_us: float = 0.0,
-                 cpu: int | None = None, experiment=None):
+                 cpu: int | None = None, experiment=None,
+                 swingup: SwingUpParams | None = None):
         self.rig = rig
         self.experiment = experiment
         self.clock = clock
@@ -271,6 +306,12 @@ class Loop:
         #: The controller state (:mod:`frictionlab.controller`'s table) from the first
         #: reading on, updated in place by each tick (for the sidecar's adapted levels).
         self.state = None
+        self.swingup = swingup
+        self._sp = (None if swingup is None
+                    else SwingUp(params.controller, swingup).pack()[2])
+        # swing-up state (read by other threads: phase code, catch tick)
+        self.swing_w = None
+        self.swing_caught_tick: int | None = None
 
     # --- requests from other threads -------------------------------------------
 
@@ -297,6 +338,9 @@ class Loop:
         p = self.params
         if setup and self.experiment is None:
             controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
+            if self.swingup is not None:
+                w_, s_ = SwingUp(p.controller, self.swingup).init(0.0)
+                swingup_step(w_, s_, p.gp, p.cp, self._sp, 0.0, 0.0, 0.0)
         gc_was = gc.isenabled()
         if self.manage_gc and setup:
             gc.collect()
@@ -399,6 +443,9 @@ class Loop:
         gp_ramp = gp_work.view()
         gp_ramp.flags.writeable = False
         s = None
+        swing = self.swingup is not None
+        sp = self._sp
+        w = None
         first = True
         silent = unread = 0
         rx_seen = rig.rx_frames
@@ -539,6 +586,12 @@ class Loop:
                         raise _Stop("nonfinite_u", f"the experiment computed u = {float(u)!r}",
                                     r)
                 else:
+                    if first and swing:
+                        w, s = SwingUp(params.controller, self.swingup).init(theta)
+                        self.swing_w = w
+                        self.state = s
+                        flags |= START
+                        first = False
                     if first:
                         if not abs(theta) <= safety.start_tolerance:
                             raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the "
@@ -548,7 +601,10 @@ class Loop:
                         self.state = s
                         flags |= START
                         first = False
-                    if not abs(theta) <= angle_limit:
+                    if not abs(theta) <= angle_limit and (
+                            not swing or (w[W_PHASE] == BALANCING
+                                          and not abs(math.remainder(theta, _TWO_PI))
+                                          <= angle_limit)):
                         raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
                                     f"{angle_limit} rad", r)
                     th_hat = s[S_X1]
@@ -562,7 +618,24 @@ class Loop:
                             gp = params.gp
                         else:
                             gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
-                    u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
+                    if swing:
+                        u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, theta, arm, arm_dot)
+                        ph = w[W_PHASE]
+                        if ph == SWINGING:
+                            flags |= SWINGING_FLAG
+                            th_hat = w[3]
+                            thd_hat = w[4]
+                        elif ph == CAUGHT:
+                            flags |= CAUGHT_FLAG
+                        elif ph == BALANCING:
+                            if self.swing_caught_tick is None:
+                                self.swing_caught_tick = int(w[W_CATCH])
+                        else:
+                            code = STOP_CODES[int(w[W_STOP])]
+                            raise _Stop(code, _swing_stop_detail(code, self.swingup, arm,
+                                                                 arm_dot), r)
+                    else:
+                        u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
                     if not -_FMAX <= u <= _FMAX:
                         raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
                                     "from the estimates theta, theta', arm, arm', z = "
@@ -633,6 +706,18 @@ class Loop:
                 self._housekeeping(k)
             k += 1
 
+    def swing_status(self) -> dict | None:
+        """The swing-up's phase, catch time and number of catches (None: no swing-up)."""
+        if self.swingup is None:
+            return None
+        w = self.swing_w
+        if w is None:
+            return {"phase": "swinging", "swing_up_time": None, "catches": 0}
+        caught = self.swing_caught_tick
+        return {"phase": PHASES[int(w[W_PHASE])],
+                "swing_up_time": None if caught is None else caught * self.h,
+                "catches": int(w[W_NCATCH])}
+
     def _housekeeping(self, k: int) -> None:
         """Scheduled garbage collection (outside the tick)."""
         if not self.manage_gc:
@@ -680,5 +765,15 @@ class Loop:
             "stop_reason": self.stop_reason,
             "stop_detail": self.stop_detail,
             "stop_tick": self.stop_tick,
+            **({"swing_up": self.swing_status()} if self.swingup is not None else {}),
             **self.rig.counters(),
         }
+
+
+def _swing_stop_detail(code: str, p: SwingUpParams, arm: float, arm_dot: float) -> str:
+    if code == "not_caught":
+        return f"the swing-up did not catch the pendulum within {p.time_limit:g} s"
+    if code == "arm_travel":
+        return f"|Omega| = {abs(arm):.3f} rad > swingup.arm_limit {p.arm_limit:g} rad"
+    return (f"|Omega'| = {abs(arm_dot):.3f} rad/s > swingup.arm_speed_limit "
+            f"{p.arm_speed_limit:g} rad/s")

@@ -263,6 +263,13 @@
     $("setup").textContent = `backend ${st.backend} (${friction}) · design ${(st.design && st.design.preset) || "custom"} · ` +
       `compensation ${comp.enabled ? "on" : "off"} (${comp.kind || "-"})` + (st.pending_changes ? " · change pending" : "");
 
+    const sw = st.swing_up;
+    const phase = $("swing-phase");
+    phase.dataset.phase = sw ? sw.phase : "";
+    phase.textContent = sw ? ` · swing-up: ${sw.phase}` +
+      (sw.swing_up_time !== null && sw.swing_up_time !== undefined ? ` (caught at ${fmt(sw.swing_up_time, 4)} s)` : "") : "";
+    $("swingup").disabled = running || !!(st.console && st.console.exited);
+
     const start = $("start");
     start.disabled = !!(st.console && st.console.exited);
     start.textContent = running ? "Stop" : "Start";
@@ -544,6 +551,11 @@
     $("start").addEventListener("click", async () => {
       const running = ui.status && ui.status.running;
       const r = await api("POST", running ? "/api/stop" : "/api/start");
+      if (!r.ok) setMsg("feedback-msg", "refused: " + r.data.detail, true);
+    });
+
+    $("swingup").addEventListener("click", async () => {
+      const r = await api("POST", "/api/swingup");
       if (!r.ok) setMsg("feedback-msg", "refused: " + r.data.detail, true);
     });
 
