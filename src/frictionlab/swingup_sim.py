@@ -2,7 +2,7 @@ r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.swingup`).
 
 The runner of :func:`frictionlab.swingup.swingup_step` on the simulator's
 plant (:func:`frictionlab.simulation.plant_tick`, the same compiled
-integrator, measurement noise and quantisation as
+integrator, sensor (:func:`frictionlab.sensor.measure`) and friction drift as
 :func:`frictionlab.simulation.simulate_config`).  The pendulum's angle is
 unbounded in the plant (it may go over the top); the recorded ``theta`` and
 ``theta_m`` columns are wrapped into [-pi, pi).
@@ -22,10 +22,10 @@ import numpy as np
 
 from ._jit import jit
 from .config import Config
-from .controller import Controller
-from .friction import KINDS
-from .rig import quantize
-from .simulation import NC, Trajectory, _pack_plant, _quanta, make_controller, plant_tick
+from .controller import ADAPTIVE, G_COMP, S_FC_HAT, S_FS_HAT, Controller
+from .friction import KINDS, P_DRIFT, P_DRIFT_TIME, P_FC, P_FS, drifted_params, resolve_drift
+from .sensor import measure
+from .simulation import NC, Trajectory, _pack_plant, make_controller, make_sensor, plant_tick
 from .swingup import (
     BALANCING,
     PHASES,
@@ -46,26 +46,21 @@ _OK, _FELL, _STOPPED = 0, 1, 2
 
 
 @jit
-def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, noise, seed,
-                 quanta, fall_angle, out, phase_out):
+def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
+                 fall_angle, out, phase_out):
     """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
     h = gp[11]
     w0 = gp[8]
-    noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
-    if noisy and seed >= 0:
-        np.random.seed(seed)
+    adaptive = gp[G_COMP] == ADAPTIVE
+    fc_fixed = cp[P_FC] if gp[G_COMP] != 0.0 else 0.0
+    fs_fixed = cp[P_FS] if gp[G_COMP] != 0.0 else 0.0
+    drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
+    fpt = fp.copy()
     mem = 0.0
+    x0 = 0.0
     for k in range(n_ticks):
-        th_m = x[0]
-        arm_m = x[2]
-        armd_m = x[3]
-        if noisy:
-            th_m += noise[0] * np.random.standard_normal()
-            arm_m += noise[1] * np.random.standard_normal()
-            armd_m += noise[2] * np.random.standard_normal()
-        th_m = quantize(wrap_angle(th_m), quanta[0])
-        arm_m = quantize(arm_m, quanta[1])
-        armd_m = quantize(armd_m, quanta[2])
+        th_m, arm_m, armd_m, x0 = measure(sens, x[0], x[2], x[3], k, x0)
+        th_m = wrap_angle(th_m)
         est = (s[0], w0 * s[1], s[2], s[3], s[5])
         u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
         balancing = w[W_PHASE] >= 1.0 and w[W_PHASE] <= 2.0
@@ -84,8 +79,12 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, n
         out[k, 12] = x[2]
         out[k, 13] = x[3]
         out[k, 14] = x[4]
+        out[k, 16] = s[S_FC_HAT] if adaptive else fc_fixed
+        out[k, 17] = s[S_FS_HAT] if adaptive else fs_fixed
         phase_out[k] = w[W_PHASE]
-        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
+        if drifting:
+            drifted_params(fp, k * h, fpt)
+        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         out[k, 15] = f_mean
         if w[W_PHASE] == 3.0:
             return k + 1, _STOPPED
@@ -152,11 +151,10 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
-    noise = np.full(3, cfg.sim.noise)
     done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, _pack_plant(cfg),
-                                KINDS.index(cfg.friction_kind), cfg.friction.pack(), gp, cp,
-                                sp, s, w, noise, cfg.sim.seed, _quanta(cfg),
-                                cfg.sim.fall_angle, out, phase)
+                                KINDS.index(cfg.friction_kind),
+                                resolve_drift(cfg.friction.pack(), n * h), gp, cp, sp, s, w,
+                                make_sensor(cfg), cfg.sim.fall_angle, out, phase)
     phase = phase[:done]
     balanced = bool((phase == BALANCING).any())
     stop = STOP_CODES[int(w[W_STOP])] if status == _STOPPED else ""
