@@ -1029,6 +1029,38 @@ def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
         served.close()
 
 
+@pytest.mark.slow
+def test_swing_up_button_starts_a_swing_up_and_the_phase_is_shown(tmp_path):
+    import math
+
+    cfg = build_config("fast", "classical", sets=[("sim.initial_angle", math.pi)])
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05)
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        st = client.get("/api/status").json()
+        assert st["swing_up"] is None
+        # Start (balancing only) refuses the hanging pendulum ...
+        assert client.post("/api/start", json={}).status_code == 200
+        assert ctl.wait(5.0)
+        assert client.get("/api/status").json()["stop_reason"] == "not_upright"
+        # ... Swing up swings it up, catches it and balances it
+        r = client.post("/api/swingup", json={})
+        assert r.status_code == 200
+        assert r.json()["status"]["swing_up"]["phase"] in ("swinging", "caught", "balancing")
+        assert client.post("/api/swingup", json={}).status_code == 409
+        seen = set()
+        while (st := client.get("/api/status").json())["t"] < 4.0:
+            assert st["running"], (st["stop_reason"], st["stop_detail"])
+            seen.add(st["swing_up"]["phase"])
+        assert st["swing_up"]["phase"] == "balancing" and "swinging" in seen
+        assert 0 < st["swing_up"]["swing_up_time"] < 4.0
+        assert client.post("/api/stop", json={}).status_code == 200
+        page = client.get("/").text
+        assert 'id="swingup"' in page and 'id="swing-phase"' in page
+    ctl.close()
+
+
 def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
     """The Experiments panel: refused without confirm (the motor moves), bad options and
     limits refused at their field, a confirmed run goes through the loop on the connected
@@ -1064,36 +1096,4 @@ def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
         assert exp["log"] and os.path.exists(exp["log"])
         st = client.get("/api/status").json()
         assert st["stop_reason"] == "finished" and st["experiment"]["progress"] == 1.0
-    ctl.close()
-
-
-@pytest.mark.slow
-def test_swing_up_button_starts_a_swing_up_and_the_phase_is_shown(tmp_path):
-    import math
-
-    cfg = build_config("fast", "classical", sets=[("sim.initial_angle", math.pi)])
-    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
-                             manage_gc=False)
-    app = create_app(ctl, None, frame_period=0.01, status_period=0.05)
-    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
-        st = client.get("/api/status").json()
-        assert st["swing_up"] is None
-        # Start (balancing only) refuses the hanging pendulum ...
-        assert client.post("/api/start", json={}).status_code == 200
-        assert ctl.wait(5.0)
-        assert client.get("/api/status").json()["stop_reason"] == "not_upright"
-        # ... Swing up swings it up, catches it and balances it
-        r = client.post("/api/swingup", json={})
-        assert r.status_code == 200
-        assert r.json()["status"]["swing_up"]["phase"] in ("swinging", "caught", "balancing")
-        assert client.post("/api/swingup", json={}).status_code == 409
-        seen = set()
-        while (st := client.get("/api/status").json())["t"] < 4.0:
-            assert st["running"], (st["stop_reason"], st["stop_detail"])
-            seen.add(st["swing_up"]["phase"])
-        assert st["swing_up"]["phase"] == "balancing" and "swinging" in seen
-        assert 0 < st["swing_up"]["swing_up_time"] < 4.0
-        assert client.post("/api/stop", json={}).status_code == 200
-        page = client.get("/").text
-        assert 'id="swingup"' in page and 'id="swing-phase"' in page
     ctl.close()

@@ -2,7 +2,7 @@ r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.swingup`).
 
 The runner of :func:`frictionlab.swingup.swingup_step` on the simulator's
 plant (:func:`frictionlab.simulation.plant_tick`, the same compiled
-integrator, measurement noise and quantisation as
+integrator, sensor (:func:`frictionlab.sensor.measure`) and friction drift as
 :func:`frictionlab.simulation.simulate_config`).  The pendulum's angle is
 unbounded in the plant (it may go over the top); the recorded ``theta`` and
 ``theta_m`` columns are wrapped into [-pi, pi).
@@ -22,8 +22,8 @@ import numpy as np
 
 from ._jit import jit
 from .config import Config
-from .controller import Controller
-from .friction import KINDS, P_DRIFT, P_DRIFT_TIME, drifted_params, resolve_drift
+from .controller import ADAPTIVE, G_COMP, S_FC_HAT, S_FS_HAT, Controller
+from .friction import KINDS, P_DRIFT, P_DRIFT_TIME, P_FC, P_FS, drifted_params, resolve_drift
 from .sensor import measure
 from .simulation import NC, Trajectory, _pack_plant, make_controller, make_sensor, plant_tick
 from .swingup import (
@@ -46,23 +46,20 @@ _OK, _FELL, _STOPPED = 0, 1, 2
 
 
 @jit
-def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sensor,
+def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
                  fall_angle, out, phase_out):
-    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code).
-
-    The measurements are :func:`frictionlab.sensor.measure` with the sensor
-    ``sensor`` (the same model as :func:`frictionlab.simulation.simulate_config`
-    and the emulated rig); the plant's friction drifts as there
-    (``friction.drift``).
-    """
+    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
     h = gp[11]
     w0 = gp[8]
-    mem = 0.0
-    x0 = 0.0
+    adaptive = gp[G_COMP] == ADAPTIVE
+    fc_fixed = cp[P_FC] if gp[G_COMP] != 0.0 else 0.0
+    fs_fixed = cp[P_FS] if gp[G_COMP] != 0.0 else 0.0
     drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
     fpt = fp.copy()
+    mem = 0.0
+    x0 = 0.0
     for k in range(n_ticks):
-        th_m, arm_m, armd_m, x0 = measure(sensor, x[0], x[2], x[3], k, x0)
+        th_m, arm_m, armd_m, x0 = measure(sens, x[0], x[2], x[3], k, x0)
         th_m = wrap_angle(th_m)
         est = (s[0], w0 * s[1], s[2], s[3], s[5])
         u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
@@ -82,6 +79,8 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, s
         out[k, 12] = x[2]
         out[k, 13] = x[3]
         out[k, 14] = x[4]
+        out[k, 16] = s[S_FC_HAT] if adaptive else fc_fixed
+        out[k, 17] = s[S_FS_HAT] if adaptive else fs_fixed
         phase_out[k] = w[W_PHASE]
         if drifting:
             drifted_params(fp, k * h, fpt)
@@ -152,9 +151,9 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
-    fp = resolve_drift(cfg.friction.pack(), n * h)
     done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, _pack_plant(cfg),
-                                KINDS.index(cfg.friction_kind), fp, gp, cp, sp, s, w,
+                                KINDS.index(cfg.friction_kind),
+                                resolve_drift(cfg.friction.pack(), n * h), gp, cp, sp, s, w,
                                 make_sensor(cfg), cfg.sim.fall_angle, out, phase)
     phase = phase[:done]
     balanced = bool((phase == BALANCING).any())

@@ -67,16 +67,16 @@ class RealtimeController:
     sim_lockstep : bool
         ``sim`` backend: one plant step per executed tick (see
         :class:`~.rigs.SimRig`).
+    swing_up : bool
+        Runs start with the swing-up (``swingup.*`` of ``cfg``,
+        :mod:`frictionlab.swingup`); may be changed between runs (the
+        console's Swing up button sets it for the run it starts).
     experiment : object, optional
         Run an identification experiment (:mod:`.experiment`) in place of
         the balancing controller: same loop, timing, safety and logging;
         the run ends with reason ``finished`` when its schedule is done.
         Its ``describe()`` goes into the sidecar (``experiment``) and
         :meth:`status`, its ``progress`` into :meth:`status`.
-    swing_up : bool
-        Runs start with the swing-up (``swingup.*`` of ``cfg``,
-        :mod:`frictionlab.swingup`); may be changed between runs (the
-        console's Swing up button sets it for the run it starts).
     """
 
     def __init__(self, cfg: Config, backend: str | Rig = "sim", *, log_dir="runs",
@@ -87,11 +87,11 @@ class RealtimeController:
                  log_formats: tuple[str, ...] = ("csv",), experiment=None,
                  swing_up: bool = False):
         self.cfg = cfg
+        self.swing_up = swing_up
         self.experiment = experiment
         #: The experiment of the current (or last) run: ``experiment``, or the one given
         #: to :meth:`start` for that run.
         self.run_experiment = experiment
-        self.swing_up = swing_up
         self.log_formats = tuple(log_formats)
         self.sim_lockstep = sim_lockstep
         self.backend = backend
@@ -220,8 +220,8 @@ class RealtimeController:
                             realtime=self.realtime, manage_gc=self.manage_gc,
                             prewarm_us=self.prewarm_us, cpu=self.cpu,
                             experiment=experiment,
-                            swingup=(self.cfg.swingup if swing_up and experiment is None
-                                     else None))
+                            swingup=self.cfg.swingup if swing_up and experiment is None
+                            else None)
                 self._writer = None
                 if self.log_dir is not None:
                     self._writer = self._open_log(loop)

@@ -244,7 +244,7 @@ class Loop:
         no ``not_upright`` check at the start, the angle limit only once the
         phase is ``balancing``, and the swing-up's own stops ``not_caught``
         (its time limit, counted in executed ticks), ``arm_travel`` and
-        ``arm_speed``.
+        ``arm_speed``.  Not with ``experiment``.
 
     Attributes read by other threads (single-word updates, no locks): ``k``,
     ``ticks``, ``missed``, ``overruns``, ``rig_timeouts``, ``jitter``,
@@ -258,6 +258,8 @@ class Loop:
                  manage_gc: bool = True, priority: int = 50, prewarm_us: float = 0.0,
                  cpu: int | None = None, experiment=None,
                  swingup: SwingUpParams | None = None):
+        if experiment is not None and swingup is not None:
+            raise ValueError("a run is an experiment or a swing-up, not both")
         self.rig = rig
         self.experiment = experiment
         self.clock = clock
@@ -602,9 +604,8 @@ class Loop:
                         flags |= START
                         first = False
                     if not abs(theta) <= angle_limit and (
-                            not swing or (w[W_PHASE] == BALANCING
-                                          and not abs(math.remainder(theta, _TWO_PI))
-                                          <= angle_limit)):
+                            not swing or (w[W_PHASE] == BALANCING and not abs(
+                                math.remainder(theta, _TWO_PI)) <= angle_limit)):
                         raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
                                     f"{angle_limit} rad", r)
                     th_hat = s[S_X1]

@@ -22,10 +22,10 @@ running in real time:
   (the controller captures it as x_0).
 * **Sessions.**  ``HELLO`` starts a session: the "operator" balances the
   pendulum upright (``sim.initial_angle``, at rest; the arm stays where it
-  is) and holds it there until the first COMMAND arrives.
-  With ``sim.initial_angle`` = pi (``rig-sim --hanging``) the pendulum hangs
-  at rest instead, as the identification experiments and ``run --swing-up``
-  want it.
+  is) and holds it there until the first COMMAND arrives.  With
+  ``sim.initial_angle`` = pi (3.14159; ``rig-sim --hanging``) the pendulum
+  hangs at rest instead, as the identification experiments and
+  ``run --swing-up`` want it.
 * **The operator's hand.**  CONTROL frames ``{"cmd": "hand", ...}``
   (:data:`HAND`) turn the pendulum or the arm one full lap by hand (App.
   B.1, B.2: the hand sets that angle and its velocity along a smooth lap of
