@@ -22,8 +22,14 @@ Figures (sets per second of wall time):
   timed on the first ``--serial-points`` sets (default 200);
 * ``ceiling_sets_per_s`` - cores / the CPU time of the simulation alone (one
   30 s run without recording or features, :func:`simulate_config` with
-  ``record=False``, best of the serial timings): the rate if the cores did
-  nothing but simulate; ``fraction_of_ceiling`` = ``sets_per_s`` / it.
+  ``record=False``): the rate if the cores did nothing but simulate;
+  ``fraction_of_ceiling`` = ``sets_per_s`` / it.  On a busy machine the
+  wall-clock rates fall with the share of the cores the benchmark gets, so
+  the CPU times are compared too: ``batch_fraction_simulation`` is the
+  simulation alone over the compiled batch on one thread (both timed in
+  alternation on the same 100 sets), and ``threads_cpu_ms`` the CPU per set
+  of the threaded sweep; ``cores / threads_cpu_ms`` is its rate with the
+  cores free.
 
 Besides wall-clock rates it prints the CPU time per set summed over all the
 benchmark's processes (main, pool or Dask workers, forkserver, nannies): on a
@@ -105,17 +111,22 @@ def _rates(fn, n_sets: int, repeats: int) -> tuple[float, float, float, list]:
             1e3 * statistics.median(cpu) / n_sets, rows)
 
 
-def sim_only_ms(base: Config, points: list[dict], repeats: int) -> float:
-    """CPU ms of the simulation alone per set (no recording, no features), best of
-    ``repeats`` passes over ``points``."""
+def sim_vs_batch_ms(base: Config, points: list[dict], repeats: int) -> tuple[float, float]:
+    """CPU ms per set of the simulation alone (no recording, no features) and of the
+    compiled batch on one thread (configurations built, simulation, features, rows),
+    measured in alternation on the same ``points`` (best of ``repeats`` passes each),
+    so that a busy machine disturbs both alike."""
     cfgs = [base.with_values(p) for p in points]
-    best = math.inf
+    sim, bat = math.inf, math.inf
     for _ in range(repeats):
         t0 = time.process_time()
         for cfg in cfgs:
             simulate_config(cfg, DURATION, record=False)
-        best = min(best, (time.process_time() - t0) / len(cfgs))
-    return 1e3 * best
+        sim = min(sim, (time.process_time() - t0) / len(cfgs))
+        t0 = time.process_time()
+        evaluate(base, points, duration=DURATION, workers=1)
+        bat = min(bat, (time.process_time() - t0) / len(cfgs))
+    return 1e3 * sim, 1e3 * bat
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -140,10 +151,11 @@ def main(argv: list[str] | None = None) -> dict:
     sub = points[:args.serial_points]
     evaluate(base, sub[:2], duration=DURATION, workers=1)  # load the compiled code
     evaluate(base, sub[:4 * cores], duration=DURATION, workers=cores)
-    sim_ms = sim_only_ms(base, sub[:100], args.repeats)
+    sim_ms, batch_ms = sim_vs_batch_ms(base, sub[:100], 2 * args.repeats)
     ceiling = cores * 1e3 / sim_ms
-    print(f"simulation alone: {sim_ms:.2f} ms CPU per set; ceiling {ceiling:.0f} sets/s on "
-          f"{cores} cores")
+    print(f"simulation alone: {sim_ms:.2f} ms CPU per set (ceiling {ceiling:.0f} sets/s on "
+          f"{cores} cores); the compiled batch on one thread, alternated with it: "
+          f"{batch_ms:.2f} ms ({100 * sim_ms / batch_ms:.0f} % simulation)")
     serial, serial_med, serial_cpu, serial_rows = _rates(
         lambda: evaluate(base, sub, duration=DURATION, workers=1), len(sub), args.repeats)
     print(f"serial (compiled batch, one thread): {serial:.1f} sets/s (median "
@@ -154,6 +166,8 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"threads (default): {threads:.1f} sets/s (median {threads_med:.1f}), "
           f"{100 * threads / ceiling:.0f} % of the ceiling; CPU {threads_cpu:.2f} ms per set, "
           f"i.e. {cores * 1e3 / threads_cpu:.0f} sets/s if {cores} cores were free")
+    print(f"threads vs one thread, CPU per set: {threads_cpu:.2f} / {serial_cpu:.2f} ms "
+          f"(x{threads_cpu / serial_cpu:.2f})")
 
     t0 = time.perf_counter()
     evaluate(base, points[:4 * cores], duration=DURATION, dask="local", workers=cores,
@@ -185,6 +199,9 @@ def main(argv: list[str] | None = None) -> dict:
               "dask_vs_threads": round(dask / threads, 3),
               "per_run_pool_sets_per_s": round(pool, 1),
               "serial_sets_per_s": round(serial, 1), "sim_only_ms": round(sim_ms, 3),
+              "batch_one_thread_ms": round(batch_ms, 3),
+              "batch_fraction_simulation": round(sim_ms / batch_ms, 3),
+              "threads_cpu_ms": round(threads_cpu, 3),
               "ceiling_sets_per_s": round(ceiling, 1),
               "fraction_of_ceiling": round(threads / ceiling, 3), "identical": identical}
     print(json.dumps(result))

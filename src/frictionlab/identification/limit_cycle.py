@@ -30,11 +30,14 @@ Search
 1. Global: :func:`scipy.optimize.differential_evolution` over the bounds
    (in coordinates normalised to [0, 1]); each generation's population is
    evaluated in one batch through :func:`frictionlab.sweep.evaluate` (all
-   experiments of all members in one call, so a process pool or a Dask
-   cluster works on the whole generation).  The engine's workers are chosen
-   once for the whole fit (:func:`frictionlab.sweep.auto_workers` on the
-   fit's largest number of runs): a generation alone is too small to pay
-   for a process pool, the fit is not, and the pool is kept.
+   experiments of all members in one call of the compiled batch evaluator,
+   :mod:`frictionlab.batch`, on the engine's threads, or on a Dask cluster).
+   The engine's workers are chosen once for the whole fit
+   (:func:`frictionlab.sweep.auto_workers` on the fit's largest number of
+   runs: all cores, one thread for a fit under about half a second of
+   work).  The global search may run on shorter runs than the rest
+   (``search_duration``, ``search_window``): it only has to find the basin
+   of the optimum, which the polish then refines on full-length runs.
 2. Local: :func:`scipy.optimize.least_squares` (trust region reflective,
    within the bounds) from the best point, with a central-difference
    Jacobian whose relative step (default 1 %) lies well above the
@@ -883,8 +886,8 @@ def fit_limit_cycle(
         once for the whole fit by :func:`frictionlab.sweep.auto_workers`
         from the fit's largest number of runs (all cores unless the whole
         fit is under about half a second of serial work), not per
-        generation: a generation alone is too small to pay a pool's
-        start-up, the fit is not, and the pool is started once and kept.
+        generation.  With the default reduction these are threads of the
+        compiled batch evaluator.
     seed : int
         Seed of the global search.
     maxiter : int
