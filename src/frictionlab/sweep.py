@@ -375,11 +375,13 @@ def _check_reduce(reduce: Any) -> None:
 
 
 def _warm_up() -> None:
-    """Load the compiled simulator once (from numba's on-disk cache)."""
+    """Load the compiled simulator and batch evaluator once (from numba's on-disk cache)."""
+    from .batch import evaluate_rows
     from .config import build_config
     from .simulation import run_features
 
     run_features(build_config(), 2.0)
+    evaluate_rows(build_config(), [{}], 2.0, None, threads=1)
 
 
 #: Set only in the environment of the forkserver this module starts: importing
