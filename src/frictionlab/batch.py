@@ -19,8 +19,9 @@ Two drivers: :func:`_batch_serial` (one thread; the Dask and process-pool
 workers of :mod:`frictionlab.sweep`) and :func:`_batch_threads` (numba
 ``prange`` over ``threads`` numba threads, the GIL released; the sets are
 dealt to the threads in turn, so that short runs - a pendulum that falls - do
-not pile up on one thread).  numba's default threading layer (``workqueue``)
-must not be entered by two Python threads at once; :func:`run` holds a lock.
+not pile up on one thread).  numba's ``workqueue`` threading layer (its
+fallback when neither OpenMP nor TBB is available) must not be entered by
+two Python threads at once; :func:`run` holds a lock.
 
 numba is imported on the first batch, as for every kernel
 (:mod:`frictionlab._jit`).
@@ -47,7 +48,7 @@ from .simulation import NC, _pack_plant, _quanta, _run, make_controller, run_tic
 #: it when it compiles :func:`_batch_threads`, on that batch's first call.
 prange = range
 
-__all__ = ["Batch", "evaluate_rows", "max_threads", "prepare", "run"]
+__all__ = ["Batch", "evaluate_rows", "max_threads", "prepare", "rows", "run"]
 
 #: Feature-extraction settings of :func:`frictionlab.limit_cycles.features`'s defaults.
 REL_PROMINENCE, SETTLE_TOL, SMOOTH = 0.02, 2e-3, 9
