@@ -113,6 +113,8 @@ GOOD = {"experiments": [{"design": "fast", "features": {"period": 1.0, "peak1": 
             "friction.coulomb=2:3", "--bounds", "friction.stiction=0.5:1.5"],
      "no stiction >= Coulomb"),
     ("{not json", [], "not valid JSON"),
+    (GOOD, ["--search-duration", "0"], "--search-duration must be > 0"),
+    (GOOD, ["--search-duration", "15", "--search-window", "20"], "--search-window"),
 ])
 def test_limit_cycle_infeasible_input_exits_2(capsys, tmp_path, measured, extra, match):
     argv = ["identify", "limit-cycle", "--measured", _write(tmp_path, measured),

@@ -372,3 +372,46 @@ def test_a_broken_backend_raises_instead_of_fitting_penalties():
 
     with pytest.raises(RuntimeError, match="boom"):
         fit_limit_cycle(exps, ["friction.coulomb"], evaluate=broken, maxiter=1, popsize=2)
+
+
+# ---------------------------------------------------------------------------
+# a shorter global search (search_duration / search_window)
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_short_search_runs_reach_the_optimum_of_the_full_search():
+    """Two keys from two experiments: the search on 15 s runs (10 s window), polished
+    on 30 s runs, lands on the optimum of the 30 s search (the truth) at the same
+    cost, and every run of the polish and of the reported cost is 30 s long."""
+    truth = {"friction.coulomb": 1.35, "plant.omega0": 7.1}
+    exps = parse_experiments(_measured(truth))
+    keys = list(truth)
+    durations = []
+
+    def spy(base, points, **kw):
+        durations.append(kw["duration"])
+        return sweep.evaluate(base, points, **kw)
+
+    kw = {"duration": DURATION, "window": WINDOW, "maxiter": 8, "popsize": 5, "seed": 0}
+    full = fit_limit_cycle(exps, keys, **kw)
+    short = fit_limit_cycle(exps, keys, search_duration=15.0, evaluate=spy, **kw)
+    assert set(durations) == {15.0, DURATION}
+    assert durations[-1] == DURATION  # the final evaluation and line fit: full runs
+    for k, v in truth.items():
+        assert short.estimate[k] == pytest.approx(v, rel=0.01)
+        assert short.estimate[k] == pytest.approx(full.estimate[k], rel=0.01)
+    assert short.cost <= 1.01 * full.cost + 1e-6
+
+
+def test_search_settings_default_and_validation():
+    from frictionlab.identification.limit_cycle import search_settings
+
+    assert search_settings(30.0, 20.0, None, None) == (30.0, 20.0)
+    assert search_settings(30.0, 20.0, 15.0, None) == (15.0, 10.0)
+    assert search_settings(30.0, None, 15.0, None) == (15.0, None)
+    assert search_settings(30.0, 20.0, 15.0, 12.0) == (15.0, 12.0)
+    assert search_settings(30.0, 20.0, None, 5.0) == (30.0, 5.0)
+    for bad in ((-1.0, None), (float("nan"), None), (15.0, 16.0), (15.0, 0.0)):
+        with pytest.raises(ConfigError, match="--search-"):
+            search_settings(30.0, 20.0, *bad)

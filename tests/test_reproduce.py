@@ -134,22 +134,29 @@ def test_rows_match_simulate(report):
 
 
 def test_every_run_goes_through_the_sweep_engine(monkeypatch):
+    import frictionlab.batch as batch
     import frictionlab.simulation as simulation
     import frictionlab.sweep as sweep
 
     points, sims = [], []
-    evaluate, simulate_config = sweep.evaluate, simulation.simulate_config
+    evaluate, run_batch = sweep.evaluate, batch.run
+    simulate_config = simulation.simulate_config
 
     def counting_evaluate(base, pts, **kw):
         points.extend(pts)
         assert kw["workers"] == 1 and kw["duration"] == rp.DURATION
         return evaluate(base, pts, **kw)
 
-    def counting_simulate(*a, **kw):
+    def counting_run(b, *a, **kw):  # the compiled batch (features): a simulation per set
+        sims.extend([1] * len(b.index))
+        return run_batch(b, *a, **kw)
+
+    def counting_simulate(*a, **kw):  # the runs whose traces are kept (a custom reduce)
         sims.append(1)
         return simulate_config(*a, **kw)
 
     monkeypatch.setattr(sweep, "evaluate", counting_evaluate)
+    monkeypatch.setattr(batch, "run", counting_run)
     monkeypatch.setattr(simulation, "simulate_config", counting_simulate)
     results = rp.run(workers=1)
     assert len(points) == len(sims) == rp.count_runs()

@@ -174,14 +174,17 @@ def test_serial_rows_are_run_features_and_failures_are_rows():
 
 @pytest.mark.timeout(300)
 def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
-    """Acceptance: Table 2's F_C values, pool vs Dask LocalCluster vs in-process."""
+    """Acceptance: Table 2's F_C values, threads vs Dask LocalCluster vs in-process,
+    and the compiled batch vs one Python-driven run per point in a process pool."""
     base = build_config("fast", "classical", sets=[BAND])
     points = [{"friction.coulomb": v} for v in TABLE2_FC]
     serial = evaluate(base, points, duration=10, workers=1)
     pool = evaluate(base, points, duration=10, workers=2)
     dask = evaluate(base, points, duration=10, dask="local", workers=2)
+    per_run = evaluate(base, points, duration=10, workers=2, reduce=reduce_features)
     assert pool == serial
     assert dask == pool
+    assert per_run == pool
     # the cluster's workers run without Dask's malloc trim threshold (see _local_dask_config)
     client = _get_dask("local", 2)
     trim = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
@@ -298,7 +301,8 @@ def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
     base = build_config("fast", "classical")
     points = [{"friction.coulomb": v} for v in (1.3, 1.5, 1.7, 1.9)]
     monkeypatch.setattr(sweep_module, "_run_chunk", _chunk_that_kills_its_worker)
-    rows = evaluate(base, points, duration=3, workers=2, chunk_size=1)
+    # a custom reduce runs in the process pool (the default reduction runs on threads)
+    rows = evaluate(base, points, duration=3, workers=2, chunk_size=1, reduce=reduce_features)
     monkeypatch.undo()
     assert [r["friction.coulomb"] for r in rows] == [1.3, 1.5, 1.7, 1.9]
     dead = rows[2]
@@ -309,7 +313,7 @@ def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
     for r in rows:
         assert (r["status"], r["error"] is None) in {("limit_cycle", True), ("error", False)}
     # the broken pool was dropped: the next sweep gets a fresh one
-    again = evaluate(base, points, duration=3, workers=2, chunk_size=1)
+    again = evaluate(base, points, duration=3, workers=2, chunk_size=1, reduce=reduce_features)
     assert [r["status"] for r in again] == ["limit_cycle"] * 4
 
 
