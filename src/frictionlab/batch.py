@@ -12,8 +12,9 @@ sensor model, controller step, plant tick) and the same compiled feature
 extraction as :func:`frictionlab.limit_cycles.features`
 (:func:`~frictionlab.limit_cycles._features_kernel`), with no Python per run.
 The features are those of :func:`frictionlab.simulation.run_features`, bit
-for bit (noise included: each run seeds the generator of the thread it runs
-on, as a single run seeds the caller's).
+for bit (noise included: :func:`frictionlab.sensor.measure`'s noise is a
+function of the seed and the sample number, with no generator state to share
+between threads).
 
 Two drivers: :func:`_batch_serial` (one thread; the Dask and process-pool
 workers of :mod:`frictionlab.sweep`) and :func:`_batch_threads` (numba
@@ -40,9 +41,10 @@ import numpy as np
 from ._jit import _njit, jit, jit_parallel
 from .config import Config
 from .controller import NS
-from .friction import KINDS
+from .friction import KINDS, resolve_drift
 from .limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
-from .simulation import NC, _pack_plant, _quanta, _run, make_controller, run_ticks
+from .sensor import SensorParams
+from .simulation import NC, _pack_plant, _run, make_controller, make_sensor, run_ticks
 
 #: ``numba.prange`` once a parallel batch has run (:func:`_numba`); numba reads
 #: it when it compiles :func:`_batch_threads`, on that batch's first call.
@@ -58,7 +60,7 @@ _FEATURE_INDEX = [KERNEL_VALUES.index(name) for name in FEATURES]
 
 
 @jit
-def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, fall, win,
+def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
          buf, codes, vals, cycles):
     """Run set ``i`` and store its status code, feature values and cycle count.
 
@@ -70,8 +72,10 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, fall, w
     x = np.zeros(5)
     x[0] = x0[i]
     s = s0[i].copy()
-    done, fell_code, _mem = _run(x, 0.0, nt[i], sub[i], rat[i], pp[i], fk[i], fp[i], gp[i],
-                                 cp[i], s, noise[i], seed[i], q[i], fall[i], buf, True)
+    r = sens[i]
+    sp = SensorParams(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], int(r[8]))
+    done, fell_code, _mem, _x0 = _run(x, 0.0, nt[i], sub[i], rat[i], pp[i], fk[i], fp[i],
+                                      gp[i], cp[i], s, sp, 0, 0.0, fall[i], buf, True)
     fell = fell_code == 1
     for j in range(vals.shape[1]):
         vals[i, j] = np.nan
@@ -93,7 +97,7 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, fall, w
     y = buf[:done, 0].copy()
     u = buf[:done, 3].copy()
     v = buf[:done, 5].copy()
-    code, fv, cyc = _features_kernel(t, y, u, v, span, fell, noise[i, 0], REL_PROMINENCE,
+    code, fv, cyc = _features_kernel(t, y, u, v, span, fell, sens[i, 7], REL_PROMINENCE,
                                      SETTLE_TOL, SMOOTH)
     codes[i] = code
     vals[i, :] = fv
@@ -101,7 +105,7 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, fall, w
 
 
 @jit
-def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, fall, win,
+def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
                   codes, vals, cycles):
     """Every set of the batch in turn (one thread)."""
     n = len(nt)
@@ -110,12 +114,12 @@ def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, f
         longest = max(longest, nt[i])
     buf = np.empty((longest, NC))
     for i in range(n):
-        _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, fall, win,
+        _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
              buf, codes, vals, cycles)
 
 
 @jit_parallel
-def _batch_threads(threads, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q,
+def _batch_threads(threads, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens,
                    fall, win, codes, vals, cycles):
     """The sets on ``threads`` numba threads: thread c runs sets c, c + threads, ..."""
     n = len(nt)
@@ -125,7 +129,7 @@ def _batch_threads(threads, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, 
             longest = max(longest, nt[i])
         buf = np.empty((longest, NC))
         for i in range(c, n, threads):
-            _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, noise, seed, q, fall, win,
+            _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
                  buf, codes, vals, cycles)
 
 
@@ -158,10 +162,9 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
     rat = np.empty(n, dtype=np.int64)
     h = np.empty(n)
     fk = np.empty(n, dtype=np.int64)
-    seed = np.empty(n, dtype=np.int64)
     fall = np.empty(n)
     win = np.full(n, np.nan if window is None else float(window))
-    pp, fp, gp, cp, s0, noise, q = [], [], [], [], [], [], []
+    pp, fp, gp, cp, s0, sens = [], [], [], [], [], []
     for k, (cfg, ticks) in enumerate(zip(cfgs, durations, strict=True)):
         ctrl = make_controller(cfg)
         g, c = ctrl.pack()
@@ -169,16 +172,14 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
         cp.append(c)
         s0.append(ctrl.init(cfg.sim.initial_angle))
         pp.append(_pack_plant(cfg))
-        fp.append(cfg.friction.pack())
-        q.append(_quanta(cfg))
-        noise.append(np.full(3, cfg.sim.noise))
+        fp.append(resolve_drift(cfg.friction.pack(), ticks * cfg.design.h))
+        sens.append(np.array(make_sensor(cfg), dtype=float))
         x0[k] = cfg.sim.initial_angle
         nt[k] = ticks
         sub[k] = cfg.substeps
         rat[k] = cfg.pendulum_ratio
         h[k] = cfg.design.h
         fk[k] = KINDS.index(cfg.friction_kind)
-        seed[k] = cfg.sim.seed
         fall[k] = cfg.sim.fall_angle
 
     def stack(rows, width):
@@ -186,7 +187,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
 
     return (x0, nt, sub, rat, h, stack(pp, 5), fk, stack(fp, len(fp[0]) if n else 0),
             stack(gp, len(gp[0]) if n else 0), stack(cp, len(cp[0]) if n else 0),
-            stack(s0, NS), stack(noise, 3), seed, stack(q, 3), fall, win)
+            stack(s0, NS), stack(sens, len(SensorParams._fields)), fall, win)
 
 
 def prepare(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
