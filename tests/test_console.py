@@ -640,6 +640,23 @@ def test_a_run_ending_by_itself_while_recording_asks_for_the_name(app_and_contro
     assert not client.get("/api/status").json()["console"]["pending_recording"]
 
 
+def test_a_recording_the_console_never_saw_running_still_asks_for_its_name(
+        app_and_controller):
+    """Whether a recording awaits its name is asked of the controller, not inferred from
+    an earlier status (a stale one, taken before the recording started, once hid it)."""
+    client, ctl, _ = app_and_controller
+    assert client.post("/api/start", json={}).status_code == 200
+    ctl.record_start()  # no status of the console has seen it recording
+    ctl.stop("angle_limit")
+    assert ctl.wait(5.0)
+    assert ctl.unnamed_recording is not None
+    st = client.get("/api/status").json()
+    assert not st["recording"] and st["console"]["pending_recording"]
+    assert ctl.unnamed_recording is None  # taken by the console: asked for only once
+    r = client.post("/api/record/name", json={"name": "unseen"})
+    assert r.status_code == 200 and r.json()["rows"] >= 1
+
+
 def test_guard_refuses_a_websocket_without_the_token(app_and_controller):
     from starlette.testclient import WebSocketDenialResponse
 
