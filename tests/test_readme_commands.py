@@ -17,12 +17,14 @@ from __future__ import annotations
 import json
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from inprocess import run_cli_in_process
 
 from frictionlab.config import build_config
 
@@ -125,6 +127,27 @@ def folders(tmp_path_factory):
     return get
 
 
+_SHELL_SYNTAX = re.compile(r"[|&;<>()$`*?{}\\!]")
+
+
+def plain_frictionlab(command: str) -> list[str] | None:
+    """The arguments of a plain ``frictionlab ...`` command line (no pipes,
+    redirections, variables or globs: bash would pass it on unchanged), else None.
+
+    Such a line runs in-process (:func:`inprocess.run_cli_in_process`); the
+    installed ``frictionlab`` executable itself is tested in tests/test_cli.py
+    and tests/test_startup.py.
+    """
+    try:
+        words = shlex.split(command, comments=True)
+    except ValueError:
+        return None
+    code = command.split(" #", 1)[0]
+    if words[:1] != ["frictionlab"] or _SHELL_SYNTAX.search(code) or "=" in words[0]:
+        return None
+    return words[1:]
+
+
 def _env() -> dict:
     env = dict(os.environ)
     # the frictionlab of this interpreter first on PATH
@@ -133,12 +156,19 @@ def _env() -> dict:
     return env
 
 
+# the lines of one document run in order in one folder: under pytest-xdist, on one worker
+# (``--dist loadgroup``, as scripts/test runs it)
 @pytest.mark.parametrize("doc,line,command", [
-    pytest.param(p, n, c, id=f"{p.name}:{n}") for p, n, c in COMMANDS if not skip_reason(c)])
+    pytest.param(p, n, c, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
+    for p, n, c in COMMANDS if not skip_reason(c)])
 def test_documented_command_runs_as_written(folders, doc, line, command):
     cwd = folders(doc)
-    res = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(), capture_output=True,
-                         text=True, timeout=TIMEOUT)
+    argv = plain_frictionlab(command)
+    if argv is not None:  # the same command line, without paying the interpreter's start-up
+        res = run_cli_in_process(argv, cwd=cwd, env={"MPLBACKEND": "Agg"})
+    else:
+        res = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(),
+                             capture_output=True, text=True, timeout=TIMEOUT)
     where = f"{doc.name}:{line}: {command}"
     assert res.returncode == 0, f"{where}\nexit {res.returncode}\n{res.stderr[-3000:]}"
     if "--json" in command.split():
@@ -163,7 +193,8 @@ def _fragment(doc: Path, text: str) -> bool:
 
 
 @pytest.mark.parametrize("doc,line,code", [
-    pytest.param(p, n, t, id=f"{p.name}:{n}") for p, n, t in PYTHON if not _fragment(p, t)])
+    pytest.param(p, n, t, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
+    for p, n, t in PYTHON if not _fragment(p, t)])
 def test_documented_python_runs(folders, doc, line, code):
     res = subprocess.run([sys.executable, "-c", code], cwd=folders(doc), env=_env(),
                          capture_output=True, text=True, timeout=TIMEOUT)
