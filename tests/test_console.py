@@ -378,6 +378,7 @@ def _backlog_samples(texts: list[str]) -> np.ndarray:
     return np.array(t)
 
 
+@pytest.mark.slow
 def test_a_connecting_page_gets_the_history_already_serialised():
     """History is serialised once per chunk of samples, never per page.
 
@@ -459,6 +460,7 @@ def app_and_controller(tmp_path):
     ctl.close()
 
 
+@pytest.mark.slow
 def test_design_changes_and_refusals_through_the_api(app_and_controller):
     client, _ctl, _ = app_and_controller
     slow = design("slow")
@@ -560,6 +562,7 @@ def test_refusals_are_located_by_key_not_by_message(app_and_controller, monkeypa
                                                         "enabled", "error_signal"]
 
 
+@pytest.mark.slow
 def test_run_record_download_and_exit(app_and_controller, tmp_path):
     client, ctl, exits = app_and_controller
     assert client.post("/api/record/start", json={}).status_code == 409  # not running
@@ -797,6 +800,7 @@ print(json.dumps(events))
 """
 
 
+@pytest.mark.slow
 def test_a_first_session_loads_nothing_while_the_loop_runs(tmp_path):
     """Everything a server thread would load on first use is loaded before the loop starts.
 
@@ -889,6 +893,7 @@ async def _read_backlog(ws_url: str) -> list[dict]:
                 return msgs
 
 
+@pytest.mark.slow
 def test_connecting_pages_cannot_stall_the_loop(tmp_path):
     """30 pages connecting at once and 10 reconnecting ones: the loop keeps its deadlines
     and the pendulum stays up; each page gets its history in small messages made once
@@ -961,6 +966,7 @@ def _closed_by_server(sock: socket.socket, timeout: float) -> bool:
         return False
 
 
+@pytest.mark.slow
 def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
     """100 idle TCP connections without the token: Stop and every authorised request still
     answer, refusals close their connection, idle and trickling connections are closed

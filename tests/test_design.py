@@ -19,6 +19,7 @@ def run_cli(*args):
     return res
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["fast", "slow"])
 def test_cli_design_reproduces_appendix_d(name):
     res = run_cli("design", "--design", name, "--json")
@@ -92,6 +93,7 @@ def test_design_uses_design_omega0():
     assert b.feedback.max_pole_error < 1e-9
 
 
+@pytest.mark.slow
 def test_bad_design_inputs():
     with pytest.raises(ValueError, match="design must be one of"):
         preset("medium")

@@ -158,6 +158,7 @@ def _env() -> dict:
 
 # the lines of one document run in order in one folder: under pytest-xdist, on one worker
 # (``--dist loadgroup``, as scripts/test runs it)
+@pytest.mark.slow
 @pytest.mark.parametrize("doc,line,command", [
     pytest.param(p, n, c, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
     for p, n, c in COMMANDS if not skip_reason(c)])
@@ -192,6 +193,7 @@ def _fragment(doc: Path, text: str) -> bool:
     return any(doc.name == name and marker in text for name, marker in PYTHON_FRAGMENTS)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("doc,line,code", [
     pytest.param(p, n, t, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
     for p, n, t in PYTHON if not _fragment(p, t)])

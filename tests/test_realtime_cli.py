@@ -97,6 +97,7 @@ def started_log(log_dir: Path):
     return None
 
 
+@pytest.mark.slow
 def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path):
     # lockstep: a pause of this shared machine pauses the simulated plant too (in the
     # default mode it would act as a disturbance and change the cycle)
@@ -127,6 +128,7 @@ def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path
     assert meta["stats"]["ticks"] == st["ticks"]
 
 
+@pytest.mark.slow
 def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     host, port = rig_sim
     # a wide angle limit: a pause of this shared machine must not end the run early
@@ -165,6 +167,7 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     assert rig["u_da"] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP,
                                  signal.SIGQUIT])
 def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
@@ -190,6 +193,7 @@ def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     assert rig["u_da"] == 0.0 and rig["last_command_seq"] == meta["stop_tick"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_console_mode_stops_on_a_signal(tmp_path, sig):
     # console mode (no --headless) on a free port; lockstep and a wide angle limit: a pause
@@ -302,6 +306,7 @@ def _proc_state(pid: int) -> str:
         return fh.read().rpartition(")")[2].split()[0]
 
 
+@pytest.mark.slow
 def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp_path):
     """SIGINT while the controller waits for the rig's HELLO_ACK (a rig still booting)."""
     import threading
@@ -352,6 +357,7 @@ def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp
     assert meta["stop_reason"] == "signal" and meta["stop_detail"] == "SIGINT"
 
 
+@pytest.mark.slow
 def test_ctrl_z_stops_the_run_then_suspends(tmp_path, rig_sim):
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
@@ -376,6 +382,7 @@ def test_ctrl_z_stops_the_run_then_suspends(tmp_path, rig_sim):
     assert json.loads(stdout)["stop_reason"] == "signal"
 
 
+@pytest.mark.slow
 def test_a_suspended_controller_stops_on_resume_without_acting(tmp_path, rig_sim):
     """SIGSTOP (not catchable) for 300 ms: the rig's watchdog zeroes the motor meanwhile,
     and on SIGCONT the loop stops (reason paused) without acting on its stale state."""
@@ -413,6 +420,7 @@ def test_a_suspended_controller_stops_on_resume_without_acting(tmp_path, rig_sim
     assert rig["u_da"] == 0.0 and rig["last_command_seq"] == int(log["tick"][-1])
 
 
+@pytest.mark.slow
 def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
     """A file-size limit (ulimit -f) makes the log writes fail, as a full disk does."""
     import resource

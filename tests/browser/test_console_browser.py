@@ -18,7 +18,8 @@ from frictionlab.design import PRESETS, design
 
 from .conftest import ConsoleProcess, wait_until
 
-pytestmark = pytest.mark.timeout(120)
+# a browser and a console server: slow (docs/development.md)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,8 @@ from websockets.sync.client import connect
 
 from .conftest import ConsoleProcess, wait_until
 
-pytestmark = pytest.mark.timeout(120)
+# a browser and a console server: slow (docs/development.md)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 
 
 def test_non_loopback_bind_without_token_is_refused(tmp_path):
