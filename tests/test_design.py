@@ -1,11 +1,10 @@
 """Controller design: Appendix C/D, numerical placement, python-control, observers."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from inprocess import run_cli_in_process
 
 from frictionlab.design import design, observer_gains, preset
 from frictionlab.reference import APPENDIX_D
@@ -14,12 +13,9 @@ APP_D = APPENDIX_D
 
 
 def run_cli(*args):
-    res = subprocess.run([sys.executable, "-m", "frictionlab", *args], capture_output=True,
-                         text=True, timeout=120)
-    return res
+    return run_cli_in_process(args)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name", ["fast", "slow"])
 def test_cli_design_reproduces_appendix_d(name):
     res = run_cli("design", "--design", name, "--json")
@@ -93,7 +89,6 @@ def test_design_uses_design_omega0():
     assert b.feedback.max_pole_error < 1e-9
 
 
-@pytest.mark.slow
 def test_bad_design_inputs():
     with pytest.raises(ValueError, match="design must be one of"):
         preset("medium")
