@@ -191,13 +191,12 @@ def test_the_simulator_converges_to_to_controls_plant(friction, k, fine_bound):
 
 
 @pytest.mark.slow
-def test_lqr_from_python_control_through_design_gains():
+def test_lqr_from_python_control_through_design_gains(cli):
     cfg = build_config("fast", "none", sets=["plant.zeta=0"])
     sysd = control.c2d(fl.linearize(cfg), cfg.design.h)
     K, _, E = control.dlqr(sysd.A, sysd.B, np.diag([100.0, 0.0, 100.0, 1.0]), 1.0)
     gains = ",".join(f"{k:.17g}" for k in K.ravel())
-    out = subprocess.run([*CLI, "design", "--set", f"design.gains={gains}", "--json"],
-                         capture_output=True, text=True, timeout=120)
+    out = cli("design", "--set", f"design.gains={gains}", "--json")
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
     np.testing.assert_array_equal(d["L"], K.ravel())
