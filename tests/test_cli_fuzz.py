@@ -96,6 +96,8 @@ WORK = {
     ("reproduce",): (("frictionlab.reproduce", "run", _reach),
                      ("frictionlab.sweep", "_get_dask", _reach)),
     ("predict",): (("frictionlab.predict", "predict", _reach),),
+    # the log's features are computed for real (a generated log is small)
+    ("features",): (),
 }
 
 
@@ -325,6 +327,8 @@ def _argv(draw, path, parser, folder: Path) -> list[str]:
         if not action.option_strings and action.nargs != 0 and action.choices:
             argv.append(draw(st.sampled_from(list(action.choices)))
                         if draw(_MOSTLY) else draw(st.text(max_size=6)))
+        elif not action.option_strings and action.dest == "log" and draw(_MOSTLY):
+            argv.append(_path(draw, folder, "log"))  # features LOG
     for flag, value in VALID.get(path, ()):
         if draw(_MOSTLY):
             argv += [flag, value.format(example=EXAMPLE)]

@@ -603,7 +603,7 @@ def test_simulate_cli_runs_every_compensator_against_every_plant(plant):
         # nothing to compensate: the static compensators' relay makes a limit cycle
         # (overcompensation), the LuGre observer's estimate stays small
         assert statuses == {"coulomb": "limit_cycle", "classical": "limit_cycle",
-                            "lugre": "settled"}
+                            "lugre": "settled", "adaptive": "settled"}
 
 
 @pytest.mark.parametrize("kind", ["coulomb", "classical"])

@@ -164,7 +164,8 @@ def test_schema_ranges_are_the_dataclasses_ranges():
         lo = fields[f["name"]]["lo"]
         assert f["lo"] == (None if lo is None or math.isinf(lo) else lo)
     assert sch["presets"]["slow"] == dataclasses.asdict(PRESETS["slow"])
-    assert set(sch["compensation"]["kinds"]) == {"coulomb", "classical", "lugre"}
+    assert set(sch["compensation"]["kinds"]) == {"coulomb", "classical", "lugre",
+                                                  "adaptive"}
 
 
 # --- access control ------------------------------------------------------------------------
@@ -492,6 +493,36 @@ def test_design_changes_and_refusals_through_the_api(app_and_controller):
     comp = client.get("/api/status").json()["compensation"]
     assert comp["kind"] == "classical" and comp["params"]["stiction"] == 2.0
     assert client.post("/api/push", json={"kick": 0.3}).status_code == 409  # not running
+
+
+def test_adaptive_compensation_through_the_api(app_and_controller):
+    """The Adaptive choice of the Friction Type: its fields in the schema, the
+    law's gains checked against its stability conditions (located at the field),
+    and its estimates in the status."""
+    client, _ctl, _ = app_and_controller
+    sch = client.get("/api/schema").json()["compensation"]
+    assert "adaptive" in sch["kinds"]
+    names = [f["name"] for f in sch["fields"]["adaptive"]]
+    assert names[:7] == [f["name"] for f in sch["fields"]["lugre"]]
+    assert "adaptation_gain" in names and "adaptation_bandwidth" in names
+    assert client.get("/api/status").json()["adaptation"] is None
+    r = client.post("/api/compensation", json={"kind": "adaptive", "params": {"coulomb": 1.2}})
+    assert r.status_code == 200, r.json()
+    st = r.json()["status"]
+    assert st["compensation"]["kind"] == "adaptive" and st["compensation"]["enabled"]
+    assert st["adaptation"] == {"start": {"coulomb": 1.2, "stiction": 2.3}, "coulomb": 1.2,
+                                "stiction": 2.3, "status": "off"}
+    r = client.post("/api/compensation", json={"params": {"adaptation_gain": 1e5}})
+    assert r.status_code == 422
+    err = r.json()["errors"][0]
+    assert err["field"] == "params.adaptation_gain"
+    assert "compensation.adaptation_gain = 100000 is out of range" in err["message"]
+    r = client.post("/api/compensation", json={"params": {"adaptation_bandwidth": 500.0}})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == (
+        "params.adaptation_bandwidth")
+    assert client.get("/api/status").json()["compensation"]["params"]["adaptation_gain"] == 200
+    r = client.post("/api/compensation", json={"enabled": False})
+    assert r.json()["status"]["adaptation"] is None
 
 
 @pytest.mark.parametrize("path, body, field, verdict", [
@@ -1019,3 +1050,41 @@ def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
         for s in idle:
             s.close()
         served.close()
+
+
+def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
+    """The Experiments panel: refused without confirm (the motor moves), bad options and
+    limits refused at their field, a confirmed run goes through the loop on the connected
+    rig and its estimate arrives in the status."""
+    cfg = build_config("fast", "classical", sets=[("plant.omega0", 6.3)])
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05)
+    body = {"name": "free-oscillation", "options": {"duration": 6.0}}
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        r = client.post("/api/experiment", json=body)
+        assert r.status_code == 422 and r.json()["confirm_required"] is True
+        assert "arm will move" in r.json()["detail"]
+        assert not ctl.running and client.get("/api/status").json()["ticks"] == 0
+        r = client.post("/api/experiment", json={**body, "options": {"bogus": 1},
+                                                  "confirm": True})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "options"
+        r = client.post("/api/experiment", json={**body, "limits": {"max_u_da": 2},
+                                                  "confirm": True})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "limits"
+        r = client.post("/api/experiment", json={"name": "nonsense", "confirm": True})
+        assert r.status_code == 422
+        r = client.post("/api/experiment", json={**body, "confirm": True})
+        assert r.status_code == 200, r.json()
+        deadline = time.monotonic() + 120
+        while True:
+            exp = client.get("/api/status").json()["console"]["experiment"]
+            if exp["state"] != "running" or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        assert exp["state"] == "done", exp
+        assert abs(exp["estimates"]["omega0"] - 6.3) < 0.02 * 6.3
+        assert exp["log"] and os.path.exists(exp["log"])
+        st = client.get("/api/status").json()
+        assert st["stop_reason"] == "finished" and st["experiment"]["progress"] == 1.0
+    ctl.close()

@@ -78,19 +78,24 @@ def test_frictionlab_controller_as_policy_replays_the_simulator_exactly(friction
 
 
 def test_noise_and_quantisation_like_the_simulator():
-    q = RigScaling().quanta()
+    r = RigScaling()
     env = FurutaEnv(sets=["sim.noise=0.01", "sim.quantization=1"], friction="none")
     obs, info = env.reset(seed=5, options={"initial_angle": 0.0})
     errs = []
     for _ in range(1000):
-        # quantised to the ADC steps of App. B
-        np.testing.assert_allclose(obs / q, np.round(obs / q), atol=1e-9)
+        # quantised to the ADC steps of App. B, in raw units (biases included; the
+        # arm relative to its first reading)
+        raw = np.array([obs[0] / r.theta_scale - r.theta_bias, obs[1] / r.arm_scale,
+                        obs[2] / r.velocity_scale - r.velocity_bias]) / (2 / 4096)
+        np.testing.assert_allclose(raw, np.round(raw), atol=1e-6)
         errs.append(obs - [info["theta"], info["arm"], info["arm_dot"]])
         obs, _, _, _, info = env.step(np.zeros(1))
     errs = np.array(errs)
     # noise of standard deviation 0.01 (plus quantisation's q/sqrt(12), well below it)
     np.testing.assert_allclose(errs.std(axis=0), 0.01, rtol=0.12)
-    np.testing.assert_allclose(errs.mean(axis=0), 0.0, atol=0.002)
+    np.testing.assert_allclose(errs.mean(axis=0)[[0, 2]], 0.0, atol=0.002)
+    # the arm is measured from its first reading: its error is the noise less the first draw
+    assert abs(errs[0, 1]) <= 25.8 * 2 / 4096
     # reproducible from the seed
     env2 = FurutaEnv(sets=["sim.noise=0.01", "sim.quantization=1"], friction="none")
     a, _ = env2.reset(seed=5, options={"initial_angle": 0.0})

@@ -16,6 +16,11 @@ intended :math:`u_{fb}`.  Three compensators, as in Sec. 6.1-6.3:
     \mathrm{sgn}\,\dot\Omega`.  Memoryless.
 ``lugre``
     The observer of eq. (19) with gain k (Sec. 6.3; state: :math:`\hat z`).
+``adaptive``
+    The same observer with its Coulomb and stiction levels adapted online
+    from the applied u and the measured arm velocity (the adaptive friction
+    estimator Sec. 8 proposes; law, stability conditions and safety rules in
+    :mod:`frictionlab.adaptive`; state: :math:`\hat z` and the law's).
 
 The force laws are those of :mod:`frictionlab.friction`, called through the
 compiled :func:`frictionlab.controller.compensator_force` that the simulator
@@ -78,14 +83,19 @@ import numpy as np
 
 from .config import COMPENSATOR_FIELDS, Config, ConfigError
 from .controller import (
+    COMPENSATOR_CODES,
     DEFAULT_ERROR_SIGNAL,
     ERROR_SIGNALS,
     NS,
     S_RELAY,
+    S_SLIDE,
+    S_U,
+    S_VHAT,
     S_ZHAT,
+    adaptive_force,
     compensator_force,
 )
-from .friction import COULOMB, LUGRE, STRIBECK, FrictionParams
+from .friction import FrictionParams
 from .rig import RigScaling
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
@@ -97,6 +107,7 @@ PEAK_TO_PEAK_FLOOR = RigScaling().quanta()[0]
 __all__ = [
     "COMPENSATORS",
     "DEFAULT_GRIDS",
+    "AdaptiveCompensator",
     "ChatterMetrics",
     "ClassicalCompensator",
     "Comparison",
@@ -116,18 +127,21 @@ __all__ = [
 ]
 
 #: Compensators (``--compensation`` values other than ``none``).
-COMPENSATORS = ("coulomb", "classical", "lugre")
+COMPENSATORS = ("coulomb", "classical", "lugre", "adaptive")
 
 
-def check_compensator(kind: str, params: FrictionParams) -> None:
+def check_compensator(kind: str, params: FrictionParams, *, h: float | None = None,
+                      arm_length: float | None = None) -> None:
     """Reject a compensator model that the compensator cannot run.
 
     The LuGre observer of eq. (19) divides by :math:`g(v) = s(v)/\\sigma_0`
     with the Stribeck level :math:`s(v) = F_C + (F_S - F_C)e^{-(v/v_S)^2}`.
     With :math:`F_S = F_C = 0` (for :math:`v \\ge 0`, or with the
     ``*_negative`` levels for :math:`v < 0`) :math:`s` vanishes for every v
-    and the observer is singular.  The other compensators accept any valid
-    :class:`FrictionParams`.
+    and the observer is singular.  The ``adaptive`` compensator must also
+    meet its law's stability conditions (:func:`frictionlab.adaptive.check_gains`,
+    with ``h`` and ``arm_length``: default the thesis's 5 ms and 0.21 m).
+    The other compensators accept any valid :class:`FrictionParams`.
 
     Parameters
     ----------
@@ -139,9 +153,21 @@ def check_compensator(kind: str, params: FrictionParams) -> None:
     Raises
     ------
     ConfigError
-        One line naming the ``compensation.*`` keys at fault.
+        One line naming the ``compensation.*`` keys at fault (a
+        :class:`~frictionlab.config.ConfigValueError` for a gain or level out
+        of the adaptive law's range).
     """
-    if kind != "lugre":
+    if kind == "adaptive":
+        from ._validation import ParamError
+        from .adaptive import check_gains
+        from .config import ConfigValueError
+
+        try:
+            check_gains(params, 0.005 if h is None else h,
+                        0.21 if arm_length is None else arm_length)
+        except ParamError as exc:
+            raise ConfigValueError(exc.field, exc.value, exc.allowed, str(exc)) from None
+    if kind not in ("lugre", "adaptive"):
         return
     fs_neg = params.stiction if params.stiction_negative is None else params.stiction_negative
     fc_neg = params.coulomb if params.coulomb_negative is None else params.coulomb_negative
@@ -165,11 +191,17 @@ class CompensatorState:
         LuGre bristle estimate :math:`\\hat z` (rad).
     friction_estimate : float
         The last :math:`\\hat F` (m/s^2).
+    adaptation : tuple of float
+        The adaptive law's state (``adaptive`` only): predicted and last
+        measured arm velocity, the estimated F_C and F_S, the status code and
+        the distance slid (the controller's entries ``S_VHAT`` ...
+        ``S_SLIDE``); empty before the first step.
     """
 
     relay: float = 0.0
     z_hat: float = 0.0
     friction_estimate: float = 0.0
+    adaptation: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -202,13 +234,14 @@ class Compensator:
             raise ValueError("params must be a FrictionParams")
         if not (isinstance(self.h, int | float) and math.isfinite(self.h) and 0 < self.h <= 1):
             raise ValueError(f"h must be in (0, 1] s, got {self.h!r}")
-        check_compensator(self.kind, self.params)
+        check_compensator(self.kind, self.params, h=self.h,
+                          arm_length=getattr(self, "arm_length", None))
         object.__setattr__(self, "_cp", self.params.pack())
 
     @property
     def code(self) -> int:
         """The compiled code's compensator number."""
-        return {"coulomb": COULOMB, "classical": STRIBECK, "lugre": LUGRE}[self.kind]
+        return COMPENSATOR_CODES[self.kind]
 
     def init(self, z_hat: float = 0.0) -> CompensatorState:
         """Initial state: relay undecided, bristle at ``z_hat`` (default relaxed)."""
@@ -277,8 +310,39 @@ class LuGreCompensator(Compensator):
                              f"got {self.error_signal!r}")
 
 
+@dataclass(frozen=True)
+class AdaptiveCompensator(LuGreCompensator):
+    """The LuGre observer of eq. (19) with F_C and F_S adapted online
+    (:mod:`frictionlab.adaptive`).
+
+    ``arm_length`` (:math:`L_1`, m) and ``u_max`` (the saturation of u) are
+    the law's; its gains must meet the stability conditions of
+    :func:`frictionlab.adaptive.check_gains` for ``h`` and ``arm_length``.
+    :meth:`step` takes ``u_prev``, the control applied over the last sample.
+    """
+
+    kind: ClassVar[str] = "adaptive"
+    arm_length: float = 0.21
+    u_max: float = 1.0 / 0.022
+
+    def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0, e: float = 0.0,
+             u_prev: float = 0.0) -> tuple[float, CompensatorState]:
+        """Friction estimate for the coming sample: one tick of the adaptation law
+        (with ``u_prev``, the control applied over the last sample), then the
+        observer with the adapted levels.  See :meth:`Compensator.step`."""
+        s = np.zeros(NS)
+        s[S_ZHAT] = state.z_hat
+        if state.adaptation:
+            s[S_VHAT:S_SLIDE + 1] = state.adaptation
+        s[S_U] = u_prev
+        f = float(adaptive_force(s, self._cp, float(v), float(e), float(self.h),
+                                 float(self.arm_length), float(self.u_max)))
+        return f, CompensatorState(0.0, float(s[S_ZHAT]), f,
+                                   tuple(float(x) for x in s[S_VHAT:S_SLIDE + 1]))
+
+
 _CLASSES = {"coulomb": CoulombCompensator, "classical": ClassicalCompensator,
-            "lugre": LuGreCompensator}
+            "lugre": LuGreCompensator, "adaptive": AdaptiveCompensator}
 
 
 def make_compensator(kind: str, params: FrictionParams | None = None, h: float = 0.005,
@@ -287,7 +351,7 @@ def make_compensator(kind: str, params: FrictionParams | None = None, h: float =
 
     Parameters
     ----------
-    kind : {"coulomb", "classical", "lugre"}
+    kind : {"coulomb", "classical", "lugre", "adaptive"}
         The compensator.
     params : FrictionParams, optional
         Its model (default: the compensator's Sec. 6 settings).
@@ -299,8 +363,8 @@ def make_compensator(kind: str, params: FrictionParams | None = None, h: float =
     Returns
     -------
     Compensator
-        A :class:`CoulombCompensator`, :class:`ClassicalCompensator` or
-        :class:`LuGreCompensator`.
+        A :class:`CoulombCompensator`, :class:`ClassicalCompensator`,
+        :class:`LuGreCompensator` or :class:`AdaptiveCompensator`.
 
     Raises
     ------
@@ -492,7 +556,8 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
 # ---------------------------------------------------------------------------
 
 #: Default search grids of ``frictionlab compensate tune`` around the values
-#: Sec. 6 explored (the thesis varied sigma0, sigma1 and k for LuGre).
+#: Sec. 6 explored (the thesis varied sigma0, sigma1 and k for LuGre; the
+#: adaptive compensator's grid varies its law's gains).
 DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
     "coulomb": [("compensation.coulomb", [1.1, 1.3, 1.5, 1.7, 1.9]),
                 ("compensation.hysteresis", [0.0, 0.01, 0.02, 0.05, 0.08, 0.12])],
@@ -503,6 +568,10 @@ DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
     "lugre": [("compensation.sigma0", [50.0, 100.0, 300.0, 1000.0]),
               ("compensation.sigma1", [2.0, 4.0, 6.0, 10.0]),
               ("compensation.observer_gain", [1.0, 3.0, 7.0, 15.0])],
+    # the adaptation law's gain and bandwidth, with and without eq. (19)'s correction
+    "adaptive": [("compensation.adaptation_gain", [50.0, 200.0, 1000.0]),
+                 ("compensation.adaptation_bandwidth", [10.0, 20.0, 50.0]),
+                 ("compensation.observer_gain", [0.0, 7.0])],
 }
 
 

@@ -1,7 +1,8 @@
 """Run configuration: every parameter of a run, addressable by ``section.field`` keys.
 
-The keys are those of ``shared/INTERFACE.md`` (``plant.omega0``,
-``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``...).
+The keys are the public parameter keys of docs/cli.md (``plant.omega0``,
+``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``,
+``rig.theta_scale``...).
 A configuration is built from, in order: the thesis defaults, the design
 preset (``fast``/``slow``), the per-model friction defaults, a TOML file, and
 ``--set KEY=VALUE`` overrides (applied in order, the later winning).
@@ -27,6 +28,7 @@ from ._validation import ParamError, Validated, param
 from .design import DesignSpec, preset
 from .friction import KINDS, FrictionParams
 from .plant import PlantParams
+from .rig import RigScaling
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -47,7 +49,7 @@ __all__ = [
 #: Plant friction models selectable with ``--friction``.
 PLANT_FRICTION_KINDS = KINDS
 #: Compensators selectable with ``--compensation``.
-COMPENSATOR_KINDS = ("none", "coulomb", "classical", "lugre")
+COMPENSATOR_KINDS = ("none", "coulomb", "classical", "lugre", "adaptive")
 
 
 class ConfigError(ValueError):
@@ -126,7 +128,9 @@ class SimParams(Validated):
 
     _prefix = "sim."
 
-    initial_angle: float = param(0.05, "initial pendulum angle", "rad", lo=-1.0, hi=1.0)
+    initial_angle: float = param(0.05, "initial pendulum angle (pi: hanging down, at rest; "
+                                 "rig-sim's pendulum at the start of a session)", "rad",
+                                 lo=-math.pi, hi=math.pi)
     substeps: int | None = param(None, "arm and friction integration substeps per sampling "
                                  "period (None = the model's accurate default: 10, LuGre 6)",
                                  "1", lo=1, hi=10000, integer=True, optional=True)
@@ -138,8 +142,9 @@ class SimParams(Validated):
                          lo=0.0, hi=1.0)
     seed: int = param(0, "random seed of the measurement noise", "1", lo=0, hi=2**32 - 1,
                       integer=True)
-    quantization: float = param(0.0, "1 = quantize measurements like the rig's 12-bit ADC "
-                                "(App. B scale factors), 0 = ideal", "1", lo=0.0, hi=1.0)
+    quantization: float = param(0.0, "1 = measure through the rig's 12-bit converters "
+                                "(the grid in raw units with the rig.* factors, wrap and "
+                                "range; frictionlab.sensor), 0 = ideal", "1", lo=0.0, hi=1.0)
     fall_angle: float = param(math.pi / 2, "|theta| beyond which the pendulum has fallen",
                               "rad", lo=0.0, hi=math.pi, lo_open=True)
     duration: float = param(40.0, "simulated time", "s", lo=0.0, hi=1e5, lo_open=True)
@@ -167,6 +172,7 @@ class Config:
     compensation: FrictionParams = dataclasses.field(
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
     sim: SimParams = dataclasses.field(default_factory=SimParams)
+    rig: RigScaling = dataclasses.field(default_factory=RigScaling)
 
     def __post_init__(self) -> None:
         if self.friction_kind not in PLANT_FRICTION_KINDS:
@@ -178,7 +184,8 @@ class Config:
         if self.compensation_kind != "none":
             from .compensation import check_compensator
 
-            check_compensator(self.compensation_kind, self.compensation)
+            check_compensator(self.compensation_kind, self.compensation, h=self.design.h,
+                              arm_length=self.plant.arm_length)
 
     @property
     def substeps(self) -> int:
@@ -214,12 +221,17 @@ class Config:
         return out
 
 
-_SECTIONS = ("plant", "design", "friction", "compensation", "sim")
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
-            "compensation": FrictionParams, "sim": SimParams}
+            "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
+#: The drift of the plant's levels (every model with a level).
+_DRIFT = {"drift", "drift_start", "drift_time"}
+#: The adaptive compensator's law (:mod:`frictionlab.adaptive`).
+_ADAPT = {"adaptation_gain", "adaptation_bandwidth", "adaptation_deadband", "adaptation_distance",
+          "adaptation_max_innovation", "adaptation_min", "adaptation_max"}
 #: Friction fields each *plant* model reads (LuGre's ``observer_gain`` is the k
 #: of eq. (19) with e = -theta, docs/model.md "The observer gain k in the plant").
 PLANT_FIELDS = {
@@ -232,6 +244,9 @@ PLANT_FIELDS = {
     "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "sigma1_velocity", "observer_gain"} | _NEG,
 }
+for _kind in PLANT_FIELDS:
+    if _kind != "none":
+        PLANT_FIELDS[_kind] |= _DRIFT
 #: Friction fields each compensator reads.
 COMPENSATOR_FIELDS = {
     "none": set(),
@@ -240,6 +255,8 @@ COMPENSATOR_FIELDS = {
     | _NEG - {"viscous_negative"},
     "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "sigma1_velocity", "observer_gain"} | _NEG,
+    "adaptive": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+                 "sigma1_velocity", "observer_gain", "viscous_negative"} | _ADAPT,
 }
 
 
@@ -439,7 +456,7 @@ def build_config(
         Plant friction model and compensator.
     config_file : path, optional
         TOML file with ``[plant]``, ``[design]``, ``[friction]``,
-        ``[compensation]``, ``[sim]`` tables.
+        ``[compensation]``, ``[sim]``, ``[rig]`` tables.
     sets : iterable of ``"KEY=VALUE"`` or ``(key, value)``
         Overrides, applied in order.
     """

@@ -20,8 +20,11 @@ per second of Gymnasium's ``SyncVectorEnv`` over single environments
 Observation (``observation="si"``, the default)
     ``[theta_m, arm_m, arm_dot_m]``: measured pendulum angle (rad), arm angle
     (rad) and arm velocity (rad/s), with the simulator's sensor: Gaussian
-    noise of standard deviation ``sim.noise`` in each signal's SI unit, then
-    the 12-bit quantisation of App. B when ``sim.quantization`` is 1.
+    noise of standard deviation ``sim.noise`` in each signal's SI unit (drawn
+    from the environment's generator, seeded by ``reset(seed=...)``), then the
+    rig's 12-bit converter of App. B when ``sim.quantization`` is 1
+    (:mod:`frictionlab.sensor`: the grid in raw units, biases included; the
+    arm relative to its first reading).
 ``observation="raw"``
     The same measurements as the rig's raw ADC values ``[y, x, v]`` in
     [-1, 1] (App. B.5 scaling, :class:`frictionlab.rig.RigScaling`; the
@@ -88,8 +91,8 @@ from gymnasium.vector.utils import batch_space
 from ._jit import jit
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .friction import KINDS
-from .rig import RigScaling, quantize
-from .simulation import _pack_plant, _quanta, plant_tick
+from .sensor import reading
+from .simulation import _pack_plant, make_sensor, plant_tick
 
 __all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "FurutaEnv",
            "FurutaVectorEnv"]
@@ -124,13 +127,14 @@ def _step_plants(mask, xs, us, mems, friction, substeps, ratios, h, pps, fkinds,
 
 
 @jit
-def _sense(xs, draws, quanta, out):
-    """The simulator's sensor: each measured signal (theta, Omega, Omega_dot)
-    plus its noise draw, quantised (:func:`frictionlab.rig.quantize`)."""
+def _sense(xs, draws, sp, steps, x0s, out):
+    """The simulator's sensor (:func:`frictionlab.sensor.reading`): each signal
+    (theta, Omega, Omega_dot) plus its noise draw, through the rig's converter;
+    plant i's arm zero ``x0s[i]`` is taken at its first step."""
     for i in range(xs.shape[0]):
-        out[i, 0] = quantize(xs[i, 0] + draws[i, 0], quanta[0])
-        out[i, 1] = quantize(xs[i, 2] + draws[i, 1], quanta[1])
-        out[i, 2] = quantize(xs[i, 3] + draws[i, 2], quanta[2])
+        out[i, 0], out[i, 1], out[i, 2], x0s[i] = reading(
+            sp, xs[i, 0] + draws[i, 0], xs[i, 2] + draws[i, 1], xs[i, 3] + draws[i, 2],
+            steps[i] == 0, x0s[i])
 
 
 class _Plants:
@@ -140,7 +144,7 @@ class _Plants:
         self.n = n
         self.h = cfg.design.h
         self.noise = cfg.sim.noise
-        self.quanta = _quanta(cfg)
+        self.sensor = make_sensor(cfg)._replace(noise=0.0)  # the draws come from the env
         self.fall = cfg.sim.fall_angle
         self.xs = np.zeros((n, 5))
         self.mems = np.zeros(n)
@@ -154,6 +158,7 @@ class _Plants:
         self.steps = np.zeros(n, dtype=np.int64)
         self.configs: list[Config] = [cfg] * n
         self._draws = np.zeros((n, 3))
+        self._arm_zero = np.zeros(n)
         self._out = np.zeros((n, 3))
         self._x0 = self.xs[0]  # a view: plant 0's state
 
@@ -192,7 +197,7 @@ class _Plants:
         if self.noise > 0.0:
             rng.standard_normal(out=self._draws)
             self._draws *= self.noise
-        _sense(self.xs, self._draws, self.quanta, self._out)
+        _sense(self.xs, self._draws, self.sensor, self.steps, self._arm_zero, self._out)
         return self._out.copy()
 
     def fallen(self, theta, rest):
@@ -226,7 +231,7 @@ class _Settings:
                                                                    sets=list(sets))
         self.observation = observation
         self.action = action
-        self.scaling = RigScaling()
+        self.scaling = self.base.rig
         self.u_max = self.scaling.u_max
         self.ranges, self.kinds = _check_randomization(self.base, randomize)
         if observation == "si":

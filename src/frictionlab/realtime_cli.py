@@ -139,6 +139,12 @@ def register_cli(sub) -> None:
     p.add_argument("--fault-after", type=float, default=0.0, metavar="S",
                    help="apply the --fault settings S seconds after start-up (default 0: "
                         "at once)")
+    p.add_argument("--hand", action="append", default=[], metavar="KEY=VALUE",
+                   help="the operator's hand, scripted (docs/protocol.md): lap=pendulum|arm "
+                        "(one full lap by hand), seconds, direction, push (rad/s to the "
+                        "pendulum), push_arm (rad/s to the arm); repeatable")
+    p.add_argument("--hand-after", type=float, default=0.0, metavar="S",
+                   help="do the --hand actions S seconds after start-up (default 0)")
     p.add_argument("--no-realtime", action="store_true",
                    help="do not ask for SCHED_FIFO priority")
     p.add_argument("--cpu", type=_cpu_arg, default="auto", help=_CPU_HELP)
@@ -361,6 +367,27 @@ def cmd_rig_sim(args) -> int:
         except ValueError:
             raise UsageError(f"--fault {key}: {value!r} is not a number") from None
         finite(f"--fault {key}", faults[key])
+    finite("--hand-after", args.hand_after, 0.0, lo_open=False)
+    hand = {}
+    for text in args.hand:
+        key, sep, value = text.partition("=")
+        if not sep:
+            raise UsageError(f"--hand expects KEY=VALUE, got {text!r}")
+        if key == "lap":
+            hand[key] = value
+        else:
+            try:
+                hand[key] = float(value)
+            except ValueError:
+                raise UsageError(f"--hand {key}: {value!r} is not a number") from None
+    if hand:
+        from .realtime.rigsim import hand_error
+
+        error = hand_error(hand)
+        if error:
+            raise UsageError(f"--hand: {error}")
+        hand = {"cmd": "hand", **hand, **({"after": args.hand_after} if args.hand_after
+                                          else {})}
     flush_notes(args)
 
     def announce(info):
@@ -370,5 +397,5 @@ def cmd_rig_sim(args) -> int:
 
     run_rig_sim(cfg, args.host, args.port, watchdog=args.watchdog, serial_device=args.serial,
                 faults=faults, fault_after=args.fault_after, realtime=not args.no_realtime,
-                cpu=_resolve_cpu(args.cpu), announce=announce)
+                cpu=_resolve_cpu(args.cpu), announce=announce, hand=hand or None)
     return 0

@@ -11,6 +11,7 @@ HTTP API (JSON; every ``POST`` body is a JSON object, ``{}`` when empty):
 ``POST /api/design``           State Feedback / Kalman Filter panels, Fast / Slow (+ confirm)
 ``POST /api/compensation``     Compensation on/off, Friction Type, Friction Model (+ confirm)
 ``POST /api/push``             disturb the pendulum (emulated rigs only)
+``POST /api/experiment``       Experiments panel: run an identification experiment (+ confirm)
 ``POST /api/record/start``     Save Data: start recording
 ``POST /api/record/stop``      Save Data: stop recording (the page then asks the name)
 ``POST /api/record/name``      the ``out>`` prompt: name the recording (``.dat`` added)
@@ -60,6 +61,7 @@ from ..realtime.params import ChangeError, UnsafeChange
 from .models import (
     CompensationRequest,
     DesignRequest,
+    ExperimentRequest,
     PushRequest,
     RecordNameRequest,
     field_errors,
@@ -312,6 +314,51 @@ class _Console:
         self.saved: dict | None = None     # the last named recording
         self.exited = False
         self.lock = threading.Lock()
+        #: the Experiments panel's last experiment: name, state (running, done,
+        #: stopped, failed), estimates, message, log
+        self.experiment: dict | None = None
+
+    def run_experiment(self, exp) -> None:
+        """Start ``exp`` on the controller and analyse its log when the run ends (in a
+        thread of its own)."""
+        ctl = self.controller
+        with self.lock:
+            self.experiment = {"name": exp.name, "state": "running", "estimates": None,
+                               "warnings": [], "message": None, "log": None}
+        ctl.start(experiment=exp)
+        threading.Thread(target=self._analyse, args=(exp,), name="frictionlab-experiment",
+                         daemon=True).start()
+
+    def _analyse(self, exp) -> None:
+        from ..identification.experiments import IdentificationError
+        from ..identification.onrig import analyse_log
+
+        ctl = self.controller
+        ctl.wait()
+        st = ctl.last_stats or {}
+        out = {"log": st.get("log")}
+        if st.get("stop_reason") != "finished":
+            out.update(state="stopped", message=f"stopped before it finished: "
+                       f"{st.get('stop_reason')} ({st.get('stop_detail') or ''}); the motor "
+                       "was set to zero")
+        elif not st.get("log"):
+            out.update(state="failed", message="the run was not logged: nothing to analyse")
+        else:
+            try:
+                from ..identification.logs import read_log
+
+                log = read_log(st["log"], ctl.cfg.design.h)
+                res = analyse_log(exp.name, log, ctl.cfg, marks=dict(exp.marks))
+            except (IdentificationError, ValueError, OSError) as exc:
+                out.update(state="failed", message=str(exc))
+            else:
+                out.update(state="done", message="done",
+                           estimates={k: v for k, v in res.items()
+                                      if isinstance(v, float) or v is None},
+                           warnings=list(res.get("warnings", [])))
+        with self.lock:
+            if self.experiment is not None:
+                self.experiment.update(out)
 
 
 def _error(status: int, message: str, field: str | None = None) -> HTTPException:
@@ -424,6 +471,7 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
             "saved": console.saved,
             "token_required": token is not None,
             "exited": console.exited,
+            "experiment": None if console.experiment is None else dict(console.experiment),
         }
         return json_safe(st)
 
@@ -562,6 +610,38 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
         except (RuntimeError, ValueError) as exc:
             raise _error(409, str(exc)) from None
         return {"ok": True, "kick": req.kick}
+
+    # --- Experiments ------------------------------------------------------------------------
+
+    @app.post("/api/experiment")
+    def run_experiment(req: ExperimentRequest):
+        from ..identification.onrig import make_rig_experiment
+        from ..realtime.experiment import Limits
+
+        _guard_exited()
+        if controller.running:
+            raise _error(409, "the controller is running: stop it before an experiment")
+        try:
+            limits = Limits(**req.limits)
+        except ValueError as exc:
+            raise _error(422, str(exc), "limits") from None
+        try:
+            exp = make_rig_experiment(req.name, controller.cfg, limits, **req.options)
+        except (TypeError, ValueError) as exc:
+            raise _error(422, f"{req.name}: {exc}", "options") from None
+        if not req.confirm:
+            message = (f"the {req.name} experiment drives the motor: the arm will move (limits:"
+                       f" arm speed {limits.max_speed:g} rad/s, travel {limits.max_travel:g} "
+                       f"rad, |u_DA| {limits.max_u_da:g}); Stop zeroes the motor at once. "
+                       "Send the request with \"confirm\": true to run it")
+            raise HTTPException(422, detail={"detail": message, "errors": [],
+                                             "confirm_required": True})
+        try:
+            console.run_experiment(exp)
+        except RuntimeError as exc:  # includes RigError
+            code = 409 if "already running" in str(exc) or "closed" in str(exc) else 502
+            raise _error(code, str(exc)) from None
+        return {"ok": True, "status": full_status()}
 
     # --- Save Data -------------------------------------------------------------------------
 

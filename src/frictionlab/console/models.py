@@ -51,6 +51,11 @@ COMPENSATOR_FIELDS = {
     "classical": ("stiction", "coulomb", "stribeck_velocity", "hysteresis"),
     "lugre": ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "observer_gain"),
+    # the LuGre observer's fields (coulomb, stiction: the starting values), then its law's
+    "adaptive": ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+                 "observer_gain", "adaptation_gain", "adaptation_bandwidth",
+                 "adaptation_deadband", "adaptation_distance", "adaptation_max_innovation",
+                 "adaptation_min", "adaptation_max"),
 }
 #: Allowed push (rad/s added to the pendulum's angular velocity).
 KICK_RANGE = (-3.0, 3.0)
@@ -141,6 +146,13 @@ class FrictionModelRequest(_Request):
     sigma1: Number | None = None
     observer_gain: Number | None = None
     hysteresis: Number | None = None
+    adaptation_gain: Number | None = None
+    adaptation_bandwidth: Number | None = None
+    adaptation_deadband: Number | None = None
+    adaptation_distance: Number | None = None
+    adaptation_max_innovation: Number | None = None
+    adaptation_min: Number | None = None
+    adaptation_max: Number | None = None
 
     @field_validator(*_ALL_COMP_FIELDS)
     @classmethod
@@ -164,7 +176,7 @@ class CompensationRequest(_Request):
 
     confirm: Confirm = False
     enabled: bool | None = Field(default=None, strict=True)
-    kind: Literal["coulomb", "classical", "lugre"] | None = None
+    kind: Literal["coulomb", "classical", "lugre", "adaptive"] | None = None
     params: FrictionModelRequest | None = None
     error_signal: Literal[ERROR_SIGNALS] | None = None  # type: ignore[valid-type]
 
@@ -203,6 +215,29 @@ class PushRequest(_Request):
             raise ValueError(f"kick = {v:g} rad/s is out of range; allowed [{lo:g}, {hi:g}], "
                              "not 0")
         return v
+
+
+#: Experiments the console's Experiments panel runs (``identify experiment`` names).
+EXPERIMENT_NAMES = ("stiction", "stribeck", "free-oscillation", "control-scaling",
+                    "velocity-scale", "angle-scales")
+
+
+class ExperimentRequest(_Request):
+    """The Experiments panel: run an identification experiment on the connected rig.
+
+    ``options`` are the experiment's own (``step``, ``hold``, ``references``,
+    ... as in ``identify experiment``; checked by the experiment), ``limits``
+    the fields of :class:`frictionlab.realtime.experiment.Limits`
+    (``max_speed``, ``max_travel``, ``max_u_da``).  The motor moves the arm,
+    so the request is refused (422, ``confirm_required``) unless ``confirm``.
+    """
+
+    name: Literal["stiction", "stribeck", "free-oscillation", "control-scaling",
+                  "velocity-scale", "angle-scales"]
+    options: dict[str, Number | list[Number]] = Field(default_factory=dict, max_length=20)
+    limits: dict[Literal["max_speed", "max_travel", "max_u_da"], Number] = Field(
+        default_factory=dict)
+    confirm: Confirm = False
 
 
 class RecordNameRequest(_Request):

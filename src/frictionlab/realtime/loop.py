@@ -8,13 +8,14 @@ nanoseconds on the monotonic clock, so there is no drift):
    latest deadline that has passed (never a burst of catch-up ticks),
    count the skipped ones as *missed* and record the stall;
 3. read the rig's raw (y, x, v), check them (finite, inside [-1, 1]),
-   convert them to SI with App. B (:class:`frictionlab.rig.RigScaling`;
-   the arm channel is unwrapped and its bias x_0 captured at the first tick,
-   so Omega = 0 at the start), check the angle limit;
+   convert them to SI with App. B (the laws of :mod:`frictionlab.sensor`
+   with the ``rig.*`` factors; the arm channel is unwrapped and its bias
+   x_0 captured at the first tick, so Omega = 0 at the start), check the
+   angle limit;
 4. run the compiled controller step - the simulator's own code
    (:func:`frictionlab.controller.controller_step`: u from the predicted
    estimates, saturation, observer update);
-5. write u_DA = -0.022 u (saturated to [-1, 1]); *compute* = u written -
+5. write u_DA = k_u u (``rig.u_scale``, saturated to [-1, 1]); *compute* = u written -
    wake-up, less the time spent reading the rig (*rig*: request to reply
    over UDP/serial, the plant's step for ``sim``), which is measured
    separately; an *overrun* is a u written after the next deadline;
@@ -22,8 +23,10 @@ nanoseconds on the monotonic clock, so there is no drift):
    (log writer, console subscriptions) without blocking;
 7. between ticks, after every tick (one without a reading too): apply
    pending parameter changes atomically (the mailbox; in effect from the
-   next tick), and the scheduled housekeeping (garbage collection once a
-   second, the host's steal time every 100 ms).
+   next tick; a change of compensator, or of the adaptive compensator's
+   parameters, restarts the compensator's state), and the scheduled
+   housekeeping (garbage collection once a second, the host's steal time
+   every 100 ms).
 
 Gain transitions: a change of the state-feedback gains L while the loop runs
 (a new design) moves L linearly from the gains in use to the new ones over
@@ -63,7 +66,9 @@ late, or a tick that took that long from its deadline to its output - the
 process was suspended, e.g. SIGSTOP, or the host stalled - so the
 controller's state is stale; the tick zeroes the motor instead of acting on
 it; not with a rig whose plant waits for the loop, ``Rig.realtime_plant``
-False), ``exception``, and the requested stops ``duration``, ``user``,
+False), ``exception``, an identification experiment's ``finished`` (its
+schedule is done) and ``experiment_limit`` (arm speed, travel or waiting
+time exceeded, :mod:`.experiment`), and the requested stops ``duration``, ``user``,
 ``signal``, ``exit`` and ``log_failed`` (the log writer could not write,
 :mod:`.datalog`).
 
@@ -84,18 +89,20 @@ import traceback
 from collections import deque
 from dataclasses import dataclass
 
+from .. import sensor
 from .._validation import Validated, param
 from ..controller import (
+    ADAPTIVE,
     G_COMP,
     G_L,
     G_W0,
     S_ARM,
     S_ARMDOT,
-    S_RELAY,
     S_X1,
     S_X2,
     S_ZHAT,
     controller_step,
+    reset_compensator,
 )
 from ..rig import RigScaling
 from .osrt import normal_priority, try_realtime_priority
@@ -105,12 +112,12 @@ from .rigs import BadReading, Rig
 from .samples import CHANGED, COMPENSATE, MISSED, NO_READING, OVERRUN, START, STOP, Sample
 from .stats import Histogram, StallLog
 
-__all__ = ["STOP_REASONS", "Loop", "Safety"]
+__all__ = ["STOP_REASONS", "ExperimentEnd", "Loop", "Safety"]
 
 #: Every stop reason the loop records.
 STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_reading",
                 "rig_silent", "not_upright", "rig_fault", "nonfinite_u", "paused",
-                "log_failed", "exception")
+                "log_failed", "exception", "finished", "experiment_limit")
 _NAN = math.nan
 _FMAX = sys.float_info.max
 _rt_warned = False
@@ -153,6 +160,16 @@ class Safety(Validated):
                             integer=True)
 
 
+class ExperimentEnd(Exception):
+    """Raised by an experiment's ``step`` to end the run: reason ``finished`` (its
+    schedule is done) or ``experiment_limit`` (one of its limits was exceeded)."""
+
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(detail)
+        self.reason = reason
+        self.detail = detail
+
+
 class _Stop(Exception):
     """Internal: leave the loop with a reason."""
 
@@ -186,6 +203,14 @@ class Loop:
     manage_gc : bool
         Freeze and disable the cyclic garbage collector during the run (see
         the module docstring).
+    experiment : object, optional
+        An identification experiment in place of the balancing controller
+        (:mod:`frictionlab.realtime.experiment`): ``step(t, theta, arm,
+        arm_dot, y, x, v) -> u`` (m/s^2) is called in the tick instead of the
+        controller step, and may raise :class:`ExperimentEnd`.  The
+        ``not_upright`` and ``angle_limit`` checks are off (the pendulum hangs
+        or swings freely); every other check, the timing and the logging are
+        those of a balancing run.
 
     Attributes read by other threads (single-word updates, no locks): ``k``,
     ``ticks``, ``missed``, ``overruns``, ``rig_timeouts``, ``jitter``,
@@ -197,12 +222,13 @@ class Loop:
                  safety: Safety | None = None, scaling: RigScaling | None = None,
                  duration: float | None = None, realtime: bool = True,
                  manage_gc: bool = True, priority: int = 50, prewarm_us: float = 0.0,
-                 cpu: int | None = None):
+                 cpu: int | None = None, experiment=None):
         self.rig = rig
+        self.experiment = experiment
         self.clock = clock
         self.params = params
         self.safety = safety or Safety()
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or params.cfg.rig
         h = params.cfg.design.h
         self.h = h
         self.h_ns = round(h * 1e9)
@@ -242,6 +268,9 @@ class Loop:
         self.sched_fifo = False
         self.x0: float | None = None
         self.traceback: str | None = None
+        #: The controller state (:mod:`frictionlab.controller`'s table) from the first
+        #: reading on, updated in place by each tick (for the sidecar's adapted levels).
+        self.state = None
 
     # --- requests from other threads -------------------------------------------
 
@@ -266,7 +295,7 @@ class Loop:
         # (a signal during the handshake) skips all that and stops at tick 0 at once.
         setup = self.stop_request is None
         p = self.params
-        if setup:
+        if setup and self.experiment is None:
             controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
         gc_was = gc.isenabled()
         if self.manage_gc and setup:
@@ -342,6 +371,11 @@ class Loop:
         echo_bad = 0
         commanded = False
         sc = self.scaling
+        # App. B.5 from the sensor model, as plain Python (no dispatch in the tick)
+        theta_si = sensor.theta_from_raw.py_func
+        arm_si = sensor.arm_from_raw.py_func
+        velocity_si = sensor.velocity_from_raw.py_func
+        unwrap = sensor.unwrap.py_func
         ts, tb = sc.theta_scale, sc.theta_bias
         as_ = sc.arm_scale
         vs, vb = sc.velocity_scale, sc.velocity_bias
@@ -349,6 +383,8 @@ class Loop:
         jit_add, comp_add, rig_add = self.jitter.add, self.compute.add, self.rig_io.add
         n_ticks = self.n_ticks
         mailbox = self.mailbox
+        experiment = self.experiment
+        exp_step = experiment.step if experiment is not None else None
         params = self.params
         gp, cp = params.gp, params.cp
         w0 = gp[G_W0]
@@ -484,42 +520,54 @@ class Loop:
                     x0 = x
                     self.x0 = x0
                 else:
-                    d = x - x_prev
-                    if d > 1.0:
-                        wraps -= 1
-                    elif d < -1.0:
-                        wraps += 1
+                    wraps = unwrap(x_prev, x, wraps)
                 x_prev = x
-                theta = ts * (y + tb)
-                arm = as_ * (x + 2.0 * wraps - x0)
-                arm_dot = vs * (v + vb)
-                if first:
-                    if not abs(theta) <= safety.start_tolerance:
-                        raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the start "
-                                    f"(tolerance {safety.start_tolerance} rad; no swing-up)", r)
-                    s = params.controller.init(theta)
-                    flags |= START
-                    first = False
-                if not abs(theta) <= angle_limit:
-                    raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
-                                f"{angle_limit} rad", r)
-                th_hat = s[S_X1]
-                thd_hat = w0 * s[S_X2]
-                arm_hat = s[S_ARM]
-                armd_hat = s[S_ARMDOT]
-                z_hat = s[S_ZHAT]
-                if ramp_k < ramp_n:
-                    ramp_k += 1
-                    if ramp_k == ramp_n:
-                        gp = params.gp
-                    else:
-                        gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
-                u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
-                if not -_FMAX <= u <= _FMAX:
-                    raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
-                                "from the estimates theta, theta', arm, arm', z = "
-                                f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, {armd_hat:.4g}, "
-                                f"{z_hat:.4g}", r)
+                theta = theta_si(y, ts, tb)
+                arm = arm_si(x + 2.0 * wraps, x0, as_)
+                arm_dot = velocity_si(v, vs, vb)
+                if exp_step is not None:
+                    # an identification experiment: its own schedule and limits
+                    try:
+                        u = exp_step(k * h, theta, arm, arm_dot, y, x, v)
+                    except ExperimentEnd as end:
+                        raise _Stop(end.reason, end.detail, r) from None
+                    if first:
+                        flags |= START
+                        first = False
+                    th_hat = thd_hat = arm_hat = armd_hat = f_hat = z_hat = _NAN
+                    if not -_FMAX <= u <= _FMAX:
+                        raise _Stop("nonfinite_u", f"the experiment computed u = {float(u)!r}",
+                                    r)
+                else:
+                    if first:
+                        if not abs(theta) <= safety.start_tolerance:
+                            raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the "
+                                        f"start (tolerance {safety.start_tolerance} rad; no "
+                                        "swing-up)", r)
+                        s = params.controller.init(theta)
+                        self.state = s
+                        flags |= START
+                        first = False
+                    if not abs(theta) <= angle_limit:
+                        raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
+                                    f"{angle_limit} rad", r)
+                    th_hat = s[S_X1]
+                    thd_hat = w0 * s[S_X2]
+                    arm_hat = s[S_ARM]
+                    armd_hat = s[S_ARMDOT]
+                    z_hat = s[S_ZHAT]
+                    if ramp_k < ramp_n:
+                        ramp_k += 1
+                        if ramp_k == ramp_n:
+                            gp = params.gp
+                        else:
+                            gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
+                    u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
+                    if not -_FMAX <= u <= _FMAX:
+                        raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
+                                    "from the estimates theta, theta', arm, arm', z = "
+                                    f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, "
+                                    f"{armd_hat:.4g}, {z_hat:.4g}", r)
                 u_da = us * u
                 if u_da > 1.0:
                     u_da = 1.0
@@ -550,6 +598,7 @@ class Loop:
             # ---- between ticks ----
             if mailbox:
                 old_kind = gp[G_COMP]
+                old_cp = cp
                 applied = []
                 while mailbox:
                     applied.append(mailbox.popleft())
@@ -568,9 +617,11 @@ class Loop:
                     ramp_k = ramp_n
                 w0 = gp[G_W0]
                 comp_flag = COMPENSATE if params.comp_enabled else 0
-                if gp[G_COMP] != old_kind and s is not None:
-                    s[S_RELAY] = 0.0
-                    s[S_ZHAT] = 0.0
+                if s is not None and (gp[G_COMP] != old_kind or (
+                        gp[G_COMP] == ADAPTIVE and not (cp == old_cp).all())):
+                    # a new compensator, or new starting values of the adaptive one:
+                    # it starts afresh at the next tick
+                    reset_compensator(s)
                 pending_flags = CHANGED
                 self.changes_applied += len(applied)
                 for _p, fut in applied:

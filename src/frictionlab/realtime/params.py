@@ -14,8 +14,9 @@ Change requests are dicts (the console's and the mailbox's format):
     or a dict of ``design.*`` fields (``{"omega1": 5.0}``) applied to the
     current spec.  ``h`` cannot change while the loop exists.
 ``"compensation"``
-    ``"none"`` (off) or ``"coulomb"``/``"classical"``/``"lugre"`` (selects
-    the model and turns compensation on).
+    ``"none"`` (off) or ``"coulomb"``/``"classical"``/``"lugre"``/``"adaptive"``
+    (selects the model and turns compensation on; ``adaptive`` is the LuGre
+    observer with levels adapted online, :mod:`frictionlab.adaptive`).
 ``"compensation_enabled"``
     ``True``/``False``: the thesis's Compensation button (keeps the model).
 ``"compensation_params"``
@@ -57,7 +58,7 @@ from ..loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
 __all__ = ["CHANGE_KEYS", "COMPENSATOR_MODELS", "ChangeError", "ControlParams", "UnsafeChange"]
 
 #: Friction models the compensator can use (the thesis's "Friction Type").
-COMPENSATOR_MODELS = ("coulomb", "classical", "lugre")
+COMPENSATOR_MODELS = ("coulomb", "classical", "lugre", "adaptive")
 CHANGE_KEYS = ("design", "compensation", "compensation_enabled", "compensation_params", "set",
                "error_signal")
 _FRICTION_FIELDS = tuple(f.name for f in dataclasses.fields(FrictionParams)
@@ -156,7 +157,7 @@ class ControlParams:
                                   compensation=params[kind])
         d = design(spec, cfg.plant)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
-                          error_signal=error_signal)
+                          error_signal=error_signal, u_max=cfg.rig.u_max)
         gp, cp = ctrl.pack()
         gp.flags.writeable = False
         cp.flags.writeable = False
