@@ -34,6 +34,7 @@ def _run(capsys, argv):
     return rc, out, err
 
 
+@pytest.mark.slow
 def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
     plot, report = tmp_path / "fit.png", tmp_path / "full.json"
     rc, out, err = _run(capsys, [
@@ -59,6 +60,7 @@ def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
     assert "warnings" in full and "singular_values" in full
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_limit_cycle_on_a_dask_localcluster_gives_the_pool_estimate(capsys, measured):
     from frictionlab.sweep import shutdown
@@ -134,6 +136,7 @@ def test_limit_cycle_missing_file_exits_2(capsys, tmp_path):
     assert rc == 2 and "cannot read" in err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, sets, expect", [
     ("stiction", ["friction.stiction=2.1", "friction.coulomb=1.35"],
      {"stiction": (2.1, 0.05), "coulomb": (1.35, 0.05)}),

@@ -68,6 +68,7 @@ def _rel(est: dict, key: str) -> float:
     return abs(est[key] - TRUTH[key]) / TRUTH[key]
 
 
+@pytest.mark.slow
 def test_synthetic_recovery(clean_fit):
     """Acceptance: default bounds and budget, F_C and omega0 within 2 %, F_S within 10 %."""
     assert clean_fit.bounds == {k: DEFAULT_BOUNDS[k] for k in TRUTH}
@@ -79,6 +80,7 @@ def test_synthetic_recovery(clean_fit):
     assert _rel(est, "friction.stiction") < 0.10
 
 
+@pytest.mark.slow
 def test_residuals_cover_every_measured_feature(clean_fit):
     assert set(clean_fit.residuals) == {"fast", "slow"}
     for label, res in clean_fit.residuals.items():
@@ -100,6 +102,7 @@ def test_stderr_reported_and_no_flat_direction(clean_fit):
         assert abs(clean_fit.estimate[key] - value) < 3.0 * clean_fit.stderr[key]
 
 
+@pytest.mark.slow
 def test_noisy_features_truth_within_three_stderr(noisy_fit):
     """Acceptance: with 1 % feature noise the true values lie within 3
     reported standard errors, for each of the first three noise seeds."""
@@ -131,6 +134,7 @@ def test_json_fields(clean_fit):
     assert out["estimate"] == clean_fit.estimate
 
 
+@pytest.mark.slow
 def test_evaluates_generations_through_the_sweep_engine(monkeypatch):
     """Every evaluation goes through frictionlab.sweep.evaluate, one call per
     generation (population x experiments points), and a parameter with no
@@ -177,6 +181,7 @@ BELOW = {"experiments": [{"design": "fast",
                           "features": {"period": 2.0, "peak1": 0.05, "max_u": 3.5}}]}
 
 
+@pytest.mark.slow
 def test_fit_keeps_stiction_above_coulomb_unless_told_not_to():
     exps = parse_experiments(BELOW)
     keys = ["friction.coulomb", "friction.stiction"]

@@ -46,6 +46,7 @@ def _varied(row):
     return keys[0], row[keys[0]]
 
 
+@pytest.mark.slow
 def test_json_is_the_documented_object(report):
     result, out = report
     assert set(result) == {"out", "seconds", "figures", "tables"}
@@ -62,6 +63,7 @@ def test_json_is_the_documented_object(report):
     assert lugre == APPENDIX_F_KEYS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("number", ["2", "3"])
 def test_tables_2_and_3_within_5_percent_of_the_thesis(report, number):
     key, thesis = THESIS[number]
@@ -133,6 +135,7 @@ def test_rows_match_simulate(report):
             assert sim["features"][name] == row[name], (number, row["key"], name)
 
 
+@pytest.mark.slow
 def test_every_run_goes_through_the_sweep_engine(monkeypatch):
     import frictionlab.batch as batch
     import frictionlab.simulation as simulation
@@ -195,6 +198,7 @@ def _failing_reduce(cfg, duration, window):
 _REAL_REDUCE = rp.reduce_with_trace
 
 
+@pytest.mark.slow
 def test_a_failed_run_is_a_row_not_a_crash(tmp_path, monkeypatch):
     """A run that raises becomes an error row; the report is still written, without
     the figures of that run."""

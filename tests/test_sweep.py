@@ -172,6 +172,7 @@ def test_serial_rows_are_run_features_and_failures_are_rows():
     assert [d for d, _ in calls] == sorted(d for d, _ in calls)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
     """Acceptance: Table 2's F_C values, threads vs Dask LocalCluster vs in-process,
@@ -237,6 +238,7 @@ def _reduce_without_status(cfg, duration, window):
     return dict.fromkeys(FEATURES, 0.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_reduce_hook_replaces_the_feature_reduction(workers):
     """A caller's reduce runs for every point (in-process and in the pool): its
@@ -329,6 +331,7 @@ def _data_lines(path):
     return max(0, Path(path).read_text().count("\n") - 1) if Path(path).exists() else 0
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(400)
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["term", "kill"])
 def test_killed_sweep_resumes_with_every_point_exactly_once(tmp_path, sig):
@@ -424,6 +427,7 @@ def test_resume_refuses_a_different_setup(tmp_path):
     assert rc == 0 and json.loads(out)["rows"] == 2 and len(read_csv(path)) == 2
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_file_with_the_earlier_column_order(tmp_path):
     """Files of an earlier frictionlab (status between the keys and the
     features) are not resumed into: exit 2, one line, the file untouched."""
@@ -560,6 +564,7 @@ def test_table_marks_rows_that_are_not_limit_cycles():
     assert lines[3].split("|")[2].strip() == "-" and lines[3].rstrip("| ").endswith("fell")
 
 
+@pytest.mark.slow
 def test_plot_leaves_undefined_features_out_and_marks_falls_on_the_edge(tmp_path, monkeypatch):
     """A fallen run is no point of the line (which breaks there) but a marker
     on the panel's bottom edge, outside the data: the y range is that of the
@@ -603,6 +608,7 @@ def test_plot_leaves_undefined_features_out_and_marks_falls_on_the_edge(tmp_path
     assert any(t.startswith("fell") for t in legend)
 
 
+@pytest.mark.slow
 def test_plot_file(tmp_path):
     png = tmp_path / "s.png"
     rc, out, _ = run_cli("--vary", "friction.coulomb=1.1,1.5", "--vary", "plant.omega0=6.8,7.5",
@@ -616,6 +622,7 @@ def test_plot_file(tmp_path):
 EDGE_MODULES = ("frictionlab.cli", "frictionlab.sweep_cli", "matplotlib", "rich")
 
 
+@pytest.mark.slow
 def test_engine_imports_no_cli_plotting_or_terminal_code():
     """frictionlab.sweep is numerics and files: no import of the CLI, matplotlib or
     rich anywhere in its source (also inside functions), and none at run time."""
