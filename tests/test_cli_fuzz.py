@@ -96,6 +96,8 @@ WORK = {
     ("reproduce",): (("frictionlab.reproduce", "run", _reach),
                      ("frictionlab.sweep", "_get_dask", _reach)),
     ("predict",): (("frictionlab.predict", "predict", _reach),),
+    # the log's features are computed for real (a generated log is small)
+    ("features",): (),
 }
 
 
@@ -325,6 +327,8 @@ def _argv(draw, path, parser, folder: Path) -> list[str]:
         if not action.option_strings and action.nargs != 0 and action.choices:
             argv.append(draw(st.sampled_from(list(action.choices)))
                         if draw(_MOSTLY) else draw(st.text(max_size=6)))
+        elif not action.option_strings and action.dest == "log" and draw(_MOSTLY):
+            argv.append(_path(draw, folder, "log"))  # features LOG
     for flag, value in VALID.get(path, ()):
         if draw(_MOSTLY):
             argv += [flag, value.format(example=EXAMPLE)]
@@ -393,6 +397,7 @@ def check_outcome(argv, rc, out, err, peak):
         assert len(out.splitlines()) == 1 and isinstance(json.loads(out), dict), argv
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(WORK), ids=" ".join)
 @FUZZ
 @given(data=st.data())
@@ -449,6 +454,7 @@ def test_reported_bad_input_in_process(stubbed, tmp_path, argv, message):
     assert rc == 2 and message in err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv, message", [REPORTED[i] for i in (0, 1, 2, 5, 7, 8)],
                          ids=lambda v: " ".join(v)[:40] if isinstance(v, list) else "")
 def test_reported_bad_input_through_the_entry_point(tmp_path, argv, message):

@@ -164,7 +164,8 @@ def test_schema_ranges_are_the_dataclasses_ranges():
         lo = fields[f["name"]]["lo"]
         assert f["lo"] == (None if lo is None or math.isinf(lo) else lo)
     assert sch["presets"]["slow"] == dataclasses.asdict(PRESETS["slow"])
-    assert set(sch["compensation"]["kinds"]) == {"coulomb", "classical", "lugre"}
+    assert set(sch["compensation"]["kinds"]) == {"coulomb", "classical", "lugre",
+                                                  "adaptive"}
 
 
 # --- access control ------------------------------------------------------------------------
@@ -379,6 +380,7 @@ def _backlog_samples(texts: list[str]) -> np.ndarray:
     return np.array(t)
 
 
+@pytest.mark.slow
 def test_a_connecting_page_gets_the_history_already_serialised():
     """History is serialised once per chunk of samples, never per page.
 
@@ -460,6 +462,7 @@ def app_and_controller(tmp_path):
     ctl.close()
 
 
+@pytest.mark.slow
 def test_design_changes_and_refusals_through_the_api(app_and_controller):
     client, _ctl, _ = app_and_controller
     slow = design("slow")
@@ -491,6 +494,36 @@ def test_design_changes_and_refusals_through_the_api(app_and_controller):
     comp = client.get("/api/status").json()["compensation"]
     assert comp["kind"] == "classical" and comp["params"]["stiction"] == 2.0
     assert client.post("/api/push", json={"kick": 0.3}).status_code == 409  # not running
+
+
+def test_adaptive_compensation_through_the_api(app_and_controller):
+    """The Adaptive choice of the Friction Type: its fields in the schema, the
+    law's gains checked against its stability conditions (located at the field),
+    and its estimates in the status."""
+    client, _ctl, _ = app_and_controller
+    sch = client.get("/api/schema").json()["compensation"]
+    assert "adaptive" in sch["kinds"]
+    names = [f["name"] for f in sch["fields"]["adaptive"]]
+    assert names[:7] == [f["name"] for f in sch["fields"]["lugre"]]
+    assert "adaptation_gain" in names and "adaptation_bandwidth" in names
+    assert client.get("/api/status").json()["adaptation"] is None
+    r = client.post("/api/compensation", json={"kind": "adaptive", "params": {"coulomb": 1.2}})
+    assert r.status_code == 200, r.json()
+    st = r.json()["status"]
+    assert st["compensation"]["kind"] == "adaptive" and st["compensation"]["enabled"]
+    assert st["adaptation"] == {"start": {"coulomb": 1.2, "stiction": 2.3}, "coulomb": 1.2,
+                                "stiction": 2.3, "status": "off"}
+    r = client.post("/api/compensation", json={"params": {"adaptation_gain": 1e5}})
+    assert r.status_code == 422
+    err = r.json()["errors"][0]
+    assert err["field"] == "params.adaptation_gain"
+    assert "compensation.adaptation_gain = 100000 is out of range" in err["message"]
+    r = client.post("/api/compensation", json={"params": {"adaptation_bandwidth": 500.0}})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == (
+        "params.adaptation_bandwidth")
+    assert client.get("/api/status").json()["compensation"]["params"]["adaptation_gain"] == 200
+    r = client.post("/api/compensation", json={"enabled": False})
+    assert r.json()["status"]["adaptation"] is None
 
 
 @pytest.mark.parametrize("path, body, field, verdict", [
@@ -561,6 +594,7 @@ def test_refusals_are_located_by_key_not_by_message(app_and_controller, monkeypa
                                                         "enabled", "error_signal"]
 
 
+@pytest.mark.slow
 def test_run_record_download_and_exit(app_and_controller, tmp_path):
     client, ctl, exits = app_and_controller
     assert client.post("/api/record/start", json={}).status_code == 409  # not running
@@ -639,6 +673,23 @@ def test_a_run_ending_by_itself_while_recording_asks_for_the_name(app_and_contro
     assert r.status_code == 200
     assert (tmp_path / "before_the_fall.dat").is_file()
     assert not client.get("/api/status").json()["console"]["pending_recording"]
+
+
+def test_a_recording_the_console_never_saw_running_still_asks_for_its_name(
+        app_and_controller):
+    """Whether a recording awaits its name is asked of the controller, not inferred from
+    an earlier status (a stale one, taken before the recording started, once hid it)."""
+    client, ctl, _ = app_and_controller
+    assert client.post("/api/start", json={}).status_code == 200
+    ctl.record_start()  # no status of the console has seen it recording
+    ctl.stop("angle_limit")
+    assert ctl.wait(5.0)
+    assert ctl.unnamed_recording is not None
+    st = client.get("/api/status").json()
+    assert not st["recording"] and st["console"]["pending_recording"]
+    assert ctl.unnamed_recording is None  # taken by the console: asked for only once
+    r = client.post("/api/record/name", json={"name": "unseen"})
+    assert r.status_code == 200 and r.json()["rows"] >= 1
 
 
 def test_guard_refuses_a_websocket_without_the_token(app_and_controller):
@@ -781,6 +832,7 @@ print(json.dumps(events))
 """
 
 
+@pytest.mark.slow
 def test_a_first_session_loads_nothing_while_the_loop_runs(tmp_path):
     """Everything a server thread would load on first use is loaded before the loop starts.
 
@@ -873,6 +925,7 @@ async def _read_backlog(ws_url: str) -> list[dict]:
                 return msgs
 
 
+@pytest.mark.slow
 def test_connecting_pages_cannot_stall_the_loop(tmp_path):
     """30 pages connecting at once and 10 reconnecting ones: the loop keeps its deadlines
     and the pendulum stays up; each page gets its history in small messages made once
@@ -945,6 +998,7 @@ def _closed_by_server(sock: socket.socket, timeout: float) -> bool:
         return False
 
 
+@pytest.mark.slow
 def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
     """100 idle TCP connections without the token: Stop and every authorised request still
     answer, refusals close their connection, idle and trickling connections are closed
@@ -997,3 +1051,73 @@ def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
         for s in idle:
             s.close()
         served.close()
+
+
+@pytest.mark.slow
+def test_swing_up_button_starts_a_swing_up_and_the_phase_is_shown(tmp_path):
+    import math
+
+    cfg = build_config("fast", "classical", sets=[("sim.initial_angle", math.pi)])
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05)
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        st = client.get("/api/status").json()
+        assert st["swing_up"] is None
+        # Start (balancing only) refuses the hanging pendulum ...
+        assert client.post("/api/start", json={}).status_code == 200
+        assert ctl.wait(5.0)
+        assert client.get("/api/status").json()["stop_reason"] == "not_upright"
+        # ... Swing up swings it up, catches it and balances it
+        r = client.post("/api/swingup", json={})
+        assert r.status_code == 200
+        assert r.json()["status"]["swing_up"]["phase"] in ("swinging", "caught", "balancing")
+        assert client.post("/api/swingup", json={}).status_code == 409
+        seen = set()
+        while (st := client.get("/api/status").json())["t"] < 4.0:
+            assert st["running"], (st["stop_reason"], st["stop_detail"])
+            seen.add(st["swing_up"]["phase"])
+        assert st["swing_up"]["phase"] == "balancing" and "swinging" in seen
+        assert 0 < st["swing_up"]["swing_up_time"] < 4.0
+        assert client.post("/api/stop", json={}).status_code == 200
+        page = client.get("/").text
+        assert 'id="swingup"' in page and 'id="swing-phase"' in page
+    ctl.close()
+
+
+def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
+    """The Experiments panel: refused without confirm (the motor moves), bad options and
+    limits refused at their field, a confirmed run goes through the loop on the connected
+    rig and its estimate arrives in the status."""
+    cfg = build_config("fast", "classical", sets=[("plant.omega0", 6.3)])
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05)
+    body = {"name": "free-oscillation", "options": {"duration": 6.0}}
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        r = client.post("/api/experiment", json=body)
+        assert r.status_code == 422 and r.json()["confirm_required"] is True
+        assert "arm will move" in r.json()["detail"]
+        assert not ctl.running and client.get("/api/status").json()["ticks"] == 0
+        r = client.post("/api/experiment", json={**body, "options": {"bogus": 1},
+                                                  "confirm": True})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "options"
+        r = client.post("/api/experiment", json={**body, "limits": {"max_u_da": 2},
+                                                  "confirm": True})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "limits"
+        r = client.post("/api/experiment", json={"name": "nonsense", "confirm": True})
+        assert r.status_code == 422
+        r = client.post("/api/experiment", json={**body, "confirm": True})
+        assert r.status_code == 200, r.json()
+        deadline = time.monotonic() + 120
+        while True:
+            exp = client.get("/api/status").json()["console"]["experiment"]
+            if exp["state"] != "running" or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        assert exp["state"] == "done", exp
+        assert abs(exp["estimates"]["omega0"] - 6.3) < 0.02 * 6.3
+        assert exp["log"] and os.path.exists(exp["log"])
+        st = client.get("/api/status").json()
+        assert st["stop_reason"] == "finished" and st["experiment"]["progress"] == 1.0
+    ctl.close()

@@ -78,19 +78,24 @@ def test_frictionlab_controller_as_policy_replays_the_simulator_exactly(friction
 
 
 def test_noise_and_quantisation_like_the_simulator():
-    q = RigScaling().quanta()
+    r = RigScaling()
     env = FurutaEnv(sets=["sim.noise=0.01", "sim.quantization=1"], friction="none")
     obs, info = env.reset(seed=5, options={"initial_angle": 0.0})
     errs = []
     for _ in range(1000):
-        # quantised to the ADC steps of App. B
-        np.testing.assert_allclose(obs / q, np.round(obs / q), atol=1e-9)
+        # quantised to the ADC steps of App. B, in raw units (biases included; the
+        # arm relative to its first reading)
+        raw = np.array([obs[0] / r.theta_scale - r.theta_bias, obs[1] / r.arm_scale,
+                        obs[2] / r.velocity_scale - r.velocity_bias]) / (2 / 4096)
+        np.testing.assert_allclose(raw, np.round(raw), atol=1e-6)
         errs.append(obs - [info["theta"], info["arm"], info["arm_dot"]])
         obs, _, _, _, info = env.step(np.zeros(1))
     errs = np.array(errs)
     # noise of standard deviation 0.01 (plus quantisation's q/sqrt(12), well below it)
     np.testing.assert_allclose(errs.std(axis=0), 0.01, rtol=0.12)
-    np.testing.assert_allclose(errs.mean(axis=0), 0.0, atol=0.002)
+    np.testing.assert_allclose(errs.mean(axis=0)[[0, 2]], 0.0, atol=0.002)
+    # the arm is measured from its first reading: its error is the noise less the first draw
+    assert abs(errs[0, 1]) <= 25.8 * 2 / 4096
     # reproducible from the seed
     env2 = FurutaEnv(sets=["sim.noise=0.01", "sim.quantization=1"], friction="none")
     a, _ = env2.reset(seed=5, options={"initial_angle": 0.0})
@@ -199,6 +204,7 @@ def test_bad_options_are_refused():
         env.reset(options={"initial_angle": 2.0})
 
 
+@pytest.mark.slow
 def test_make_vec_gives_the_native_vector_env():
     venv = gymnasium.make_vec(ENV_ID, num_envs=3, friction="lugre")
     assert isinstance(venv.unwrapped, FurutaVectorEnv) and venv.num_envs == 3
@@ -259,3 +265,57 @@ def test_vector_randomises_each_copy():
         FurutaVectorEnv(0)
     with pytest.raises(ValueError, match="shape"):
         venv.step(np.zeros((5, 1)))
+
+
+# --- the swing-up variant ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"action": "u_da", "observation": "raw",
+                                         "randomize": True, "sets": ["sim.noise=0.002"]}])
+def test_swing_up_variant_passes_the_env_checker(kwargs):
+    env = gymnasium.make(fgym.SWINGUP_ENV_ID, **kwargs)
+    assert env.spec.max_episode_steps == 2000
+    msgs = _check(env.unwrapped)
+    assert all(NORMALISE_HINT in m for m in msgs), msgs
+    assert env.unwrapped._s.task == "swing_up"
+
+
+def test_swing_up_episode_starts_hanging_and_the_energy_controller_brings_it_up():
+    from frictionlab.swingup import SwingUp
+
+    env = gymnasium.make(fgym.SWINGUP_ENV_ID, sets=["sim.noise=0.002"])
+    obs, info = env.reset(seed=4)
+    assert abs(abs(info["theta"]) - math.pi) <= 0.05 and info["theta_dot"] == 0.0
+    assert abs(obs[0]) > 3.0  # measured angle wrapped into [-pi, pi)
+    cfg = env.unwrapped.config
+    ctl = SwingUp(make_controller(cfg), cfg.swingup)
+    state = ctl.init(obs[0])
+    rewards = []
+    for _ in range(1600):  # 8 s
+        out, state = ctl.step(state, *obs)
+        obs, r, terminated, truncated, info = env.step(env.unwrapped.action_from_u(out.u))
+        rewards.append(r)
+        assert not terminated and not truncated
+        assert -math.pi <= obs[0] < math.pi
+    assert out.phase == "balancing"
+    assert rewards[0] < 0.01 and min(rewards[-200:]) > 0.95
+    assert abs(math.remainder(info["theta"], 2 * math.pi)) < 0.35
+
+
+def test_swing_up_terminates_at_the_arm_limits_not_at_the_fall_angle():
+    env = gymnasium.make(fgym.SWINGUP_ENV_ID)
+    env.reset(seed=0, options={"initial_angle": math.pi})
+    for _k in range(400):
+        _, _, terminated, _, info = env.step(np.array([20.0]))
+        if terminated:
+            break
+    assert terminated
+    su = env.unwrapped.config.swingup
+    assert abs(info["arm"]) > su.arm_limit or abs(info["arm_dot"]) > su.arm_speed_limit
+    vec = FurutaVectorEnv(3, task="swing_up")
+    obs, _ = vec.reset(seed=1)
+    assert np.all(np.abs(obs[:, 0]) > 3.0)
+    _, r, term, _, _ = vec.step(np.zeros((3, 1)))
+    assert not term.any() and np.all(r < 0.01)
+    with pytest.raises(ValueError, match="task"):
+        FurutaEnv(task="juggle")

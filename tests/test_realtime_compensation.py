@@ -56,6 +56,7 @@ def peak_to_peak(log, t_from, t_to):
     return f.peak_to_peak, f.status
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", COMPENSATORS)
 def test_logged_control_equals_simulate_config_tick_by_tick(kind, tmp_path):
     cfg = build_config("fast", "lugre", kind)
@@ -74,6 +75,7 @@ def test_logged_control_equals_simulate_config_tick_by_tick(kind, tmp_path):
     assert np.max(np.abs(log["u"] - off["u"])) > 1.0
 
 
+@pytest.mark.slow
 def test_lugre_compensation_shrinks_the_noisy_limit_cycle_5x(tmp_path):
     sets = [f"sim.noise={NOISE}"]
     on = run_logged(build_config("fast", "lugre", "lugre", sets=sets), 20.0, tmp_path)
@@ -86,6 +88,7 @@ def test_lugre_compensation_shrinks_the_noisy_limit_cycle_5x(tmp_path):
     assert np.max(np.abs(on["friction_hat"])) > 1.0
 
 
+@pytest.mark.slow
 def test_switching_compensation_on_mid_run_removes_the_limit_cycle(tmp_path):
     """The operator's Compensation button (Sec. 7.1): LuGre on after 15 s."""
     cfg = build_config("fast", "lugre", "none", sets=[f"sim.noise={NOISE}"])
@@ -100,3 +103,96 @@ def test_switching_compensation_on_mid_run_removes_the_limit_cycle(tmp_path):
     ptp_after, _ = peak_to_peak(log, 20.0, 30.0)
     assert status_before == "limit_cycle"
     assert ptp_before >= 5.0 * ptp_after, (ptp_before, ptp_after)
+
+
+def test_adaptive_on_a_drifting_plant_equals_simulate_config_tick_by_tick(tmp_path):
+    """Plain eq. (18) compensation (k = 0), so that the adaptation acts; the plant's
+    levels fall 40 % over the run.  The loop's log is the simulator's run, and its
+    sidecar holds the adapted levels the simulator ends with."""
+    from frictionlab.realtime.datalog import read_sidecar
+
+    cfg = build_config("fast", "lugre", "adaptive",
+                       sets=["friction.drift=-0.4", "compensation.observer_gain=0",
+                             "compensation.coulomb=1.2"])
+    log = run_logged(cfg, 10.0, tmp_path)
+    traj = simulate_config(cfg, 10.0)
+    for name in ("u", "friction_hat", "theta_m", "arm_dot_m"):
+        np.testing.assert_allclose(log[name], traj[name], rtol=1e-6, atol=1e-5,
+                                   err_msg=name)
+    # the adaptation did act, and the drift did too
+    assert traj["coulomb_hat"][-1] != 1.2 and traj["stiction_hat"][-1] != 2.3
+    steady = simulate_config(build_config("fast", "lugre", "adaptive",
+                                          sets=["compensation.observer_gain=0",
+                                                "compensation.coulomb=1.2"]), 10.0)
+    assert np.max(np.abs(steady["u"] - log["u"])) > 0.1
+    (sidecar,) = [read_sidecar(p) for p in tmp_path.glob("*.json")]
+    ad = sidecar["adaptation"]
+    assert ad["start"] == {"coulomb": 1.2, "stiction": 2.3}
+    assert ad["status"] in ("adapting", "stuck", "presliding", "bad_signal", "saturated")
+    assert ad["coulomb"] == pytest.approx(traj["coulomb_hat"][-1], rel=1e-6, abs=1e-6)
+    assert ad["stiction"] == pytest.approx(traj["stiction_hat"][-1], rel=1e-6, abs=1e-6)
+
+
+def test_switching_to_adaptive_mid_run_starts_it_from_its_parameters(tmp_path):
+    """LuGre (k = 0) for 2 s, then the operator selects Adaptive with F_C 1.1: from
+    the next tick the compensator starts afresh (bristle relaxed, the law at its
+    starting values), and the sidecar reports the adaptation."""
+    from frictionlab.realtime.datalog import read_sidecar
+
+    cfg = build_config("fast", "lugre", "lugre", sets=["compensation.observer_gain=0"])
+    log = run_logged(cfg, 4.0, tmp_path, changes_at=(2.0, {
+        "compensation": "adaptive", "compensation_params": {"coulomb": 1.1}}))
+    flags = log["flags"].astype(int)
+    assert list(log["tick"][(flags & CHANGED) != 0]) == [401]
+    # the bristle estimate restarts from 0 at the switch (logged before the step)
+    assert log["z_hat"][401] == 0.0 and log["z_hat"][400] != 0.0
+    after = log["tick"] >= 401
+    assert np.all(np.isfinite(log["friction_hat"][after]))
+    (sidecar,) = [read_sidecar(p) for p in tmp_path.glob("*.json")]
+    assert sidecar["current"]["compensation"]["kind"] == "adaptive"
+    ad = sidecar["adaptation"]
+    assert ad["start"] == {"coulomb": 1.1, "stiction": 2.3}
+    assert 0.05 <= ad["coulomb"] <= 6.0 and 0.05 <= ad["stiction"] <= 6.0
+
+
+def test_a_glitched_velocity_reading_does_not_move_the_adapted_levels(tmp_path):
+    """Fault injected at the rig: one arm-velocity reading 3 rad/s off while the law
+    adapts (inside the ADC's range, so the loop runs on).  The law freezes on it and
+    on the sample that starts at it: the adapted levels do not move, and the run goes
+    on to its end."""
+    from frictionlab.adaptive import A_ADAPTING, A_BAD, A_PRESLIDING, A_STUCK
+    from frictionlab.controller import S_ADAPT, S_FC_HAT, S_FS_HAT
+    from frictionlab.realtime.rigs import SimRig
+
+    cfg = build_config("fast", "lugre", "adaptive",
+                       sets=["compensation.observer_gain=0", "compensation.coulomb=1.2"])
+
+    class Glitch(SimRig):
+        ctl = None
+        glitch_at = None
+
+        def sample(self, k, deadline_ns):
+            r = super().sample(k, deadline_ns)
+            s = self.ctl._loop.state
+            if s is not None:  # the controller state after tick k - 1
+                self.trace[k] = s[[S_ADAPT, S_FC_HAT, S_FS_HAT]].copy()
+                if self.glitch_at is None and k >= 400 and s[S_ADAPT] == A_ADAPTING:
+                    self.glitch_at = k
+                    r = r._replace(v=r.v + 3.0 / self.scaling.velocity_scale)
+            return r
+
+    rig = Glitch(cfg, lockstep=True)
+    rig.trace = {}
+    ctl = RealtimeController(cfg, rig, log_dir=tmp_path, clock=FakeClock(), duration=8.0,
+                             realtime=False, manage_gc=False, sim_lockstep=True)
+    rig.ctl = ctl
+    stats = ctl.run()
+    assert stats["stop_reason"] == "duration"
+    k, tr = rig.glitch_at, rig.trace
+    assert k is not None, "the law never adapted after 2 s"
+    before, at, after = tr[k], tr[k + 1], tr[k + 2]
+    assert at[0] == A_BAD and after[0] in (A_BAD, A_PRESLIDING, A_STUCK)
+    np.testing.assert_array_equal(at[1:], before[1:])
+    np.testing.assert_array_equal(after[1:], before[1:])
+    log = read_csv_log(stats["log"])
+    assert np.all(np.isfinite(log["friction_hat"][:-1]))

@@ -135,6 +135,7 @@ def test_falling_pendulum_stops_early_with_status_fell():
     assert f.status == "fell" and f.peak1 is None
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     kind=st.sampled_from(["none", "viscous", "coulomb", "classical", "stribeck", "lugre"]),
@@ -223,9 +224,13 @@ def test_noise_and_quantization_enter_only_measurements():
     assert 0.007 < np.std(err) < 0.013
     q = simulate_config(build_config("fast", "classical", sets=["sim.quantization=1"]), 2.0)
     step = np.pi * 2 / 4096
-    ratio = q["theta_m"] / step
+    # the rig's grid is in raw units, bias included (frictionlab.sensor): y = theta/pi - 0.503
+    ratio = (q["theta_m"] / np.pi - 0.503) / (2 / 4096)
     assert np.allclose(ratio, np.round(ratio), atol=1e-6)
     assert np.all(np.abs(q["theta_m"] - q["theta"]) <= step / 2 + 1e-12)
+    # the arm relative to its first reading: whole steps of 25.8 * 2/4096
+    ratio = q["arm_m"] / (25.8 * 2 / 4096)
+    assert np.allclose(ratio, np.round(ratio), atol=1e-6)
 
 
 def test_time_is_integer_ticks():
@@ -249,6 +254,7 @@ def test_save_dat_and_csv(tmp_path):
         traj.save(tmp_path / "run.txt")
 
 
+@pytest.mark.slow
 def test_simulate_cli_save_plot_and_progress(tmp_path, capsys):
     png, dat = tmp_path / "c.png", tmp_path / "c.dat"
     rc = main(["simulate", "--duration", "10", "--plot", str(png), "--save", str(dat),

@@ -1,7 +1,8 @@
 """Run configuration: every parameter of a run, addressable by ``section.field`` keys.
 
 The keys are those ``frictionlab keys`` lists (docs/cli.md; ``plant.omega0``,
-``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``...).
+``design.h``, ``friction.coulomb``, ``compensation.sigma0``, ``sim.seed``,
+``rig.theta_scale``...).
 A configuration is built from, in order: the thesis defaults, the design
 preset (``fast``/``slow``), the per-model friction defaults, a TOML file, and
 ``--set KEY=VALUE`` overrides (applied in order, the later winning).
@@ -16,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import difflib
+import functools
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -29,7 +31,9 @@ from .model.design import DesignSpec, preset
 from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
 from .model.plant import PlantParams
+from .model.rig import RigScaling
 from .model.simulation import Trajectory, simulate_config
+from .model.swingup import SwingUpParams
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -133,7 +137,10 @@ class SimParams(Validated):
 
     _prefix = "sim."
 
-    initial_angle: float = param(0.05, "initial pendulum angle", "rad", lo=-1.0, hi=1.0)
+    initial_angle: float = param(0.05, "initial pendulum angle (pi: hanging down, at rest; "
+                                 "rig-sim's pendulum at the start of a session; a start "
+                                 "beyond sim.fall_angle needs --swing-up)", "rad",
+                                 lo=-math.pi, hi=math.pi)
     substeps: int | None = param(None, "arm and friction integration substeps per sampling "
                                  "period (None = the model's accurate default: 10, LuGre 6)",
                                  "1", lo=1, hi=10000, integer=True, optional=True)
@@ -145,8 +152,9 @@ class SimParams(Validated):
                          lo=0.0, hi=1.0)
     seed: int = param(0, "random seed of the measurement noise", "1", lo=0, hi=2**32 - 1,
                       integer=True)
-    quantization: float = param(0.0, "1 = quantize measurements like the rig's 12-bit ADC "
-                                "(App. B scale factors), 0 = ideal", "1", lo=0.0, hi=1.0)
+    quantization: float = param(0.0, "1 = measure through the rig's 12-bit converters "
+                                "(the grid in raw units with the rig.* factors, wrap and "
+                                "range; frictionlab.sensor), 0 = ideal", "1", lo=0.0, hi=1.0)
     fall_angle: float = param(math.pi / 2, "|theta| beyond which the pendulum has fallen",
                               "rad", lo=0.0, hi=math.pi, lo_open=True)
     duration: float = param(40.0, "simulated time", "s", lo=0.0, hi=1e5, lo_open=True)
@@ -174,6 +182,8 @@ class Config:
     compensation: FrictionParams = dataclasses.field(
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
     sim: SimParams = dataclasses.field(default_factory=SimParams)
+    rig: RigScaling = dataclasses.field(default_factory=RigScaling)
+    swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
 
     def __post_init__(self) -> None:
         if self.friction_kind not in PLANT_FRICTION_KINDS:
@@ -183,7 +193,8 @@ class Config:
             raise ConfigError(f"compensation must be one of {', '.join(COMPENSATOR_KINDS)}; "
                               f"got {self.compensation_kind!r}")
         if self.compensation_kind != "none":
-            check_compensator(self.compensation_kind, self.compensation)
+            check_compensator(self.compensation_kind, self.compensation, h=self.design.h,
+                              arm_length=self.plant.arm_length)
 
     @property
     def substeps(self) -> int:
@@ -219,12 +230,15 @@ class Config:
         return out
 
 
-_SECTIONS = ("plant", "design", "friction", "compensation", "sim")
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig", "swingup")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
-            "compensation": FrictionParams, "sim": SimParams}
+            "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling,
+            "swingup": SwingUpParams}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
+#: The drift of the plant's levels (every model with a level).
+_DRIFT = {"drift", "drift_start", "drift_time"}
 #: Friction fields each *plant* model reads (LuGre's ``observer_gain`` is the k
 #: of eq. (19) with e = -theta, docs/model.md "The observer gain k in the plant").
 PLANT_FIELDS = {
@@ -237,11 +251,17 @@ PLANT_FIELDS = {
     "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "sigma1_velocity", "observer_gain"} | _NEG,
 }
-def check_compensator(kind: str, params: FrictionParams) -> None:
+for _kind in PLANT_FIELDS:
+    if _kind != "none":
+        PLANT_FIELDS[_kind] |= _DRIFT
+
+
+def check_compensator(kind: str, params: FrictionParams, *, h: float | None = None,
+                      arm_length: float | None = None) -> None:
     """:func:`frictionlab.model.controller.check_compensator`, its refusal a
     :class:`ConfigValueError` (a :class:`ConfigError` naming the key)."""
     try:
-        _check_compensator(kind, params)
+        _check_compensator(kind, params, h=h, arm_length=arm_length)
     except ParamError as exc:
         raise ConfigValueError(exc.field, exc.value, exc.allowed, str(exc)) from None
 
@@ -259,18 +279,28 @@ def inert_keys(cfg: Config, keys: Iterable[str]) -> list[str]:
     return out
 
 
-def valid_keys() -> list[str]:
-    """Every accepted ``section.field`` key."""
+@functools.cache
+def _key_tuple() -> tuple[str, ...]:
     keys = []
     for section in _SECTIONS:
         for f in dataclasses.fields(_CLASSES[section]):
             if "doc" in f.metadata:
                 keys.append(f"{section}.{f.name}")
-    return keys
+    return tuple(keys)
+
+
+@functools.cache
+def _key_set() -> frozenset[str]:
+    return frozenset(_key_tuple())
+
+
+def valid_keys() -> list[str]:
+    """Every accepted ``section.field`` key."""
+    return list(_key_tuple())
 
 
 def _split(key: str) -> tuple[str, str]:
-    if not isinstance(key, str) or key not in valid_keys():
+    if not isinstance(key, str) or key not in _key_set():
         raise UnknownKeyError(str(key))
     section, field = key.split(".")
     return section, field
@@ -442,7 +472,7 @@ def build_config(
         Plant friction model and compensator.
     config_file : path, optional
         TOML file with ``[plant]``, ``[design]``, ``[friction]``,
-        ``[compensation]``, ``[sim]`` tables.
+        ``[compensation]``, ``[sim]``, ``[rig]`` tables.
     sets : iterable of ``"KEY=VALUE"`` or ``(key, value)``
         Overrides, applied in order.
     """

@@ -20,8 +20,11 @@ per second of Gymnasium's ``SyncVectorEnv`` over single environments
 Observation (``observation="si"``, the default)
     ``[theta_m, arm_m, arm_dot_m]``: measured pendulum angle (rad), arm angle
     (rad) and arm velocity (rad/s), with the simulator's sensor: Gaussian
-    noise of standard deviation ``sim.noise`` in each signal's SI unit, then
-    the 12-bit quantisation of App. B when ``sim.quantization`` is 1.
+    noise of standard deviation ``sim.noise`` in each signal's SI unit (drawn
+    from the environment's generator, seeded by ``reset(seed=...)``), then the
+    rig's 12-bit converter of App. B when ``sim.quantization`` is 1
+    (:mod:`frictionlab.sensor`: the grid in raw units, biases included; the
+    arm relative to its first reading).
 ``observation="raw"``
     The same measurements as the rig's raw ADC values ``[y, x, v]`` in
     [-1, 1] (App. B.5 scaling, :class:`frictionlab.rig.RigScaling`; the
@@ -63,6 +66,20 @@ Randomisation per episode (``randomize=True`` or a dict)
     friction model per episode.  The controller design is not part of the
     environment.
 
+Swing-up variant (``frictionlab/FurutaSwingUp-v0``, or ``task="swing_up"``)
+    The same plant, friction, sensor, action and randomisation; the task is
+    to bring the pendulum up from hanging and keep it there.  Each episode
+    starts hanging at rest, at pi plus an angle drawn uniformly from
+    [-0.05, 0.05] rad (``reset(options={"initial_angle": x})``: exactly x,
+    any angle in [-pi, pi]).  The measured angle in the ``si`` observation is
+    wrapped into [-pi, pi) (the ``raw`` one wraps as the rig's channel does).
+    Reward ``(1 + cos theta)/2 - 0.01 (u/u_max)^2``: 0 hanging, 1 upright.
+    *Terminated* when the arm leaves the swing-up's safety limits
+    (``|Omega| > swingup.arm_limit``, ``|Omega'| > swingup.arm_speed_limit``)
+    or the state is not finite; *truncated* after 2000 steps (10 s).  The
+    energy-control swing-up of :mod:`frictionlab.swingup` is a baseline
+    policy (docs/swingup.md).
+
 Examples
 --------
 >>> import gymnasium as gym
@@ -88,14 +105,18 @@ from gymnasium.vector.utils import batch_space
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
 from .model.friction import KINDS
-from .model.rig import RigScaling, quantize
-from .model.simulation import _pack_plant, _quanta, plant_tick
+from .model.sensor import reading
+from .model.simulation import _pack_plant, make_sensor, plant_tick
 
-__all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "FurutaEnv",
-           "FurutaVectorEnv"]
+__all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "SWINGUP_ENV_ID", "TASKS",
+           "FurutaEnv", "FurutaVectorEnv"]
 
 #: The registered id.
 ENV_ID = "frictionlab/Furuta-v0"
+#: The registered id of the swing-up variant (``task="swing_up"``).
+SWINGUP_ENV_ID = "frictionlab/FurutaSwingUp-v0"
+#: The tasks: balance from near upright, swing up from hanging.
+TASKS = ("balance", "swing_up")
 #: Steps before an episode is truncated (10 s at 5 ms).
 MAX_EPISODE_STEPS = 2000
 #: Per-episode multipliers (lo, hi) of the configured values, drawn uniformly.
@@ -124,13 +145,14 @@ def _step_plants(mask, xs, us, mems, friction, substeps, ratios, h, pps, fkinds,
 
 
 @jit
-def _sense(xs, draws, quanta, out):
-    """The simulator's sensor: each measured signal (theta, Omega, Omega_dot)
-    plus its noise draw, quantised (:func:`frictionlab.rig.quantize`)."""
+def _sense(xs, draws, sp, steps, x0s, out):
+    """The simulator's sensor (:func:`frictionlab.sensor.reading`): each signal
+    (theta, Omega, Omega_dot) plus its noise draw, through the rig's converter;
+    plant i's arm zero ``x0s[i]`` is taken at its first step."""
     for i in range(xs.shape[0]):
-        out[i, 0] = quantize(xs[i, 0] + draws[i, 0], quanta[0])
-        out[i, 1] = quantize(xs[i, 2] + draws[i, 1], quanta[1])
-        out[i, 2] = quantize(xs[i, 3] + draws[i, 2], quanta[2])
+        out[i, 0], out[i, 1], out[i, 2], x0s[i] = reading(
+            sp, xs[i, 0] + draws[i, 0], xs[i, 2] + draws[i, 1], xs[i, 3] + draws[i, 2],
+            steps[i] == 0, x0s[i])
 
 
 class _Plants:
@@ -140,7 +162,7 @@ class _Plants:
         self.n = n
         self.h = cfg.design.h
         self.noise = cfg.sim.noise
-        self.quanta = _quanta(cfg)
+        self.sensor = make_sensor(cfg)._replace(noise=0.0)  # the draws come from the env
         self.fall = cfg.sim.fall_angle
         self.xs = np.zeros((n, 5))
         self.mems = np.zeros(n)
@@ -154,6 +176,7 @@ class _Plants:
         self.steps = np.zeros(n, dtype=np.int64)
         self.configs: list[Config] = [cfg] * n
         self._draws = np.zeros((n, 3))
+        self._arm_zero = np.zeros(n)
         self._out = np.zeros((n, 3))
         self._x0 = self.xs[0]  # a view: plant 0's state
 
@@ -192,7 +215,7 @@ class _Plants:
         if self.noise > 0.0:
             rng.standard_normal(out=self._draws)
             self._draws *= self.noise
-        _sense(self.xs, self._draws, self.quanta, self._out)
+        _sense(self.xs, self._draws, self.sensor, self.steps, self._arm_zero, self._out)
         return self._out.copy()
 
     def fallen(self, theta, rest):
@@ -213,7 +236,11 @@ class _Settings:
     the observation and action conversions, the randomisation."""
 
     def __init__(self, config, design, friction, sets, observation, action, randomize,
-                 render_mode):
+                 render_mode, task="balance"):
+        if task not in TASKS:
+            raise ValueError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
+        self.task = task
+        self.swing = task == "swing_up"
         if render_mode is not None:
             raise ValueError(f"render_mode must be None (no rendering), got {render_mode!r}")
         if observation not in ("si", "raw"):
@@ -226,7 +253,7 @@ class _Settings:
                                                                    sets=list(sets))
         self.observation = observation
         self.action = action
-        self.scaling = RigScaling()
+        self.scaling = self.base.rig
         self.u_max = self.scaling.u_max
         self.ranges, self.kinds = _check_randomization(self.base, randomize)
         if observation == "si":
@@ -264,10 +291,17 @@ class _Settings:
         if options and "initial_angle" in options:
             theta0 = np.broadcast_to(np.asarray(options["initial_angle"], dtype=float),
                                      (n,)).copy()
+            if self.swing:
+                if not np.all(np.abs(theta0) <= math.pi):
+                    raise ValueError(f"initial_angle must be in [-pi, pi], got "
+                                     f"{options['initial_angle']}")
+                return theta0
             if not np.all(np.abs(theta0) < fall):
                 raise ValueError(f"initial_angle must be within the fall angle +-{fall:g} rad, "
                                  f"got {options['initial_angle']}")
             return theta0
+        if self.swing:
+            return math.pi + rng.uniform(-0.05, 0.05, size=n)
         a = abs(self.base.sim.initial_angle)
         return rng.uniform(-a, a, size=n)
 
@@ -285,11 +319,27 @@ class _Settings:
             s = self.scaling
             return np.column_stack([s.raw_theta(measured[:, 0]), s.raw_arm(measured[:, 1]),
                                     s.raw_arm_velocity(measured[:, 2])])
+        if self.swing:
+            measured[:, 0] = (measured[:, 0] + math.pi) % (2.0 * math.pi) - math.pi
         return measured
 
+    def ended(self, plants: _Plants, x):
+        """Terminated: fallen (balance) or out of the swing-up's arm limits (swing-up),
+        or a state not finite; ``x`` one plant state (5,) or all (n, 5)."""
+        if not self.swing:
+            return plants.fallen(x[..., 0], x[..., 1] + x[..., 3] + x[..., 4])
+        su = self.base.swingup
+        ok = ((np.abs(x[..., 2]) <= su.arm_limit) & (np.abs(x[..., 3]) <= su.arm_speed_limit)
+              & (np.abs(x[..., 0] + x[..., 1] + x[..., 4]) < math.inf))
+        return np.logical_not(ok)
+
     def reward(self, theta, u):
-        """``1 - (theta/fall_angle)^2 - 0.01 (u/u_max)^2`` (floats or arrays)."""
-        q, w = theta / self.base.sim.fall_angle, u / self.u_max
+        """``1 - (theta/fall_angle)^2 - 0.01 (u/u_max)^2`` (floats or arrays); swing-up:
+        ``(1 + cos theta)/2 - 0.01 (u/u_max)^2``."""
+        w = u / self.u_max
+        if self.swing:
+            return 0.5 * (1.0 + np.cos(theta)) - 0.01 * (w * w)
+        q = theta / self.base.sim.fall_angle
         return 1.0 - q * q - 0.01 * (w * w)  # products: the same rounding for both
 
 
@@ -318,6 +368,9 @@ class FurutaEnv(gymnasium.Env):
         (plus an optional ``"friction_kind"`` sequence).
     render_mode : None
         No rendering (the info dict carries the true state).
+    task : {"balance", "swing_up"}
+        ``swing_up``: the swing-up variant (module docstring;
+        ``frictionlab/FurutaSwingUp-v0``).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": [], "render_fps": 200}
@@ -325,9 +378,10 @@ class FurutaEnv(gymnasium.Env):
     def __init__(self, config: Config | None = None, *, design: str = "fast",
                  friction: str = "classical", sets: Sequence[str] = (),
                  observation: str = "si", action: str = "u",
-                 randomize: bool | Mapping[str, Any] = False, render_mode: str | None = None):
+                 randomize: bool | Mapping[str, Any] = False, render_mode: str | None = None,
+                 task: str = "balance"):
         self._s = _Settings(config, design, friction, sets, observation, action, randomize,
-                            render_mode)
+                            render_mode, task)
         self.render_mode = None
         self.observation_space = self._s.observation_space
         self.action_space = self._s.action_space
@@ -384,7 +438,7 @@ class FurutaEnv(gymnasium.Env):
         p.step_first(u)
         x = p.xs[0]
         theta = float(x[0])
-        terminated = bool(p.fallen(theta, float(x[1] + x[3] + x[4])))
+        terminated = bool(self._s.ended(p, x))
         reward = float(self._s.reward(theta, u))
         if not math.isfinite(reward):
             reward = -1.0
@@ -408,7 +462,7 @@ class FurutaVectorEnv(VectorEnv):
     num_envs : int
     max_episode_steps : int
         Default :data:`MAX_EPISODE_STEPS` (10 s).
-    config, design, friction, sets, observation, action, randomize, render_mode
+    config, design, friction, sets, observation, action, randomize, render_mode, task
         As for :class:`FurutaEnv`.
     """
 
@@ -419,14 +473,15 @@ class FurutaVectorEnv(VectorEnv):
                  design: str = "fast", friction: str = "classical", sets: Sequence[str] = (),
                  observation: str = "si", action: str = "u",
                  randomize: bool | Mapping[str, Any] = False,
-                 max_episode_steps: int = MAX_EPISODE_STEPS, render_mode: str | None = None):
+                 max_episode_steps: int = MAX_EPISODE_STEPS, render_mode: str | None = None,
+                 task: str = "balance"):
         if not (isinstance(num_envs, int) and num_envs >= 1):
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if not (isinstance(max_episode_steps, int) and max_episode_steps >= 1):
             raise ValueError(f"max_episode_steps must be an integer >= 1, got "
                              f"{max_episode_steps!r}")
         self._s = _Settings(config, design, friction, sets, observation, action, randomize,
-                            render_mode)
+                            render_mode, task)
         self.num_envs = num_envs
         self.max_episode_steps = max_episode_steps
         self.render_mode = None
@@ -477,7 +532,7 @@ class FurutaVectorEnv(VectorEnv):
         stepping = ~restart
         p.step(stepping, u)
         x = p.xs
-        terminated = p.fallen(x[:, 0], x[:, 1] + x[:, 3] + x[:, 4]) & stepping
+        terminated = self._s.ended(p, x) & stepping
         truncated = (p.steps >= self.max_episode_steps) & stepping & ~terminated
         reward = self._s.reward(x[:, 0], p.us)
         reward = np.where(stepping, np.where(np.isfinite(reward), reward, -1.0), 0.0)
@@ -533,6 +588,11 @@ def _register() -> None:
         gymnasium.register(id=ENV_ID, entry_point="frictionlab.gym:FurutaEnv",
                            vector_entry_point="frictionlab.gym:FurutaVectorEnv",
                            max_episode_steps=MAX_EPISODE_STEPS)
+    if SWINGUP_ENV_ID not in gymnasium.registry:
+        gymnasium.register(id=SWINGUP_ENV_ID, entry_point="frictionlab.gym:FurutaEnv",
+                           vector_entry_point="frictionlab.gym:FurutaVectorEnv",
+                           max_episode_steps=MAX_EPISODE_STEPS,
+                           kwargs={"task": "swing_up"})
 
 
 _register()

@@ -126,7 +126,10 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
         if shown:
             parts.append(f"{section}: " + ", ".join(shown))
 
-    add("friction", {f: getattr(cfg.friction, f) for f in sorted(PLANT_FIELDS[cfg.friction_kind])})
+    fields = PLANT_FIELDS[cfg.friction_kind]
+    if not cfg.friction.drift:  # no drift: its start and time say nothing
+        fields = fields - {"drift", "drift_start", "drift_time"}
+    add("friction", {f: getattr(cfg.friction, f) for f in sorted(fields)})
     comp = cfg.compensation_kind
     if compensation and comp != "none":
         add("compensation", {f: getattr(cfg.compensation, f)

@@ -18,7 +18,9 @@ from frictionlab.design import PRESETS, design
 
 from .conftest import ConsoleProcess, wait_until
 
-pytestmark = pytest.mark.timeout(120)
+# a browser and a console server: slow; the tests share the console and go on from
+# each other's state, so under pytest-xdist they run in one worker, in order
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow, pytest.mark.xdist_group("browser")]
 
 
 @pytest.fixture(scope="module")
@@ -327,6 +329,34 @@ def test_friction_type_and_model_parameters(page):
     assert status(page)["compensation"]["params"]["stiction"] == 2.3
 
 
+def test_adaptive_friction_type_shows_its_estimates(page):
+    """The Adaptive choice: the LuGre fields and the law's, the adapted levels beside
+    the panel, and the friction estimate F-hat switched on in the plot."""
+    ensure_running(page)
+    button = page.locator("#compensation")
+    if button.get_attribute("aria-pressed") != "true":
+        button.click()
+        expect(button).to_have_text("Compensating")
+    page.select_option("#friction-type", "adaptive")
+    expect(page.locator("#friction-msg")).to_have_text("friction type adaptive")
+    expect(page.locator("#friction-adaptation_gain")).to_be_visible()
+    expect(page.locator("#friction-sigma0")).to_be_visible()
+    expect(page.locator("#error-signal")).to_be_visible()
+    expect(page.locator("#adapted")).to_be_visible()
+    wait_until(lambda: status(page)["adaptation"] and status(page)["adaptation"]["status"]
+               != "off", what="the adaptation running")
+    ad = status(page)["adaptation"]
+    shown = float(page.locator("#adapted-coulomb").inner_text())
+    assert 0.05 <= shown <= 6.0 and 0.05 <= ad["stiction"] <= 6.0
+    assert ui(page, 'shown("friction_hat")')
+    expect(page.locator('#signal-toggles [data-signal="friction_hat"]')).to_have_attribute(
+        "aria-pressed", "true")
+    # back to LuGre for the tests that follow: the estimates go away
+    page.select_option("#friction-type", "lugre")
+    expect(page.locator("#friction-msg")).to_have_text("friction type lugre")
+    expect(page.locator("#adapted")).to_be_hidden()
+
+
 def test_server_refusals_are_shown_beside_the_field(console, page):
     ensure_running(page)
     expect(page.locator("#friction-sigma0")).to_be_visible()  # LuGre, from the test above
@@ -514,6 +544,27 @@ def test_save_data_records_names_and_downloads(console, page):
     header = csv_text.splitlines()[0].split(",")
     assert "theta_m" in header and "u" in header
     assert len(csv_text.splitlines()) == data.shape[0] + 1
+
+
+def test_experiments_panel_runs_an_experiment_on_the_connected_rig(page):
+    """Experiments panel: refused while the loop balances; after Stop, Run asks for
+    confirmation (the motor moves), the live progress shows, and the estimate arrives."""
+    if status(page)["running"]:
+        page.locator("#start").click()  # Stop
+        wait_until(lambda: not status(page)["running"], what="the loop stopped")
+    page.locator("#experiment-name").select_option("control-scaling")
+    page.locator("#experiment-options").fill("{nope")
+    page.locator("#experiment-run").click()
+    expect(page.locator("#experiment-options-error")).to_contain_text("JSON object")
+    page.locator("#experiment-options").fill('{"levels": [4, 6]}')
+    page.locator("#experiment-run").click()
+    expect(page.locator("#confirm-title")).to_have_text("The experiment drives the motor")
+    page.locator("#confirm-apply").click()
+    expect(page.locator("#experiment-msg")).to_contain_text("control-scaling: done",
+                                                            timeout=60_000)
+    expect(page.locator("#experiment-result")).to_contain_text("input_gain = 1.0")
+    assert status(page)["stop_reason"] == "finished"
+    ensure_running(page)
 
 
 def test_exit_stops_the_loop_and_ends_the_server(console, page):

@@ -39,6 +39,8 @@ from .common import (
     error_message,
     finite,
     flush_notes,
+    hanging_start,
+    note,
     progress_bar,
 )
 
@@ -81,7 +83,7 @@ def simulate_result(cfg: Config, duration: float | None, window: float | None,
 
 
 def cmd_simulate(args) -> int:
-    cfg = config_from_args(args)
+    cfg = hanging_start(args, config_from_args(args))
     if args.duration is not None:
         try:
             cfg = cfg.with_values({"sim.duration": args.duration})
@@ -90,12 +92,25 @@ def cmd_simulate(args) -> int:
     finite("--window", args.window, 0.0)
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    if not args.swing_up and abs(cfg.sim.initial_angle) > cfg.sim.fall_angle:
+        note(args, f"frictionlab simulate: note: sim.initial_angle = "
+                   f"{cfg.sim.initial_angle:g} rad is beyond sim.fall_angle "
+                   f"({cfg.sim.fall_angle:g} rad): the run falls at once; --swing-up swings "
+                   "the pendulum up first")
     flush_notes(args)
     duration = cfg.sim.duration
     long_run = duration > 200 or args.progress
-    with progress_bar("simulating", long_run) as upd:
-        traj, feats, status = simulate_result(cfg, duration, args.window,
-                                              upd if long_run else None)
+    swing = None
+    if args.swing_up:
+        from ..studies.swingup_sim import simulate_swingup, swingup_outcome
+
+        swing = simulate_swingup(cfg, duration)
+        traj = swing.trajectory
+        status, feats = swingup_outcome(swing, args.window)
+    else:
+        with progress_bar("simulating", long_run) as upd:
+            traj, feats, status = simulate_result(cfg, duration, args.window,
+                                                  upd if long_run else None)
     if args.save:
         traj.save(args.save)
     if args.plot:
@@ -110,6 +125,10 @@ def cmd_simulate(args) -> int:
         "cycles": feats.cycles,
         "duration": len(traj) * traj.h,
     }
+    if swing is not None:
+        out["swing_up_time"] = swing.swing_up_time
+        out["swing_up"] = {"catches": swing.catches, "stop_reason": swing.stop_reason or None,
+                           "max_u_swinging": swing.max_u_swinging}
     if args.save:
         out["saved"] = args.save
     if args.plot:
@@ -118,6 +137,11 @@ def cmd_simulate(args) -> int:
         emit_json(out)
     else:
         print(f"status: {status}  ({out['duration']:.2f} s simulated)")
+        if swing is not None:
+            when = ("never" if swing.swing_up_time is None
+                    else f"at {swing.swing_up_time:.2f} s")
+            print(f"  swing-up: caught {when}, {swing.catches} catch(es)"
+                  + (f", stopped: {swing.stop_reason}" if swing.stop_reason else ""))
         for k, v in feats.interface_dict().items():
             print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
     return 0
@@ -179,6 +203,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--save", metavar="FILE", help="save signals to FILE.dat or FILE.csv")
     p.add_argument("--plot", metavar="FILE", help="plot the limit cycle to FILE.png")
     p.add_argument("--progress", action="store_true", help="always show progress on stderr")
+    p.add_argument("--swing-up", action="store_true",
+                   help="start from sim.initial_angle (pi = hanging unless set) and swing up by "
+                        "energy control (swingup.* keys) before balancing; the JSON adds "
+                        "swing_up_time")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_simulate)
 

@@ -171,6 +171,20 @@ def config_from_args(args) -> Config:
     return cfg
 
 
+def hanging_start(args, cfg: Config) -> Config:
+    """With ``--swing-up`` and no ``sim.initial_angle`` given (``--set`` or ``--config``),
+    start hanging (pi): a swing-up from the balancing default 0.05 rad would be none."""
+    from ..config import load_toml
+
+    if not getattr(args, "swing_up", False):
+        return cfg
+    items = [*(load_toml(args.config) if getattr(args, "config", None) else []),
+             *parse_sets(args.sets)]
+    if any(k == "sim.initial_angle" for k, _ in items):
+        return cfg
+    return cfg.with_values({"sim.initial_angle": math.pi})
+
+
 def note(args, text: str) -> None:
     """Queue a note for stderr.  Notes wait until the input has been checked
     (:func:`flush_notes`), so that bad input gets its one line alone."""

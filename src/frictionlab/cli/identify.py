@@ -14,6 +14,7 @@ from ..studies.identification.experiments import EXPERIMENTS, IdentificationErro
 from .common import (
     UsageError,
     _add_config_args,
+    check_output_dir,
     check_output_path,
     check_workers,
     emit_json,
@@ -71,9 +72,67 @@ def parse_weights(items: list[str]) -> dict[str, float]:
 MAX_MEASURED_BYTES = 16 << 20
 
 
+#: The fields of a ``frictionlab features`` object that make an experiment.
+_EXPERIMENT_FIELDS = ("design", "set", "features", "name")
+
+
+def _as_experiment(obj: dict) -> dict:
+    """The experiment in a ``frictionlab features`` object (its extra fields dropped)."""
+    return {k: obj[k] for k in _EXPERIMENT_FIELDS if k in obj}
+
+
+def _design_h(sets) -> float | None:
+    for key, value in reversed(parse_sets(sets)):
+        if key == "design.h":
+            return _float(value, "--set design.h")
+    return None
+
+
+def _log_experiment(path: str, h: float | None, window: float | None = None,
+                    design: str | None = None, what: str = "--measured") -> dict:
+    from ..io.runlog import run_log_features
+
+    try:
+        return run_log_features(path, window=window, h=h, design=design)
+    except ValueError as exc:
+        raise UsageError(f"{what} {path}: {exc}") from None
+
+
+def load_measured(paths, sets=()) -> list:
+    """The experiments of every ``--measured`` file: a JSON object ``{"experiments":
+    [...]}``, one ``frictionlab features`` object, or a run log (``.csv``/``.dat``,
+    its features over the last half; a ``.dat`` takes ``design.h`` from ``sets``
+    when it has no sidecar)."""
+    from ..studies.identification.limit_cycle import parse_experiments
+
+    items: list = []
+    for path in [paths] if isinstance(paths, str) else paths:
+        if path.endswith((".csv", ".dat")):
+            feats = _log_experiment(path, _design_h(sets))
+            if feats["status"] == "fell":
+                raise UsageError(f"--measured {path}: the run fell (stop reason "
+                                 f"{feats['stop_reason']}); it has no limit cycle")
+            items.append(_as_experiment(feats))
+            continue
+        obj = _load_json(path)
+        if isinstance(obj, dict) and "experiments" not in obj and "features" in obj:
+            items.append(_as_experiment(obj))
+        elif isinstance(obj, dict) and isinstance(obj.get("experiments"), list):
+            items.extend(_as_experiment(e) if isinstance(e, dict) and "status" in e else e
+                         for e in obj["experiments"])
+        else:
+            parse_experiments(obj)  # says what is wrong
+            items.append(obj)
+    return parse_experiments({"experiments": items})
+
+
 def _load_measured(path: str):
     from ..studies.identification.limit_cycle import parse_experiments
 
+    return parse_experiments(_load_json(path))
+
+
+def _load_json(path: str):
     try:
         with open(path, "rb") as fh:
             raw = fh.read(MAX_MEASURED_BYTES + 1)
@@ -88,7 +147,7 @@ def _load_measured(path: str):
         raise UsageError(f"--measured {path} is not valid JSON: {exc}") from None
     except RecursionError:
         raise UsageError(f"--measured {path} is not valid JSON: nested too deeply") from None
-    return parse_experiments(obj)
+    return obj
 
 
 #: Largest ``--maxiter`` and ``--popsize`` (per fitted key) of ``identify limit-cycle``:
@@ -121,9 +180,10 @@ def cmd_limit_cycle(args) -> int:
         LimitCycleProblem,
         check_fit_keys,
         fit_limit_cycle,
+        search_settings,
     )
 
-    experiments = _load_measured(args.measured)
+    experiments = load_measured(args.measured, args.sets)
     keys = check_fit_keys([k.strip() for k in args.fit.split(",") if k.strip()])
     bounds = parse_bounds(args.bounds)
     weights = parse_weights(args.weights)
@@ -153,6 +213,7 @@ def cmd_limit_cycle(args) -> int:
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
                       evaluate=_never, stiction_above_coulomb=constrained)
+    search_settings(args.duration, args.window, args.search_duration, args.search_window)
     err = sys.stderr
     print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
           f"{', '.join(keys)} ({args.friction} friction, {args.duration:g} s runs)", file=err)
@@ -181,7 +242,8 @@ def cmd_limit_cycle(args) -> int:
                 weights=weights, duration=args.duration, window=args.window,
                 workers=args.workers, dask=args.dask, seed=args.seed, maxiter=args.maxiter,
                 popsize=args.popsize, rel_step=args.rel_step, progress=progress,
-                stiction_above_coulomb=constrained)
+                stiction_above_coulomb=constrained, search_duration=args.search_duration,
+                search_window=args.search_window)
     finally:
         signal.signal(signal.SIGTERM, previous)
     for w in result.warnings:
@@ -218,7 +280,8 @@ def cmd_limit_cycle(args) -> int:
 # ---------------------------------------------------------------------------
 
 _DEFAULT_FRICTION = {"stiction": "classical", "stribeck": "lugre",
-                     "free-oscillation": "classical", "control-scaling": "classical"}
+                     "free-oscillation": "classical", "control-scaling": "classical",
+                     "velocity-scale": "classical", "angle-scales": "classical"}
 
 
 def _float_list(text: str, what: str) -> list[float]:
@@ -226,6 +289,93 @@ def _float_list(text: str, what: str) -> list[float]:
     if not vals:
         raise UsageError(f"{what}: give at least one value")
     return vals
+
+
+def _limits(args):
+    from ..realtime.experiment import Limits
+
+    try:
+        return Limits(max_speed=args.max_speed, max_travel=args.max_travel,
+                      max_u_da=args.max_u_da)
+    except ValueError as exc:
+        raise UsageError(str(exc).replace("limits.max_speed", "--max-speed")
+                         .replace("limits.max_travel", "--max-travel")
+                         .replace("limits.max_u_da", "--max-u-da")) from None
+
+
+def _rig_options(args) -> dict:
+    """The experiment options of the command line for the loop's experiments."""
+    name = args.experiment
+    if name == "stiction":
+        opts = {"step": args.step, "hold": args.hold, "slide": args.slide, "push": args.push}
+        if args.coulomb_levels:
+            opts["coulomb_levels"] = _float_list(args.coulomb_levels, "--coulomb-levels")
+        return opts
+    if name in ("stribeck", "velocity-scale"):
+        opts = {"gain": args.gain, "hold": args.hold}
+        if args.references:
+            opts["references"] = _float_list(args.references, "--references")
+        return opts
+    if name == "free-oscillation":
+        return {"amplitude": args.amplitude if args.amplitude_given else None,
+                "duration": args.duration}
+    if name == "angle-scales":
+        return {"wait": args.wait}
+    levels = _float_list(args.levels, "--levels") if args.levels else None
+    return {"levels": levels}
+
+
+def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
+    """Run ``exp`` through the loop with progress on stderr; (log, run summary).
+
+    A run that does not finish (a fault, a limit, a signal) is reported and
+    ends the command with exit status 1; its log is kept.
+    """
+    from ..io.logs import read_log
+    from ..realtime import RigError
+    from ..studies.identification.onrig import run_on_rig
+    from .run import _RunSignals, interface_stats
+
+    err = sys.stderr
+    lim = exp.limits
+    if clock is None:
+        print(f"identify experiment {exp.name} on {backend}: the motor will move the arm "
+              f"(limits: arm speed {lim.max_speed:g} rad/s, travel {lim.max_travel:g} rad, "
+              f"|u_DA| {lim.max_u_da:g}); Ctrl-C stops it with the motor at zero",
+              file=err)
+    tty = err.isatty() and not args.quiet
+    last = [None]
+
+    def poll(e, upd=None):
+        if upd is not None:
+            upd(e.progress)
+        elif e.phase != last[0] and not args.quiet:
+            last[0] = e.phase
+            print(f"  {100 * e.progress:3.0f} %  {e.phase}", file=err)
+
+    with _RunSignals() as signals, progress_bar(exp.name, tty and clock is None) as upd:
+        def on_start(ctl):
+            signals.ctl = ctl
+
+        try:
+            st = run_on_rig(exp, cfg, backend, log_dir=log_dir, clock=clock,
+                            realtime=not args.no_realtime, on_start=on_start,
+                            poll=lambda e: poll(e, upd if tty else None),
+                            on_prompt=lambda p: print(f">>> {p['text']}", file=err),
+                            hand=args.hand)
+        except (RigError, OSError, RuntimeError) as exc:
+            print(f"frictionlab identify experiment: error: {exc}", file=err)
+            raise SystemExit(1) from None
+    summary = interface_stats(st)
+    summary["stop_detail"] = st.get("stop_detail")
+    if st["stop_reason"] != "finished":
+        print(f"frictionlab identify experiment: {exp.name} stopped before it finished: "
+              f"{st['stop_reason']} ({st.get('stop_detail') or ''}); the motor was set to "
+              f"zero; log kept: {st['log']}", file=err)
+        raise SystemExit(1)
+    if clock is None:
+        print(f"  done: {st['ticks']} ticks, {st['missed']} missed; log {st['log']}", file=err)
+    return read_log(st["log"], cfg.design.h), summary
 
 
 def cmd_experiment(args) -> int:
@@ -237,15 +387,64 @@ def cmd_experiment(args) -> int:
                        sets=parse_sets(args.sets))
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    if args.plot and name in ("velocity-scale", "angle-scales"):
+        raise UsageError(f"--plot: no figure for {name}")
     if args.log and args.save:
         raise UsageError("--save only applies to --simulate runs")
+    if args.backend and args.save:
+        raise UsageError("--save only applies to --simulate runs (a --backend run is logged "
+                         "in --log-dir)")
     warnings: list[str] = []
+    run_info = None
+    marks: dict = {}
     if args.log:
         from ..io.logs import log_warnings, read_log
+        from ..studies.identification.onrig import experiment_marks
 
         log = read_log(args.log, cfg.design.h)
         warnings += log_warnings(args.log)
+        marks = experiment_marks(args.log)
         source = args.log
+    elif name == "angle-scales" and not args.backend:
+        raise UsageError("angle-scales needs --backend (a rig, or rig-sim over UDP with "
+                         "--hand) or --log: its laps are turned by hand")
+    elif args.backend or name == "velocity-scale":
+        from ..studies.identification.onrig import make_rig_experiment
+
+        if args.backend not in (None, "sim"):
+            from ..realtime.api import _check_backend
+
+            try:
+                _check_backend(args.backend)
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
+        if args.backend is None and args.save and not args.save.endswith(".csv"):
+            raise UsageError("--save: a simulated velocity-scale run is saved as .csv")
+        try:
+            exp = make_rig_experiment(name, cfg, _limits(args), **_rig_options(args))
+        except ParamError:
+            raise  # named after its option by _experiment_entry
+        except ValueError as exc:
+            raise UsageError(f"{name}: {exc}") from None
+        if args.backend is None:
+            # --simulate: the same loop on the simulated rig, on a fake clock (no waiting)
+            import tempfile
+
+            from ..realtime import FakeClock
+
+            with tempfile.TemporaryDirectory() as tmp:
+                log, run_info = _run_experiment(exp, cfg, "sim", tmp, args, clock=FakeClock())
+                if args.save:
+                    import shutil
+
+                    shutil.copyfile(run_info["log"], args.save)
+                run_info["log"] = None
+            source = "simulated"
+        else:
+            check_output_dir(args.log_dir, "--log-dir")
+            log, run_info = _run_experiment(exp, cfg, args.backend, args.log_dir, args)
+            source = args.backend
+        marks = dict(exp.marks)
     else:
         if name == "stiction":
             log = ex.simulate_stiction(cfg, step=args.step, hold=args.hold)
@@ -263,24 +462,19 @@ def cmd_experiment(args) -> int:
         source = "simulated"
         if args.save:
             log.save(args.save)
-    ku = cfg.plant.input_gain
+    from ..studies.identification.onrig import analyse_log
+
     try:
-        if name == "stiction":
-            res = ex.analyse_stiction(log, input_gain=ku, arm_length=cfg.plant.arm_length)
-        elif name == "stribeck":
-            res = ex.analyse_stribeck(log, input_gain=ku)
-        elif name == "free-oscillation":
-            res = ex.analyse_free_oscillation(log, max_amplitude=args.max_amplitude)
-        else:
-            res = ex.analyse_control_scaling(log, coulomb=cfg.friction.coulomb,
-                                             arm_length=cfg.plant.arm_length)
+        res = analyse_log(name, log, cfg, marks=marks, max_amplitude=args.max_amplitude)
     except IdentificationError as exc:
-        raise UsageError(f"{name}: {exc}") from None
+        where = f" (log kept: {run_info['log']})" if run_info and run_info.get("log") else ""
+        raise UsageError(f"{name}: {exc}{where}") from None
     if args.plot:
         from ..studies.identification import plots
 
         appendix = {"stiction": "App. E.1", "stribeck": "App. E.2",
-                    "free-oscillation": "App. A", "control-scaling": "App. B.4"}[name]
+                    "free-oscillation": "App. A", "control-scaling": "App. B.4",
+                    "velocity-scale": "App. B.3", "angle-scales": "App. B.1-B.2"}[name]
         title = plots.experiment_title(
             f"identify experiment {name} ({appendix})",
             f"log {args.log}" if args.log else "simulated rig", None if args.log else cfg)
@@ -290,8 +484,10 @@ def cmd_experiment(args) -> int:
             plots.plot_stribeck(res, args.plot, title)
         elif name == "free-oscillation":
             plots.plot_free_oscillation(log, res, args.plot, title)
-        else:
+        elif name == "control-scaling":
             plots.plot_control_scaling(log, res, args.plot, title)
+        else:
+            raise UsageError(f"--plot: no figure for {name}")
     warnings += res.get("warnings", [])
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -300,6 +496,8 @@ def cmd_experiment(args) -> int:
     out["source"] = source
     if args.save:
         out["saved"] = args.save
+    if run_info is not None:
+        out["run"] = run_info
     if args.plot:
         out["plot"] = args.plot
     if args.json:
@@ -311,8 +509,51 @@ def cmd_experiment(args) -> int:
     return 0
 
 
+def cmd_features(args) -> int:
+    if args.window is not None:
+        finite("--window", args.window, 0.0)
+    h = _design_h(args.sets)
+    for key, _ in parse_sets(args.sets):
+        if key != "design.h":
+            raise UsageError(f"--set {key}: features takes only design.h (the period of a "
+                             ".dat without its sidecar)")
+    out = _log_experiment(args.log, h, args.window, args.design, what="features:")
+    if args.json:
+        emit_json(out)
+        return 0
+    for note in out["notes"]:
+        print(f"frictionlab features: note: {note}", file=sys.stderr)
+    print(f"{out['name']}: {out['design']} design, {out['status']} "
+          f"(last {out['window']:.3g} s)")
+    for k, v in out["features"].items():
+        print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+    return 0
+
+
+def register_features_cli(sub) -> None:
+    """Add ``frictionlab features`` to the parser."""
+    p = sub.add_parser(
+        "features", help="limit-cycle features of a run log (for identify limit-cycle)",
+        description="The limit-cycle features 'frictionlab simulate' reports, measured on a "
+                    "'frictionlab run' log (its .csv, or its .dat), with the design from the "
+                    "run's sidecar: one experiment as 'identify limit-cycle --measured' "
+                    "takes it (docs/identification.md).")
+    p.add_argument("log", metavar="LOG", help="the run's .csv or .dat")
+    p.add_argument("--window", type=float, default=None, metavar="S",
+                   help="analyse the last S seconds (default: the last half of the log)")
+    p.add_argument("--design", choices=("fast", "slow"), default=None,
+                   help="the run's design preset (default: the sidecar's; required for a "
+                        "log without a sidecar)")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="design.h=SECONDS: the sampling period of a .dat without a sidecar")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_features)
+
+
 def register_cli(sub) -> None:
-    """Add ``identify limit-cycle`` and ``identify experiment`` to the parser."""
+    """Add ``identify limit-cycle`` and ``identify experiment`` (and ``features``)
+    to the parser."""
+    register_features_cli(sub)
     p = sub.add_parser("identify", help="friction and process identification (Sec. 5, "
                                         "App. A, B, E)")
     isub = p.add_subparsers(dest="identify_command", metavar="METHOD")
@@ -322,9 +563,12 @@ def register_cli(sub) -> None:
         "limit-cycle", help="fit parameter keys to measured limit-cycle features",
         description="Fit parameter keys to measured limit-cycle features of one or more "
                     "experiments (differential evolution, then least squares).")
-    q.add_argument("--measured", required=True, metavar="FILE.json",
+    q.add_argument("--measured", required=True, action="append", metavar="FILE",
                    help='{"experiments": [{"design": "fast"|"slow", "set": {...}, '
-                        '"features": {"peak1": ..., ...}}, ...]} (see examples/table1.json)')
+                        '"features": {"peak1": ..., ...}}, ...]} (see examples/table1.json), '
+                        "the output of 'frictionlab features', or a run log (.csv, or .dat "
+                        "with its sidecar or --set design.h) whose features are measured over "
+                        "its last half; repeatable, the experiments of all are fitted together")
     q.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
                    help="plant friction model of the simulations (default: classical)")
     q.add_argument("--fit", required=True, metavar="KEY[,KEY...]",
@@ -340,10 +584,15 @@ def register_cli(sub) -> None:
                    help="simulated seconds per run (default 30)")
     q.add_argument("--window", type=float, default=20.0,
                    help="features over the last S seconds (default 20)")
+    q.add_argument("--search-duration", type=float, default=None, metavar="S",
+                   help="simulated seconds per run of the global search only (default: "
+                        "--duration); the polish and standard errors use --duration")
+    q.add_argument("--search-window", type=float, default=None, metavar="S",
+                   help="feature window of the global search (default: --window scaled "
+                        "by --search-duration / --duration)")
     q.add_argument("--workers", type=int, default=None,
-                   help="parallel workers of the sweep engine (default: all cores, chosen "
-                        "once for the whole fit; in-process when the whole fit is under "
-                        "about half a second of simulation; 1 = in-process)")
+                   help="threads of the sweep engine (default: all cores; 1 = the "
+                        "calling thread); with --dask, the number of Dask workers")
     q.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="evaluate on a Dask cluster")
     q.add_argument("--allow-stiction-below-coulomb", action="store_true",
@@ -367,14 +616,21 @@ def register_cli(sub) -> None:
     q.set_defaults(func=cmd_limit_cycle)
 
     e = isub.add_parser(
-        "experiment", help="the simple experiments of App. A, B.4 and E",
-        description="Run a simple identification experiment of App. A, B.4 or E on the "
-                    "simulated rig (--simulate, the default) or analyse a recorded log.")
+        "experiment", help="the simple experiments of App. A, B and E",
+        description="Run a simple identification experiment of App. A, B or E on the "
+                    "simulated rig (--simulate, the default), on a rig through the real-time "
+                    "loop (--backend), or analyse a recorded log (--log).  Exit status 1 "
+                    "when a --backend run stops before it finished (a fault, a limit, a "
+                    "signal; the motor is zeroed and the log kept).")
     e.add_argument("experiment", choices=EXPERIMENTS)
     src = e.add_mutually_exclusive_group()
     src.add_argument("--log", metavar="FILE", help="analyse a recorded log (.csv or .dat)")
     src.add_argument("--simulate", action="store_true",
                      help="run the experiment on the simulated rig (default)")
+    src.add_argument("--backend", metavar="sim|udp://HOST:PORT|serial://DEVICE", default=None,
+                     help="run the experiment on a rig through the real-time loop (the loop "
+                          "of `frictionlab run`: same timing, safety and logging), then "
+                          "analyse its log")
     _add_config_args(e, friction=False)
     e.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default=None,
                    help="friction of the simulated rig (default: classical; lugre for "
@@ -384,19 +640,47 @@ def register_cli(sub) -> None:
     e.add_argument("--step", type=float, default=0.02,
                    help="stiction: staircase step of u (default 0.02)")
     e.add_argument("--hold", type=float, default=None,
-                   help="seconds per level (stiction 0.25, stribeck 2)")
+                   help="seconds per level (stiction 0.25, stribeck and velocity-scale 2)")
     e.add_argument("--references", metavar="V1,V2,...",
-                   help="stribeck: velocity references in rad/s (both signs are run)")
+                   help="stribeck, velocity-scale: velocity references in rad/s (both signs "
+                        "are run)")
     e.add_argument("--gain", type=float, default=20.0,
-                   help="stribeck: P gain of the velocity loop (default 20)")
-    e.add_argument("--amplitude", type=float, default=0.25,
-                   help="free-oscillation: initial deflection in rad (default 0.25)")
+                   help="stribeck, velocity-scale: P gain of the velocity loop (default 20)")
+    e.add_argument("--amplitude", type=float, default=None,
+                   help="free-oscillation: initial deflection in rad (default 0.25; on a "
+                        "rig the swing the excitation reaches, default 0.12)")
     e.add_argument("--max-amplitude", type=float, default=0.15,
                    help="free-oscillation: peaks above this are not used (default 0.15)")
     e.add_argument("--duration", type=float, default=None,
-                   help="free-oscillation: recorded seconds (default 12)")
+                   help="free-oscillation: recorded seconds of free decay (default 12)")
     e.add_argument("--levels", metavar="U1,U2,...",
-                   help="control-scaling: constant u values (default 3,4,5,7,9)")
+                   help="control-scaling: constant u values (default 3,4,5,7,9; on a rig "
+                        "their signs alternate)")
+    e.add_argument("--coulomb-levels", metavar="F1,F2,...",
+                   help="stiction on a rig: fractions of the breakaway u held while the arm "
+                        "slides (default 0.3,0.4,...,0.9)")
+    e.add_argument("--slide", type=float, default=0.8,
+                   help="stiction on a rig: seconds each Coulomb level is held (default 0.8)")
+    e.add_argument("--push", type=float, default=1.5,
+                   help="stiction on a rig: arm speed in rad/s of the motor's push before a "
+                        "slide (default 1.5)")
+    g = e.add_argument_group("on a rig (--backend)")
+    g.add_argument("--log-dir", default="runs",
+                   help="where the run is logged (default ./runs)")
+    g.add_argument("--max-speed", type=float, default=15.0, metavar="RAD/S",
+                   help="stop when the arm is faster than this (default 15)")
+    g.add_argument("--max-travel", type=float, default=60.0, metavar="RAD",
+                   help="stop when the arm is farther than this from its start (default 60)")
+    g.add_argument("--max-u-da", type=float, default=0.5, metavar="U_DA",
+                   help="largest |u_DA| commanded, u is clipped (default 0.5)")
+    g.add_argument("--no-realtime", action="store_true",
+                   help="do not ask for SCHED_FIFO priority")
+    g.add_argument("--hand", action="store_true",
+                   help="angle-scales: let rig-sim (over UDP) play the operator's hand for "
+                        "the laps it asks for")
+    g.add_argument("--wait", type=float, default=120.0, metavar="S",
+                   help="angle-scales: longest wait for the operator per step (default 120)")
+    e.add_argument("--quiet", action="store_true", help="no progress on stderr")
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=_experiment_entry)
 
@@ -406,12 +690,19 @@ def register_cli(sub) -> None:
 _EXPERIMENT_OPTIONS = {"step": "--step", "hold": "--hold", "gain": "--gain",
                        "amplitude": "--amplitude", "duration": "--duration",
                        "references": "--references", "levels": "--levels",
-                       "max_amplitude": "--max-amplitude"}
+                       "max_amplitude": "--max-amplitude", "slide": "--slide",
+                       "push": "--push", "coulomb_levels": "--coulomb-levels",
+                       "wait": "--wait"}
 
 
 def _experiment_entry(args) -> int:
     if args.hold is None:
-        args.hold = 2.0 if args.experiment == "stribeck" else 0.25
+        args.hold = 2.0 if args.experiment in ("stribeck", "velocity-scale") else 0.25
+    args.amplitude_given = args.amplitude is not None
+    if args.amplitude is None:
+        args.amplitude = 0.25
+    finite("--slide", args.slide, 0.0)
+    finite("--push", args.push, 0.0)
     finite("--step", args.step, 0.0)
     finite("--gain", args.gain, 0.0)
     finite("--amplitude", args.amplitude)

@@ -28,6 +28,7 @@ from .common import (
     emit_json,
     finite,
     flush_notes,
+    hanging_start,
 )
 
 __all__ = ["interface_stats", "register_cli", "start_console"]
@@ -112,6 +113,11 @@ def register_cli(sub) -> None:
                         "0 = off; see docs/realtime.md)")
     p.add_argument("--cpu", type=_cpu_arg, default="auto", help=_CPU_HELP)
     p.add_argument("--fsync", action="store_true", help="fsync the log after every write")
+    p.add_argument("--swing-up", action="store_true",
+                   help="start from wherever the pendulum is (hanging) and swing it up by "
+                        "energy control before balancing (swingup.* keys; the sim backend "
+                        "starts hanging unless sim.initial_angle is set); the JSON adds "
+                        "swing_up {phase, swing_up_time, catches}")
     p.add_argument("--sim-lockstep", action="store_true",
                    help="sim backend: advance the simulated plant one step per executed tick, "
                         "so that missed deadlines (host pauses) do not move it (default: it "
@@ -130,6 +136,9 @@ def register_cli(sub) -> None:
 
     p.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
                    help="friction model of the emulated plant (default: classical)")
+    p.add_argument("--hanging", action="store_true",
+                   help="each session starts with the pendulum hanging at rest (for run "
+                        "--swing-up; the same as --set sim.initial_angle=3.14159...)")
     p.add_argument("--watchdog", type=float, default=0.05, metavar="S",
                    help="zero the motor when no command arrives for S seconds (default 0.05)")
     p.add_argument("--fault", action="append", default=[], metavar="KEY=VALUE",
@@ -139,6 +148,12 @@ def register_cli(sub) -> None:
     p.add_argument("--fault-after", type=float, default=0.0, metavar="S",
                    help="apply the --fault settings S seconds after start-up (default 0: "
                         "at once)")
+    p.add_argument("--hand", action="append", default=[], metavar="KEY=VALUE",
+                   help="the operator's hand, scripted (docs/protocol.md): lap=pendulum|arm "
+                        "(one full lap by hand), seconds, direction, push (rad/s to the "
+                        "pendulum), push_arm (rad/s to the arm); repeatable")
+    p.add_argument("--hand-after", type=float, default=0.0, metavar="S",
+                   help="do the --hand actions S seconds after start-up (default 0)")
     p.add_argument("--no-realtime", action="store_true",
                    help="do not ask for SCHED_FIFO priority")
     p.add_argument("--cpu", type=_cpu_arg, default="auto", help=_CPU_HELP)
@@ -154,7 +169,7 @@ def cmd_run(args) -> int:
     if args.json and not args.headless:
         raise UsageError("--json needs --headless: the console prints its address, not one "
                          "JSON object (use --headless --duration S --json)")
-    cfg = config_from_args(args)
+    cfg = hanging_start(args, config_from_args(args))
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise UsageError(f"--duration must be > 0, got {args.duration}")
     if not 0 <= args.prewarm_us < cfg.design.h * 1e6 / 2:
@@ -176,7 +191,8 @@ def cmd_run(args) -> int:
                                  prewarm_us=args.prewarm_us, duration=args.duration,
                                  realtime=not args.no_realtime, fsync=args.fsync,
                                  cpu=_resolve_cpu(args.cpu), sim_lockstep=args.sim_lockstep,
-                                 log_formats=("csv", args.log_format))
+                                 log_formats=("csv", args.log_format),
+                                 swing_up=args.swing_up)
         signals.ctl = ctl
         if signals.received is not None:  # before anything ran: no rig opened, no log
             return _report(_not_started(signals.received), args)
@@ -338,13 +354,16 @@ def interface_stats(st: dict) -> dict:
     return {"ticks": st["ticks"], "missed": st["missed"], "overruns": st["overruns"],
             "jitter_ms": {"p50": j["p50"], "p99": j["p99"], "max": j["max"]},
             "compute_us": {"p50": c["p50"], "p99": c["p99"]},
-            "stop_reason": st["stop_reason"], "log": st["log"]}
+            "stop_reason": st["stop_reason"], "log": st["log"],
+            **({"swing_up": st["swing_up"]} if st.get("swing_up") is not None else {})}
 
 
 def cmd_rig_sim(args) -> int:
     from ..realtime.rigsim import FAULTS, run_rig_sim
 
     cfg = config_from_args(args)
+    if args.hanging:
+        cfg = cfg.with_values({"sim.initial_angle": math.pi})
     if not 0 <= args.port < 65536:
         raise UsageError(f"--port must be in 0..65535, got {args.port}")
     if not (args.watchdog > 0 and math.isfinite(args.watchdog)):
@@ -361,6 +380,27 @@ def cmd_rig_sim(args) -> int:
         except ValueError:
             raise UsageError(f"--fault {key}: {value!r} is not a number") from None
         finite(f"--fault {key}", faults[key])
+    finite("--hand-after", args.hand_after, 0.0, lo_open=False)
+    hand = {}
+    for text in args.hand:
+        key, sep, value = text.partition("=")
+        if not sep:
+            raise UsageError(f"--hand expects KEY=VALUE, got {text!r}")
+        if key == "lap":
+            hand[key] = value
+        else:
+            try:
+                hand[key] = float(value)
+            except ValueError:
+                raise UsageError(f"--hand {key}: {value!r} is not a number") from None
+    if hand:
+        from ..realtime.rigsim import hand_error
+
+        error = hand_error(hand)
+        if error:
+            raise UsageError(f"--hand: {error}")
+        hand = {"cmd": "hand", **hand, **({"after": args.hand_after} if args.hand_after
+                                          else {})}
     flush_notes(args)
 
     def announce(info):
@@ -370,5 +410,5 @@ def cmd_rig_sim(args) -> int:
 
     run_rig_sim(cfg, args.host, args.port, watchdog=args.watchdog, serial_device=args.serial,
                 faults=faults, fault_after=args.fault_after, realtime=not args.no_realtime,
-                cpu=_resolve_cpu(args.cpu), announce=announce)
+                cpu=_resolve_cpu(args.cpu), announce=announce, hand=hand or None)
     return 0

@@ -23,6 +23,7 @@ from ..model.limit_cycles import FEATURES
 from ..studies.sweep import (
     MODES,
     STATUSES,
+    SWINGUP_COLUMNS,
     SweepFile,
     _check_dask_address,
     _get_dask,
@@ -30,6 +31,7 @@ from ..studies.sweep import (
     iter_evaluate,
     make_points,
     parse_vary,
+    reduce_swingup,
     validate_points,
 )
 from .common import (
@@ -41,6 +43,7 @@ from .common import (
     emit_json,
     finite,
     flush_notes,
+    hanging_start,
     note,
     progress_bar,
 )
@@ -262,7 +265,7 @@ def register_cli(sub) -> None:
     p.add_argument("--window", type=float, default=None,
                    help="analyse the last S seconds of each run (default: the last half)")
     p.add_argument("--workers", type=int, default=None,
-                   help="local processes (default: all cores; 1 = in-process); with "
+                   help="threads (default: all cores; 1 = the calling thread); with "
                         "--dask local, the number of Dask workers")
     p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="run on Dask: start a LocalCluster, or join a running scheduler")
@@ -274,6 +277,10 @@ def register_cli(sub) -> None:
     p.add_argument("--resume", action="store_true",
                    help="keep the rows already in --out and run only the missing points")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    p.add_argument("--swing-up", action="store_true",
+                   help="each point swings up from sim.initial_angle (pi = hanging unless "
+                        "set) before balancing; adds the columns caught (1/0) and "
+                        "catch_time (s), status not_caught when it never balanced")
     p.add_argument("--table", action="store_true",
                    help="print a markdown table shaped like the thesis's Tables 2-7 (on "
                         "stderr with --json)")
@@ -287,7 +294,7 @@ def register_cli(sub) -> None:
 def _plan(args):
     """Everything checked before any work: (base, varies, points, duration, file,
     rows already in the file when resuming)."""
-    base = config_from_args(args)
+    base = hanging_start(args, config_from_args(args))
     if not args.vary:
         raise UsageError("a sweep needs at least one --vary KEY=V1,V2,... (or START:STOP:N)")
     varies = [parse_vary(v) for v in args.vary]
@@ -321,7 +328,9 @@ def _plan(args):
     base_flat = base.as_flat_dict()
     meta = {"keys": keys, "mode": args.mode, "duration": duration, "window": args.window,
             "base": base_flat, "vary": {k: v for k, v in varies}}
-    out = SweepFile(args.out, keys, meta)
+    if args.swing_up:
+        meta["swing_up"] = True
+    out = SweepFile(args.out, keys, meta, SWINGUP_COLUMNS if args.swing_up else ())
     if out.exists() and not args.resume:
         if not args.force:
             raise UsageError(f"--out {args.out} exists; use --resume to continue it or "
@@ -358,7 +367,9 @@ def cmd_sweep(args) -> int:
             upd(done / len(points))
             with closing(iter_evaluate(base, [points[i] for i in todo], duration=duration,
                                        window=args.window, workers=args.workers,
-                                       dask=args.dask, chunk_size=args.chunk_size)) as chunks:
+                                       dask=args.dask, chunk_size=args.chunk_size,
+                                       reduce=reduce_swingup if args.swing_up else None)
+                         ) as chunks:
                 for idx, rows in chunks:
                     out.append(rows)
                     for j, row in zip(idx, rows, strict=True):

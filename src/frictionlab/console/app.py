@@ -7,10 +7,14 @@ HTTP API (JSON; every ``POST`` body is a JSON object, ``{}`` when empty):
 ``GET /api/status``            controller status + running limit-cycle figures
 ``GET /api/schema``            fields, units and allowed ranges of every panel
 ``POST /api/start``            Start (``409`` when running, ``502`` when the rig fails)
+``POST /api/swingup``          Swing up: Start with the swing-up from hanging (``409``
+                               when running); the status's ``swing_up.phase`` is
+                               ``swinging``, ``caught``, ``balancing`` (or ``stopped``)
 ``POST /api/stop``             Stop (reason ``user``)
 ``POST /api/design``           State Feedback / Kalman Filter panels, Fast / Slow (+ confirm)
 ``POST /api/compensation``     Compensation on/off, Friction Type, Friction Model (+ confirm)
 ``POST /api/push``             disturb the pendulum (emulated rigs only)
+``POST /api/experiment``       Experiments panel: run an identification experiment (+ confirm)
 ``POST /api/record/start``     Save Data: start recording
 ``POST /api/record/stop``      Save Data: stop recording (the page then asks the name)
 ``POST /api/record/name``      the ``out>`` prompt: name the recording (``.dat`` added)
@@ -61,6 +65,7 @@ from ..realtime.params import ChangeError, UnsafeChange
 from .models import (
     CompensationRequest,
     DesignRequest,
+    ExperimentRequest,
     PushRequest,
     RecordNameRequest,
     field_errors,
@@ -299,8 +304,52 @@ class _Console:
         self.pending: dict | None = None   # stopped recording awaiting its name
         self.saved: dict | None = None     # the last named recording
         self.exited = False
-        self.was_recording = False         # as of the last status
         self.lock = threading.Lock()
+        #: the Experiments panel's last experiment: name, state (running, done,
+        #: stopped, failed), estimates, message, log
+        self.experiment: dict | None = None
+
+    def run_experiment(self, exp) -> None:
+        """Start ``exp`` on the controller and analyse its log when the run ends (in a
+        thread of its own)."""
+        ctl = self.controller
+        with self.lock:
+            self.experiment = {"name": exp.name, "state": "running", "estimates": None,
+                               "warnings": [], "message": None, "log": None}
+        ctl.start(experiment=exp)
+        threading.Thread(target=self._analyse, args=(exp,), name="frictionlab-experiment",
+                         daemon=True).start()
+
+    def _analyse(self, exp) -> None:
+        from ..studies.identification.experiments import IdentificationError
+        from ..studies.identification.onrig import analyse_log
+
+        ctl = self.controller
+        ctl.wait()
+        st = ctl.last_stats or {}
+        out = {"log": st.get("log")}
+        if st.get("stop_reason") != "finished":
+            out.update(state="stopped", message=f"stopped before it finished: "
+                       f"{st.get('stop_reason')} ({st.get('stop_detail') or ''}); the motor "
+                       "was set to zero")
+        elif not st.get("log"):
+            out.update(state="failed", message="the run was not logged: nothing to analyse")
+        else:
+            try:
+                from ..io.logs import read_log
+
+                log = read_log(st["log"], ctl.cfg.design.h)
+                res = analyse_log(exp.name, log, ctl.cfg, marks=dict(exp.marks))
+            except (IdentificationError, ValueError, OSError) as exc:
+                out.update(state="failed", message=str(exc))
+            else:
+                out.update(state="done", message="done",
+                           estimates={k: v for k, v in res.items()
+                                      if isinstance(v, float) or v is None},
+                           warnings=list(res.get("warnings", [])))
+        with self.lock:
+            if self.experiment is not None:
+                self.experiment.update(out)
 
 
 def _error(status: int, message: str, field: str | None = None) -> HTTPException:
@@ -394,12 +443,13 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
     def full_status() -> dict:
         st = dict(controller.status())
         with console.lock:
-            if console.was_recording and not st.get("running") and console.pending is None:
+            if (console.pending is None and not st.get("running")
+                    and getattr(controller, "unnamed_recording", None) is not None):
                 # the run ended (a safety stop, say) while recording: the recording was
-                # closed under an automatic name; ask the page for its name
+                # closed under an automatic name; ask the page for its name (asked of the
+                # controller, not inferred from an earlier status that may be stale)
                 with contextlib.suppress(RuntimeError, ValueError, OSError):
                     _pending(controller.record_stop(None))
-            console.was_recording = bool(st.get("recording"))
         st["console"] = {
             "limit_cycle": hub.figures,
             "clients": len(hub.clients),
@@ -412,6 +462,7 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
             "saved": console.saved,
             "token_required": token is not None,
             "exited": console.exited,
+            "experiment": None if console.experiment is None else dict(console.experiment),
         }
         return json_safe(st)
 
@@ -481,11 +532,21 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
 
     @app.post("/api/start")
     def start(body: dict | None = None):
+        return _start(None)
+
+    @app.post("/api/swingup")
+    def swingup(body: dict | None = None):
+        return _start(True)
+
+    def _start(swing_up: bool | None) -> dict:
         _guard_exited()
         if controller.running:
             raise _error(409, "the controller is already running")
         try:
-            controller.start()
+            if swing_up is None:
+                controller.start()
+            else:
+                controller.start(swing_up=swing_up)
         except RuntimeError as exc:  # includes RigError
             code = 409 if "already running" in str(exc) or "closed" in str(exc) else 502
             raise _error(code, str(exc)) from None
@@ -550,6 +611,38 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
         except (RuntimeError, ValueError) as exc:
             raise _error(409, str(exc)) from None
         return {"ok": True, "kick": req.kick}
+
+    # --- Experiments ------------------------------------------------------------------------
+
+    @app.post("/api/experiment")
+    def run_experiment(req: ExperimentRequest):
+        from ..realtime.experiment import Limits
+        from ..studies.identification.onrig import make_rig_experiment
+
+        _guard_exited()
+        if controller.running:
+            raise _error(409, "the controller is running: stop it before an experiment")
+        try:
+            limits = Limits(**req.limits)
+        except ValueError as exc:
+            raise _error(422, str(exc), "limits") from None
+        try:
+            exp = make_rig_experiment(req.name, controller.cfg, limits, **req.options)
+        except (TypeError, ValueError) as exc:
+            raise _error(422, f"{req.name}: {exc}", "options") from None
+        if not req.confirm:
+            message = (f"the {req.name} experiment drives the motor: the arm will move (limits:"
+                       f" arm speed {limits.max_speed:g} rad/s, travel {limits.max_travel:g} "
+                       f"rad, |u_DA| {limits.max_u_da:g}); Stop zeroes the motor at once. "
+                       "Send the request with \"confirm\": true to run it")
+            raise HTTPException(422, detail={"detail": message, "errors": [],
+                                             "confirm_required": True})
+        try:
+            console.run_experiment(exp)
+        except RuntimeError as exc:  # includes RigError
+            code = 409 if "already running" in str(exc) or "closed" in str(exc) else 502
+            raise _error(code, str(exc)) from None
+        return {"ok": True, "status": full_status()}
 
     # --- Save Data -------------------------------------------------------------------------
 

@@ -48,7 +48,11 @@ FEEDBACK_FIELDS = ("omega0", "omega1", "zeta1", "omega2", "zeta2")
 OBSERVER_FIELDS = ("observer_omega1", "observer_zeta1", "observer_omega2", "observer_zeta2")
 #: The panel's order of the compensator parameters (Sec. 6.1-6.3).
 _PANEL_ORDER = ("stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
-                "observer_gain", "hysteresis")
+                "observer_gain", "hysteresis",
+                # the adaptive law's (after the LuGre observer's: its starting levels)
+                "adaptation_gain", "adaptation_bandwidth", "adaptation_deadband",
+                "adaptation_distance", "adaptation_max_innovation", "adaptation_min",
+                "adaptation_max")
 #: The fields each compensator reads (:data:`~frictionlab.model.controller.COMPENSATOR_FIELDS`)
 #: that the panel shows (the symmetric model: no ``*_negative`` levels).
 COMPENSATOR_FIELDS = {
@@ -142,6 +146,13 @@ class FrictionModelRequest(_Request):
     sigma1: Number | None = None
     observer_gain: Number | None = None
     hysteresis: Number | None = None
+    adaptation_gain: Number | None = None
+    adaptation_bandwidth: Number | None = None
+    adaptation_deadband: Number | None = None
+    adaptation_distance: Number | None = None
+    adaptation_max_innovation: Number | None = None
+    adaptation_min: Number | None = None
+    adaptation_max: Number | None = None
 
     @field_validator(*_ALL_COMP_FIELDS)
     @classmethod
@@ -204,6 +215,29 @@ class PushRequest(_Request):
             raise ValueError(f"kick = {v:g} rad/s is out of range; allowed [{lo:g}, {hi:g}], "
                              "not 0")
         return v
+
+
+#: Experiments the console's Experiments panel runs (``identify experiment`` names).
+EXPERIMENT_NAMES = ("stiction", "stribeck", "free-oscillation", "control-scaling",
+                    "velocity-scale", "angle-scales")
+
+
+class ExperimentRequest(_Request):
+    """The Experiments panel: run an identification experiment on the connected rig.
+
+    ``options`` are the experiment's own (``step``, ``hold``, ``references``,
+    ... as in ``identify experiment``; checked by the experiment), ``limits``
+    the fields of :class:`frictionlab.realtime.experiment.Limits`
+    (``max_speed``, ``max_travel``, ``max_u_da``).  The motor moves the arm,
+    so the request is refused (422, ``confirm_required``) unless ``confirm``.
+    """
+
+    name: Literal["stiction", "stribeck", "free-oscillation", "control-scaling",
+                  "velocity-scale", "angle-scales"]
+    options: dict[str, Number | list[Number]] = Field(default_factory=dict, max_length=20)
+    limits: dict[Literal["max_speed", "max_travel", "max_u_da"], Number] = Field(
+        default_factory=dict)
+    confirm: Confirm = False
 
 
 class RecordNameRequest(_Request):

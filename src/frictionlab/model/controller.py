@@ -29,7 +29,20 @@ idx   name           meaning
 5     ``S_ZHAT``     compensator LuGre bristle estimate :math:`\hat z`
 6     ``S_FHAT``     last friction estimate :math:`\hat F` (m/s^2)
 7     ``S_U``        last applied u (m/s^2)
+8     ``S_VHAT``     adaptive law: predicted arm velocity (rad/s)
+9     ``S_VPREV``    adaptive law: last measured arm velocity (rad/s)
+10    ``S_FC_HAT``   adaptive law: estimated Coulomb level (m/s^2)
+11    ``S_FS_HAT``   adaptive law: estimated stiction level (m/s^2)
+12    ``S_ADAPT``    adaptive law: status (:data:`frictionlab.adaptive.ADAPT_STATES`;
+                     0 = not started: the next tick starts it)
+13    ``S_SLIDE``    adaptive law: distance slid since the arm last stopped (rad)
 ====  =============  ==================================================
+
+Compensator ``adaptive``: the LuGre observer run with the levels that the
+law of :mod:`frictionlab.adaptive` estimates from the applied u and the
+measured arm velocity (one tick of the law, then the observer, in the same
+compiled step).  Zeroing entries 4 and 5 and 8-13 (:func:`reset_compensator`) restarts a
+compensator from its parameters.
 """
 
 from __future__ import annotations
@@ -40,12 +53,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import jit
+from .adaptive import adaptation_step, check_gains
 from .design import Design
 from .friction import (
     CLASSICAL,
     COULOMB,
     LUGRE,
     P_EPS,
+    P_FC,
+    P_FCN,
     P_FS,
     P_FSN,
     STRIBECK,
@@ -59,7 +75,9 @@ from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
 
 __all__ = [
+    "ADAPTIVE",
     "COMPENSATORS",
+    "COMPENSATOR_CODES",
     "COMPENSATOR_FIELDS",
     "COMPENSATOR_KINDS",
     "DEFAULT_ERROR_SIGNAL",
@@ -68,13 +86,13 @@ __all__ = [
     "ControllerOutput",
     "check_compensator",
     "controller_step",
+    "reset_compensator",
 ]
 
-#: The compensators of Sec. 6 (``--compensation`` values other than ``none``).
-COMPENSATORS = ("coulomb", "classical", "lugre")
-#: ``--compensation`` values.
-COMPENSATOR_KINDS = ("none", *COMPENSATORS)
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
+#: The adaptive compensator's law (:mod:`frictionlab.model.adaptive`).
+_ADAPT = {"adaptation_gain", "adaptation_bandwidth", "adaptation_deadband", "adaptation_distance",
+          "adaptation_max_innovation", "adaptation_min", "adaptation_max"}
 #: The friction fields (of :class:`FrictionParams`) each compensator reads.
 COMPENSATOR_FIELDS = {
     "none": set(),
@@ -83,10 +101,24 @@ COMPENSATOR_FIELDS = {
     | _NEG - {"viscous_negative"},
     "lugre": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
               "sigma1_velocity", "observer_gain"} | _NEG,
+    "adaptive": {"stiction", "coulomb", "viscous", "stribeck_velocity", "sigma0", "sigma1",
+                 "sigma1_velocity", "observer_gain", "viscous_negative"} | _ADAPT,
 }
 
 S_X1, S_X2, S_ARM, S_ARMDOT, S_RELAY, S_ZHAT, S_FHAT, S_U = range(8)
-NS = 8
+S_VHAT, S_VPREV, S_FC_HAT, S_FS_HAT, S_ADAPT, S_SLIDE = range(8, 14)
+NS = 14
+
+#: Compensator code of ``adaptive`` (after the friction model codes).
+ADAPTIVE = 6
+#: Compensator codes by ``--compensation`` name: the one list of compensators.
+COMPENSATOR_CODES = {"none": 0, "coulomb": COULOMB, "classical": STRIBECK, "lugre": LUGRE,
+                     "adaptive": ADAPTIVE}
+#: ``--compensation`` values.
+COMPENSATOR_KINDS = tuple(COMPENSATOR_CODES)
+#: The compensators of Sec. 6 and the adaptive one (``--compensation`` values
+#: other than ``none``).
+COMPENSATORS = COMPENSATOR_KINDS[1:]
 
 G_L, G_K = 0, 4
 G_W0, G_G, G_ARMLEN, G_H, G_UMAX, G_COMP, G_ERR, G_FEEDNET = range(8, 16)
@@ -149,6 +181,42 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
 
 
 @jit
+def adaptive_force(s, cp, v, e, h, arm_len, u_max):
+    """The ``adaptive`` compensator's estimate for the coming sample.
+
+    One tick of :func:`frictionlab.adaptive.adaptation_step` (its state in
+    ``s``, with the last applied u in ``S_U``), then the LuGre observer of
+    eq. (19) with the adapted levels (both directions) in place of the
+    compensator's ``coulomb``/``stiction``.  Updates ``s`` in place.
+    """
+    st, fc, fs, vh, slide = adaptation_step(s[S_ADAPT], s[S_FC_HAT], s[S_FS_HAT], s[S_VHAT],
+                                            s[S_VPREV], s[S_SLIDE], s[S_U], v, cp, h,
+                                            arm_len, u_max)
+    s[S_SLIDE] = slide
+    s[S_ADAPT] = st
+    s[S_FC_HAT] = fc
+    s[S_FS_HAT] = fs
+    s[S_VHAT] = vh
+    s[S_VPREV] = v
+    q = cp.copy()
+    q[P_FC] = fc
+    q[P_FCN] = fc
+    q[P_FS] = fs
+    q[P_FSN] = fs
+    z_new, z_mean, dz_mean = lugre_step_exact(v, s[S_ZHAT], e, h, q)
+    s[S_ZHAT] = z_new
+    return lugre_force(v, z_mean, dz_mean, q)
+
+
+def reset_compensator(s: np.ndarray) -> None:
+    """Zero the compensator's entries of a controller state (relay, bristle,
+    adaptive law): the next tick starts the compensator afresh."""
+    s[S_RELAY] = 0.0
+    s[S_ZHAT] = 0.0
+    s[S_VHAT:S_SLIDE + 1] = 0.0
+
+
+@jit
 def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     """One controller tick; updates the state vector ``s`` in place.
 
@@ -188,7 +256,10 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
             e = arm_dot_m
         elif err == E_ARM_ANGLE:
             e = arm_m
-        f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
+        if kind == ADAPTIVE:
+            f_hat = adaptive_force(s, cp, arm_dot_m, e, h, gp[G_ARMLEN], gp[G_UMAX])
+        else:
+            f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
     u = u_fb + f_hat
     umax = gp[G_UMAX]
     if u > umax:
@@ -211,7 +282,8 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
 
 @dataclass(frozen=True)
 class ControllerOutput:
-    """What one tick produced (all SI)."""
+    """What one tick produced (all SI); ``coulomb_hat``/``stiction_hat`` are the
+    adaptive compensator's estimates (NaN for the others)."""
 
     u: float
     u_feedback: float
@@ -221,6 +293,8 @@ class ControllerOutput:
     arm_hat: float
     arm_dot_hat: float
     z_hat: float
+    coulomb_hat: float = float("nan")
+    stiction_hat: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -232,8 +306,9 @@ class Controller:
     design : Design
         Gains from :func:`frictionlab.design.design`.
     compensation : str
-        ``none``, ``coulomb``, ``classical`` (Sec. 6.2's implementation form)
-        or ``lugre`` (the observer eq. 19).
+        ``none``, ``coulomb``, ``classical`` (Sec. 6.2's implementation form),
+        ``lugre`` (the observer eq. 19) or ``adaptive`` (eq. 19 with levels
+        adapted online, :mod:`frictionlab.adaptive`).
     compensation_params : FrictionParams
         The compensator's own friction model.
     error_signal : str
@@ -264,8 +339,7 @@ class Controller:
 
     @property
     def compensator_code(self) -> int:
-        return {"none": 0, "coulomb": COULOMB, "classical": STRIBECK,
-                "lugre": LUGRE}[self.compensation]
+        return COMPENSATOR_CODES[self.compensation]
 
     def pack(self) -> tuple[np.ndarray, np.ndarray]:
         """Packed (gains, compensator parameters) for the compiled step."""
@@ -296,20 +370,26 @@ class Controller:
         w0 = self.design.spec.omega0
         est = (s[S_X1], w0 * s[S_X2], s[S_ARM], s[S_ARMDOT])
         u, u_fb, f_hat = controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m)
+        adapted = ((float(s[S_FC_HAT]), float(s[S_FS_HAT])) if self.compensation == "adaptive"
+                   else (float("nan"), float("nan")))
         out = ControllerOutput(float(u), float(u_fb), float(f_hat), *map(float, est),
-                               float(s[S_ZHAT]))
+                               float(s[S_ZHAT]), *adapted)
         return out, s
 
 
-def check_compensator(kind: str, params: FrictionParams) -> None:
+def check_compensator(kind: str, params: FrictionParams, *, h: float | None = None,
+                      arm_length: float | None = None) -> None:
     """Reject a compensator model that the compensator cannot run.
 
     The LuGre observer of eq. (19) divides by :math:`g(v) = s(v)/\\sigma_0`
     with the Stribeck level :math:`s(v) = F_C + (F_S - F_C)e^{-(v/v_S)^2}`.
     With :math:`F_S = F_C = 0` (for :math:`v \\ge 0`, or with the
     ``*_negative`` levels for :math:`v < 0`) :math:`s` vanishes for every v
-    and the observer is singular.  The other compensators accept any valid
-    :class:`FrictionParams`.
+    and the observer is singular.  The ``adaptive`` compensator must also
+    meet its law's stability conditions
+    (:func:`frictionlab.model.adaptive.check_gains`, with ``h`` and
+    ``arm_length``: default the thesis's 5 ms and 0.21 m).  The other
+    compensators accept any valid :class:`FrictionParams`.
 
     Parameters
     ----------
@@ -317,14 +397,20 @@ def check_compensator(kind: str, params: FrictionParams) -> None:
         ``none`` or one of :data:`COMPENSATORS`.
     params : FrictionParams
         The compensator's model (keys ``compensation.*``).
+    h : float, optional
+        Sampling period (``design.h``), s; read by ``adaptive`` only.
+    arm_length : float, optional
+        :math:`L_1` (``plant.arm_length``), m; read by ``adaptive`` only.
 
     Raises
     ------
     ParamError
         Naming the ``compensation.*`` key at fault (``field``) and what is
-        allowed; its message names both levels.
+        allowed; the message of a vanishing level names both levels.
     """
-    if kind != "lugre":
+    if kind == "adaptive":
+        check_gains(params, 0.005 if h is None else h, 0.21 if arm_length is None else arm_length)
+    if kind not in ("lugre", "adaptive"):
         return
     fs_neg = params.stiction if params.stiction_negative is None else params.stiction_negative
     fc_neg = params.coulomb if params.coulomb_negative is None else params.coulomb_negative

@@ -54,6 +54,15 @@ Models
     :math:`\sigma_1(v) = \sigma_1 e^{-(v/v_d)^2}` of Sec. 3.3 (``sigma1_velocity``
     = :math:`v_d`).
 
+Drift
+-----
+``drift`` (with ``drift_start``, ``drift_time``) makes the *plant's* levels
+F_S, F_C, F_v (both directions) change linearly in time, or in a step, over a
+run (App. E.1: the friction changes as the rig warms up):
+:func:`drift_factor`, applied by the simulator through
+:func:`drifted_params`.  The ``adaptation_*`` fields belong to the adaptive
+compensator (:mod:`frictionlab.adaptive`).
+
 The pure force laws are numba-compiled functions over a packed parameter
 vector (:meth:`FrictionParams.pack`) so that the simulator, the observers and
 the real-time loop share them.  For interactive use each model is also a
@@ -91,10 +100,13 @@ __all__ = [
     "Viscous",
     "classical_force",
     "coulomb_relay",
+    "drift_factor",
+    "drifted_params",
     "lugre_dz",
     "lugre_force",
     "lugre_step_exact",
     "make_model",
+    "resolve_drift",
     "static_force",
     "stribeck_curve",
     "stribeck_level",
@@ -108,7 +120,11 @@ _TINY = 1e-12  # floor of the Stribeck level in divisions (F_S = F_C = 0: no fri
 
 # packed parameter layout
 P_FS, P_FC, P_FV, P_VS, P_S0, P_S1, P_K, P_BAND, P_EPS, P_FSN, P_FCN, P_FVN, P_VD = range(13)
-NP = 13
+# drift of the plant's levels (NaN drift time: the run's duration, filled in by the runner)
+P_DRIFT, P_DRIFT_START, P_DRIFT_TIME = 13, 14, 15
+# the adaptive compensator's law (:mod:`frictionlab.adaptive`)
+P_AGAIN, P_ABW, P_ADEAD, P_AINNOV, P_AMIN, P_AMAX, P_ADIST = range(16, 23)
+NP = 23
 
 
 @dataclass(frozen=True)
@@ -149,6 +165,36 @@ class FrictionParams(Validated):
     sigma1_velocity: float | None = param(None, "v_d of sigma_1(v) = sigma_1 exp(-(v/v_d)^2) "
                                           "(None = constant sigma_1)", "rad/s", lo=0.0,
                                           hi=1e3, lo_open=True, optional=True)
+    drift: float = param(0.0, "plant only: relative change of the friction levels F_S, F_C, "
+                         "F_v (both directions) over the drift time, linear in time (-0.4 = "
+                         "40 % lower at the end; App. E.1: the lubricant warms up)", "1",
+                         lo=-1.0, hi=10.0)
+    drift_start: float = param(0.0, "plant only: when the drift begins", "s", lo=0.0, hi=1e5)
+    drift_time: float | None = param(None, "plant only: how long the drift takes (None = to "
+                                     "the end of the run; 0 = a step at drift_start)", "s",
+                                     lo=0.0, hi=1e5, optional=True)
+    adaptation_gain: float = param(200.0, "adaptive compensator: gradient gain [gamma] of the "
+                                   "level estimates (0 = no adaptation); stable for "
+                                   "gamma h^2 / L_1 < 4 - 2 lambda h",
+                                   "m/(rad s^2)", lo=0.0, hi=1e7)
+    adaptation_bandwidth: float = param(20.0, "adaptive compensator: bandwidth [lambda] of its "
+                                        "arm-velocity predictor; stable for lambda h < 2",
+                                        "1/s", lo=0.0, hi=1e5, lo_open=True)
+    adaptation_deadband: float = param(0.1, "adaptive compensator: adaptation frozen while "
+                                       "|arm velocity| is below this (stuck arm)", "rad/s",
+                                       lo=0.0, hi=100.0)
+    adaptation_distance: float = param(0.1, "adaptive compensator: adaptation frozen until "
+                                       "the arm has slid this far since it last stopped or "
+                                       "reversed (pre-sliding: the bristles settle within a "
+                                       "few s(v)/sigma_0)", "rad", lo=0.0, hi=100.0)
+    adaptation_max_innovation: float = param(1.0, "adaptive compensator: adaptation frozen "
+                                             "while the velocity prediction error exceeds "
+                                             "this (a bad signal)", "rad/s", lo=0.0, hi=1e3,
+                                             lo_open=True)
+    adaptation_min: float = param(0.05, "adaptive compensator: lower bound of the estimated "
+                                  "F_C and F_S", "m/s^2", lo=0.0, hi=1e3, lo_open=True)
+    adaptation_max: float = param(6.0, "adaptive compensator: upper bound of the estimated "
+                                  "F_C and F_S", "m/s^2", lo=0.0, hi=1e3, lo_open=True)
 
     @staticmethod
     def defaults(kind: str, role: str = "plant") -> FrictionParams:
@@ -162,8 +208,11 @@ class FrictionParams(Validated):
             ``compensation`` gives the settings Sec. 6 found best on the rig:
             Coulomb eps 0.05 (F_C 1.5); classical F_S 2.3, F_C 1.55, v_S 1,
             eps 0.08; LuGre F_S 2.3, F_C 1.55, F_v 0.07, sigma0 300, sigma1 6,
-            v_S 1, k 7.
+            v_S 1, k 7.  ``adaptive`` (compensator only) starts from the
+            LuGre settings.
         """
+        if kind == "adaptive" and role == "compensation":
+            kind = "lugre"
         _check_kind(kind)
         base = FrictionParams()
         if role == "plant":
@@ -197,6 +246,16 @@ class FrictionParams(Validated):
         p[P_FCN] = self.coulomb if self.coulomb_negative is None else self.coulomb_negative
         p[P_FVN] = self.viscous if self.viscous_negative is None else self.viscous_negative
         p[P_VD] = math.inf if self.sigma1_velocity is None else self.sigma1_velocity
+        p[P_DRIFT] = self.drift
+        p[P_DRIFT_START] = self.drift_start
+        p[P_DRIFT_TIME] = math.nan if self.drift_time is None else self.drift_time
+        p[P_AGAIN] = self.adaptation_gain
+        p[P_ABW] = self.adaptation_bandwidth
+        p[P_ADEAD] = self.adaptation_deadband
+        p[P_AINNOV] = self.adaptation_max_innovation
+        p[P_AMIN] = self.adaptation_min
+        p[P_AMAX] = self.adaptation_max
+        p[P_ADIST] = self.adaptation_distance
         return p
 
 
@@ -361,6 +420,49 @@ def lugre_step_exact(v, z, e, dt, p):
     z_ss = b * dt * inv_x  # b / a
     q = (z - z_ss) * (1.0 - np.exp(-x))  # z - z_new
     return z - q, z_ss + q * inv_x, -q * (1.0 / dt)
+
+
+@jit
+def drift_factor(t, p):
+    r"""Factor on the plant's friction levels at time ``t`` (``friction.drift``).
+
+    :math:`1 + d\,\min(1, \max(0, (t - t_0)/T))` with d = ``drift``,
+    :math:`t_0` = ``drift_start`` and T = ``drift_time`` (a NaN T must have
+    been replaced by the run's duration; T = 0 is a step at :math:`t_0`).
+    """
+    d = p[P_DRIFT]
+    if d == 0.0:
+        return 1.0
+    t0 = p[P_DRIFT_START]
+    span = p[P_DRIFT_TIME]
+    if t < t0:
+        return 1.0
+    if not span > 0.0:
+        return 1.0 + d
+    r = (t - t0) / span
+    return 1.0 + d * min(r, 1.0)
+
+
+@jit
+def drifted_params(p, t, out):
+    """Write ``p`` with its levels (F_S, F_C, F_v, both directions) scaled by
+    :func:`drift_factor` at time ``t`` into ``out``; returns ``out``."""
+    c = drift_factor(t, p)
+    for i in range(NP):
+        out[i] = p[i]
+    if c != 1.0:
+        for i in (P_FS, P_FC, P_FV, P_FSN, P_FCN, P_FVN):
+            out[i] = p[i] * c
+    return out
+
+
+def resolve_drift(p: np.ndarray, duration: float) -> np.ndarray:
+    """``p`` with an unset drift time (NaN: to the end of the run) set to the
+    time from ``drift_start`` to ``duration``, the run's length in s."""
+    if math.isnan(p[P_DRIFT_TIME]):
+        p = p.copy()
+        p[P_DRIFT_TIME] = max(float(duration) - p[P_DRIFT_START], 0.0)
+    return p
 
 
 # --------------------------------------------------------------------------

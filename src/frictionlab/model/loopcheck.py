@@ -48,6 +48,12 @@ What is checked
    state (discrete Lyapunov equation), plus the compensator's largest
    friction level.
 
+The ``adaptive`` compensator is checked as the LuGre observer at its
+starting levels with the adaptation frozen (its own law is stable by the
+conditions :func:`frictionlab.adaptive.check_gains` enforces, and it moves
+the levels slowly), its largest level being the estimates' bound
+``adaptation_max``.
+
 The check is linear: it does not predict the limit cycles friction causes
 (Sec. 4-5), nor whether such a cycle grows until the pendulum falls.  The
 loop's own safety stops (angle limit, non-finite u) stay the last line.
@@ -235,7 +241,7 @@ def loop_matrices(controller: Controller, plant: PlantParams | None = None,
         compensate = controller.compensation != "none" and arm_speed != 0.0
     gp, cp = _analysis_pack(controller, compensate)
     states = list(_PEND_ARM)
-    if compensate and controller.compensation == "lugre":
+    if compensate and controller.compensation in ("lugre", "adaptive"):
         states.append(S_ZHAT)
     # sliding: the arm's friction is the compensator's own steady-state friction (its
     # premise), a static function of the speed; its slope enters the arm
@@ -307,7 +313,7 @@ def _steady_slope(controller: Controller, cp: np.ndarray, v: float) -> float:
     level outside the band; Coulomb: a constant level.
     """
     dv = 1e-6 * max(1.0, abs(v))
-    if controller.compensation == "lugre":
+    if controller.compensation in ("lugre", "adaptive"):
         return (stribeck_curve(v + dv, cp) - stribeck_curve(v - dv, cp)) / (2 * dv)
     s = np.zeros(NS)
     s[S_RELAY] = math.copysign(1.0, v)
@@ -344,6 +350,8 @@ def _compensator_level(controller: Controller) -> float:
     levels = [p.coulomb, p.coulomb_negative or 0.0]
     if controller.compensation != "coulomb":
         levels += [p.stiction, p.stiction_negative or 0.0]
+    if controller.compensation == "adaptive":
+        levels.append(p.adaptation_max)  # the estimates' bound
     return float(max(levels))
 
 
@@ -389,7 +397,7 @@ def check_loop(controller: Controller, plant: PlantParams | None = None, *,
     if controller.compensation != "none":
         eps = controller.compensation_params.hysteresis
         checked = [v for v in speeds
-                   if controller.compensation == "lugre" or abs(v) > eps]
+                   if controller.compensation in ("lugre", "adaptive") or abs(v) > eps]
         for v in checked:
             r = _radius(loop_matrices(controller, plant, v, compensate=True)[0])
             if comp_rho is None or r > comp_rho:

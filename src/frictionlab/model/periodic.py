@@ -89,17 +89,17 @@ from .controller import (
     S_ZHAT,
     controller_step,
 )
-from .friction import KINDS, LUGRE, NONE, VISCOUS
+from .friction import KINDS, LUGRE, NONE, P_DRIFT, VISCOUS
 from .limit_cycles import LimitCycleFeatures, _crossings, features
-from .rig import quantize
+from .sensor import arm_zero, reading
 from .simulation import (
     NC,
     STATUS,
     Trajectory,
     _pack_plant,
-    _quanta,
     _run,
     make_controller,
+    make_sensor,
     plant_tick,
 )
 
@@ -132,18 +132,16 @@ def _plant_step(x, u, mem, substeps, ratio, h, pp, fkind, fp):
 
 
 @jit
-def loop_tick(X, gp, cp, quanta, substeps, ratio, h, pp, fkind, fp):
+def loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp):
     """Advance the loop state ``X`` (:data:`NL`,) in place by one tick; return u.
 
-    Measure (quantised as the simulator does, without noise), run the
-    controller, then the plant over the sample, exactly as
+    Measure (the simulator's sensor ``sp`` without noise, the arm's zero
+    ``x0``), run the controller, then the plant over the sample, exactly as
     :func:`frictionlab.simulation.simulate_config` does.
     """
     x = X[:NX_PLANT]
     s = X[I_S:I_MEM]
-    th_m = quantize(x[0], quanta[0])
-    arm_m = quantize(x[2], quanta[1])
-    armd_m = quantize(x[3], quanta[2])
+    th_m, arm_m, armd_m, _ = reading(sp, x[0], x[2], x[3], False, x0)
     u, _u_fb, _f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
     _f, mem = _plant_step(x, u, X[I_MEM], substeps, ratio, h, pp, fkind, fp)
     X[I_MEM] = mem
@@ -151,7 +149,7 @@ def loop_tick(X, gp, cp, quanta, substeps, ratio, h, pp, fkind, fp):
 
 
 @jit
-def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, gp, cp, quanta, substeps,
+def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, gp, cp, sp, x0, substeps,
                      ratio, h, pp, fkind, fp):
     """Run each row of ``X0s`` to its next ``direction`` crossing of theta = 0.
 
@@ -173,7 +171,7 @@ def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, gp, cp, qua
         armed = False
         for k in range(1, n_max + 1):
             prev[:] = X
-            loop_tick(X, gp, cp, quanta, substeps, ratio, h, pp, fkind, fp)
+            loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp)
             th = direction * X[0]
             if not (abs(X[0]) <= fall_angle) or not np.isfinite(X[1] + X[3] + X[4]):
                 codes[r] = R_FELL
@@ -190,12 +188,12 @@ def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, gp, cp, qua
 
 
 @jit
-def _record(X, n, gp, cp, quanta, substeps, ratio, h, pp, fkind, fp, fall_angle):
+def _record(X, n, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp, fall_angle):
     """Loop states at ticks 0..n (rows), stopping early if the pendulum falls."""
     out = np.empty((n + 1, X.shape[0]))
     out[0] = X
     for k in range(1, n + 1):
-        loop_tick(X, gp, cp, quanta, substeps, ratio, h, pp, fkind, fp)
+        loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp)
         out[k] = X
         if not (abs(X[0]) <= fall_angle) or not np.isfinite(X[1] + X[3] + X[4]):
             return out[:k + 1]
@@ -214,12 +212,14 @@ class _Loop:
         self.pp = _pack_plant(cfg)
         self.fkind = KINDS.index(cfg.friction_kind)
         self.fp = cfg.friction.pack()
-        self.quanta = _quanta(cfg)
+        self.fp[P_DRIFT] = 0.0  # periodic orbits of the plant at its starting levels
+        self.sensor = make_sensor(cfg)._replace(noise=0.0)
+        self.x0 = arm_zero(self.sensor)
         self.substeps, self.ratio = cfg.substeps, cfg.pendulum_ratio
         self.fall_angle = cfg.sim.fall_angle
 
     def _args(self):
-        return (self.gp, self.cp, self.quanta, self.substeps, self.ratio, self.h, self.pp,
+        return (self.gp, self.cp, self.sensor, self.x0, self.substeps, self.ratio, self.h, self.pp,
                 self.fkind, self.fp)
 
     def initial_state(self) -> np.ndarray:
@@ -236,7 +236,7 @@ class _Loop:
         X0s = np.ascontiguousarray(np.atleast_2d(X0s), dtype=float)
         return _section_returns(X0s, int(direction), float(hyst), int(n_min), int(n_max),
                                 self.fall_angle,
-                                self.gp, self.cp, self.quanta, self.substeps, self.ratio,
+                                self.gp, self.cp, self.sensor, self.x0, self.substeps, self.ratio,
                                 self.h, self.pp, self.fkind, self.fp)
 
     def free_indices(self) -> np.ndarray:
@@ -244,7 +244,7 @@ class _Loop:
         idx = [1, 2, 3, I_S + S_X1, I_S + S_X2, I_S + S_ARM, I_S + S_ARMDOT]
         if self.fkind == LUGRE:
             idx += [4, I_MEM]
-        if self.controller.compensation == "lugre":
+        if self.controller.compensation in ("lugre", "adaptive"):
             idx.append(I_S + S_ZHAT)
         return np.array(sorted(idx))
 
@@ -746,9 +746,9 @@ def _trajectory(loop: _Loop, state: np.ndarray, duration: float) -> Trajectory:
     x = np.array(state[:NX_PLANT], dtype=float)
     s = np.array(state[I_S:I_MEM], dtype=float)
     out = np.zeros((n, NC))
-    done, status, _ = _run(x, float(state[I_MEM]), n, loop.substeps, loop.ratio, loop.pp,
-                           loop.fkind, loop.fp, loop.gp, loop.cp, s, np.zeros(3), -1,
-                           loop.quanta, loop.fall_angle, out, True)
+    done, status, _, _ = _run(x, float(state[I_MEM]), n, loop.substeps, loop.ratio, loop.pp,
+                              loop.fkind, loop.fp, loop.gp, loop.cp, s, loop.sensor, 1,
+                              loop.x0, loop.fall_angle, out, True)
     return Trajectory(np.arange(done), loop.h, out[:done], STATUS[status], loop.cfg)
 
 

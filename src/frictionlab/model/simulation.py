@@ -63,9 +63,13 @@ import numpy as np
 
 from ._jit import jit
 from .controller import (
+    ADAPTIVE,
     DEFAULT_ERROR_SIGNAL,
+    G_COMP,
     NS,
     S_ARMDOT,
+    S_FC_HAT,
+    S_FS_HAT,
     S_X1,
     S_X2,
     S_ZHAT,
@@ -73,9 +77,23 @@ from .controller import (
     controller_step,
 )
 from .design import design as make_design
-from .friction import KINDS, LUGRE, NONE, P_K, lugre_force, lugre_step_exact, static_force
+from .friction import (
+    KINDS,
+    LUGRE,
+    NONE,
+    P_DRIFT,
+    P_DRIFT_TIME,
+    P_FC,
+    P_FS,
+    P_K,
+    drifted_params,
+    lugre_force,
+    lugre_step_exact,
+    resolve_drift,
+    static_force,
+)
 from .plant import accelerations_sc
-from .rig import RigScaling, quantize
+from .sensor import SensorParams, measure, sensor_params
 
 if TYPE_CHECKING:  # only annotations: the configuration layer builds what the model runs
     from ..config import Config
@@ -98,8 +116,12 @@ LOGGED = (
 #: One tick of a ``.dat`` log: the :data:`LOGGED` signals, space separated (the
 #: simulator's :meth:`Trajectory.save_dat` and the real-time logger both write it).
 DAT_LINE = " ".join(["%.9g"] * len(LOGGED)) + "\n"
-#: All recorded columns: the ten logged signals, then the true plant signals.
-COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction")
+#: All recorded columns: the ten logged signals, the true plant signals, then the
+#: Coulomb and stiction levels the compensator used (the adaptive compensator's
+#: estimates; a fixed compensator's own ``compensation.coulomb``/``stiction``; 0
+#: without compensation).
+COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction", "coulomb_hat",
+           "stiction_hat")
 NC = len(COLUMNS)
 
 STATUS = ("ok", "fell")
@@ -215,33 +237,31 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
 
 
 @jit
-def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed, quanta,
+def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
          fall_angle, out, record):
-    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, mem).
+    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, mem, x0).
 
     ``x`` (plant state) and ``s`` (controller state) are advanced in place;
     ``mem`` is the friction model's memory (:func:`plant_tick`) at the start,
-    returned at the end.
+    returned at the end.  The measurements are :func:`frictionlab.sensor.measure`
+    with the sensor ``sp`` at sample numbers ``n0, n0 + 1, ...``; ``x0`` is its
+    arm zero (taken at sample 0, returned for a continuation chunk).
     Row k of ``out`` receives the signals of tick k when ``record`` is true.
-    The noise generator is seeded with ``seed`` unless it is negative (a
-    continuation chunk of the same run keeps drawing from the same stream).
+    ``n0`` is also the run's tick at the first of these ticks: the plant's
+    friction levels drift with the time ``(n0 + k) h`` when ``fp`` has a
+    drift with a resolved drift time (:func:`frictionlab.friction.resolve_drift`;
+    an unresolved one, NaN, is ignored).
     """
     h = gp[11]
-    noisy = noise[0] > 0.0 or noise[1] > 0.0 or noise[2] > 0.0
-    if noisy and seed >= 0:
-        np.random.seed(seed)
     w0 = gp[8]
+    adaptive = gp[G_COMP] == ADAPTIVE
+    # the levels a fixed compensator uses (none: 0)
+    fc_fixed = cp[P_FC] if gp[G_COMP] != 0.0 else 0.0
+    fs_fixed = cp[P_FS] if gp[G_COMP] != 0.0 else 0.0
+    drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
+    fpt = fp.copy()
     for k in range(n_ticks):
-        th_m = x[0]
-        arm_m = x[2]
-        armd_m = x[3]
-        if noisy:
-            th_m += noise[0] * np.random.standard_normal()
-            arm_m += noise[1] * np.random.standard_normal()
-            armd_m += noise[2] * np.random.standard_normal()
-        th_m = quantize(th_m, quanta[0])
-        arm_m = quantize(arm_m, quanta[1])
-        armd_m = quantize(armd_m, quanta[2])
+        th_m, arm_m, armd_m, x0 = measure(sp, x[0], x[2], x[3], n0 + k, x0)
         th_hat = s[S_X1]
         thd_hat = w0 * s[S_X2]
         arm_hat = s[2]
@@ -264,12 +284,16 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, noise, seed
             out[k, 12] = x[2]
             out[k, 13] = x[3]
             out[k, 14] = x[4]
-        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
+            out[k, 16] = s[S_FC_HAT] if adaptive else fc_fixed
+            out[k, 17] = s[S_FS_HAT] if adaptive else fs_fixed
+        if drifting:
+            drifted_params(fp, (n0 + k) * h, fpt)
+        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         if record:
             out[k, 15] = f_mean
         if not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
-            return k + 1, 1, mem
-    return n_ticks, 0, mem
+            return k + 1, 1, mem, x0
+    return n_ticks, 0, mem, x0
 
 
 @dataclass(frozen=True)
@@ -351,11 +375,15 @@ class PlantState:
         state, or the LuGre friction of the last substep.
     friction : float
         Mean friction over the last sample (m/s^2).
+    tick : int
+        Samples stepped since :meth:`SimulatedPlant.init` (the clock of
+        ``friction.drift``).
     """
 
     x: np.ndarray
     memory: float = 0.0
     friction: float = 0.0
+    tick: int = 0
 
     @property
     def theta(self) -> float:
@@ -375,12 +403,17 @@ class SimulatedPlant:
     >>> st = plant.step(st, u=0.0)
     """
 
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config, duration: float | None = None):
         self.cfg = cfg
         self.h = cfg.design.h
         self._pp = _pack_plant(cfg)
         self._fkind = KINDS.index(cfg.friction_kind)
-        self._fp = cfg.friction.pack()
+        # friction.drift: over friction.drift_time, else to the end of the run
+        # (``duration``, default sim.duration)
+        self._fp = resolve_drift(cfg.friction.pack(),
+                                 cfg.sim.duration if duration is None else duration)
+        self._drifting = bool(self._fp[P_DRIFT] != 0.0)
+        self._fpt = self._fp.copy()
         self._substeps = cfg.substeps
         self._ratio = cfg.pendulum_ratio
 
@@ -392,15 +425,18 @@ class SimulatedPlant:
     def step(self, state: PlantState, u: float) -> PlantState:
         """Advance one sampling period with u held (returns a new state)."""
         x = state.x.copy()
+        fp = self._fp
+        if self._drifting:
+            fp = drifted_params(fp, state.tick * self.h, self._fpt)
         f, memory = plant_tick(x, float(u), state.memory, self._substeps, self._ratio, self.h,
-                               self._pp, self._fkind, self._fp)
-        return PlantState(x, memory, f)
+                               self._pp, self._fkind, fp)
+        return PlantState(x, memory, f, state.tick + 1)
 
     def push(self, state: PlantState, theta_dot_kick: float) -> PlantState:
         """Disturb the pendulum: add ``theta_dot_kick`` rad/s to its velocity."""
         x = state.x.copy()
         x[1] += theta_dot_kick
-        return PlantState(x, state.memory, state.friction)
+        return PlantState(x, state.memory, state.friction, state.tick)
 
 
 def _pack_plant(cfg: Config) -> np.ndarray:
@@ -408,16 +444,43 @@ def _pack_plant(cfg: Config) -> np.ndarray:
     return np.array([p.omega0, p.zeta, p.g, p.arm_length, p.input_gain])
 
 
-def _quanta(cfg: Config) -> np.ndarray:
-    if cfg.sim.quantization:
-        return np.array(RigScaling().quanta())
-    return np.zeros(3)
+def make_sensor(cfg: Config) -> SensorParams:
+    """The sensor a configuration describes (``rig.*``, ``sim.quantization``,
+    ``sim.noise``, ``sim.seed``; the arm's raw zero :data:`~frictionlab.sensor.ARM_START`)."""
+    return sensor_params(cfg.rig, cfg.sim.quantization, cfg.sim.noise, cfg.sim.seed)
 
 
 def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Controller:
     """The controller a configuration describes."""
     d = make_design(cfg.design, cfg.plant)
-    return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal)
+    return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal,
+                      u_max=cfg.rig.u_max)
+
+
+def run_ticks(cfg: Config, duration: float | None = None, record: bool = True) -> int:
+    """Ticks of a run of ``duration`` s (default ``cfg.sim.duration``).
+
+    Raises
+    ------
+    ValueError
+        The duration is not positive and finite, is shorter than one sampling
+        period, or (``record``) is longer than a recorded run can hold
+        (:data:`MAX_TICKS`).
+    """
+    duration = cfg.sim.duration if duration is None else float(duration)
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    h = cfg.design.h
+    n = round(duration / h)
+    if n < 1:
+        raise ValueError(f"duration {duration:g} s is shorter than one sampling period "
+                         f"(design.h = {h:g} s)")
+    if record and n > MAX_TICKS:
+        raise ValueError(f"duration {duration:g} s at design.h = {h:g} s is {n:,} ticks; "
+                         f"a recorded run holds at most {MAX_TICKS:,} "
+                         f"({MAX_TICKS * NC * 8 / 2**30:.1f} GiB): shorten the duration "
+                         "or raise design.h")
+    return n
 
 
 def simulate_config(
@@ -444,19 +507,8 @@ def simulate_config(
     controller : Controller, optional
         Use this controller instead of the one ``cfg`` describes.
     """
-    duration = cfg.sim.duration if duration is None else float(duration)
-    if not (duration > 0 and math.isfinite(duration)):
-        raise ValueError(f"duration must be > 0 s, got {duration}")
+    n = run_ticks(cfg, duration, record)
     h = cfg.design.h
-    n = round(duration / h)
-    if n < 1:
-        raise ValueError(f"duration {duration:g} s is shorter than one sampling period "
-                         f"(design.h = {h:g} s)")
-    if record and n > MAX_TICKS:
-        raise ValueError(f"duration {duration:g} s at design.h = {h:g} s is {n:,} ticks; "
-                         f"a recorded run holds at most {MAX_TICKS:,} "
-                         f"({MAX_TICKS * NC * 8 / 2**30:.1f} GiB): shorten the duration "
-                         "or raise design.h")
     ctrl = controller or make_controller(cfg)
     gp, cp = ctrl.pack()
     x = np.zeros(5)
@@ -464,27 +516,25 @@ def simulate_config(
     s = ctrl.init(cfg.sim.initial_angle)
     assert s.shape == (NS,)
     out = np.zeros((n, NC)) if record else np.zeros((1, NC))
-    noise = np.full(3, cfg.sim.noise)
+    sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)
-    fp = cfg.friction.pack()
+    fp = resolve_drift(cfg.friction.pack(), n * h)
     pp = _pack_plant(cfg)
-    q = _quanta(cfg)
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
     if progress is None:
-        done, status, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, noise,
-                               cfg.sim.seed, q, cfg.sim.fall_angle, out, record)
+        done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                  0, 0.0, cfg.sim.fall_angle, out, record)
     else:
-        # chunks of whole ticks; only the first seeds the noise, the others go on
-        # drawing from the same stream, so a chunked run is the unchunked one bit
-        # for bit (nothing else draws from numba's generator in between)
+        # chunks of whole ticks; the noise of sample n is a function of (seed, n), and
+        # the arm's zero x0 is carried over, so a chunked run is the unchunked one bit
+        # for bit
         chunk = max(1, n // 50)
-        done, status, mem = 0, 0, 0.0
+        done, status, mem, x0 = 0, 0, 0.0, 0.0
         while done < n and status == 0:
             m = min(chunk, n - done)
             view = out[done:done + m] if record else out
-            seed = cfg.sim.seed if done == 0 else -1
-            d, status, mem = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, noise,
-                                  seed, q, cfg.sim.fall_angle, view, record)
+            d, status, mem, x0 = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                      done, x0, cfg.sim.fall_angle, view, record)
             done += d
             progress(done / n)
     data = out[:done] if record else out[:0]

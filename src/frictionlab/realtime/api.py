@@ -6,6 +6,7 @@ See the package docstring (:mod:`frictionlab.realtime`) for the API summary.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 import threading
@@ -14,6 +15,8 @@ from concurrent.futures import Future
 from pathlib import Path
 
 from ..config import Config
+from ..model.adaptive import ADAPT_STATES
+from ..model.controller import S_ADAPT, S_FC_HAT, S_FS_HAT
 from ..model.rig import RigScaling
 from .clock import MonotonicClock
 from .datalog import LogWriter, link_no_clobber, writer_identity
@@ -64,6 +67,16 @@ class RealtimeController:
     sim_lockstep : bool
         ``sim`` backend: one plant step per executed tick (see
         :class:`~.rigs.SimRig`).
+    swing_up : bool
+        Runs start with the swing-up (``swingup.*`` of ``cfg``,
+        :mod:`frictionlab.swingup`); may be changed between runs (the
+        console's Swing up button sets it for the run it starts).
+    experiment : object, optional
+        Run an identification experiment (:mod:`.experiment`) in place of
+        the balancing controller: same loop, timing, safety and logging;
+        the run ends with reason ``finished`` when its schedule is done.
+        Its ``describe()`` goes into the sidecar (``experiment``) and
+        :meth:`status`, its ``progress`` into :meth:`status`.
     """
 
     def __init__(self, cfg: Config, backend: str | Rig = "sim", *, log_dir="runs",
@@ -71,8 +84,14 @@ class RealtimeController:
                  realtime: bool = True, manage_gc: bool = True, fsync: bool = False,
                  scaling: RigScaling | None = None, prewarm_us: float = 0.0,
                  cpu: int | None = None, sim_lockstep: bool = False,
-                 log_formats: tuple[str, ...] = ("csv",)):
+                 log_formats: tuple[str, ...] = ("csv",), experiment=None,
+                 swing_up: bool = False):
         self.cfg = cfg
+        self.swing_up = swing_up
+        self.experiment = experiment
+        #: The experiment of the current (or last) run: ``experiment``, or the one given
+        #: to :meth:`start` for that run.
+        self.run_experiment = experiment
         self.log_formats = tuple(log_formats)
         self.sim_lockstep = sim_lockstep
         self.backend = backend
@@ -88,7 +107,7 @@ class RealtimeController:
         self.cpu = cpu
         if not 0 <= prewarm_us < cfg.design.h * 1e6 / 2:
             raise ValueError(f"prewarm_us must be in [0, h/2), got {prewarm_us}")
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or cfg.rig
         if isinstance(backend, str) and backend != "sim":
             _check_backend(backend)
         self._params = ControlParams.from_config(cfg)
@@ -116,9 +135,17 @@ class RealtimeController:
 
     # --- life cycle ---------------------------------------------------------------
 
-    def start(self) -> None:
-        """Start a run in the loop thread (open the rig, the log, go)."""
-        loop = self._prepare()
+    def start(self, experiment=None, swing_up: bool | None = None) -> None:
+        """Start a run in the loop thread (open the rig, the log, go).
+
+        ``experiment`` (a :class:`~.experiment.RigExperiment`, one run per
+        object) runs in place of the balancing controller for this run only
+        (the console's Experiments panel); on the ``sim`` backend its
+        pendulum then starts hanging.  ``swing_up`` True/False starts this run
+        with/without the swing-up (None: :attr:`swing_up`, the controller's
+        setting).
+        """
+        loop = self._prepare(experiment, swing_up)
         self._thread = threading.Thread(target=self._execute, args=(loop,),
                                         name="frictionlab-rt", daemon=True)
         self._thread.start()
@@ -167,14 +194,23 @@ class RealtimeController:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _prepare(self) -> Loop:
+    def _prepare(self, experiment=None, swing_up: bool | None = None) -> Loop:
+        swing_up = self.swing_up if swing_up is None else bool(swing_up)
         with self._lock:
             if self._closed:
                 raise RuntimeError("the controller is closed")
             if self.running:
                 raise RuntimeError("the controller is already running")
             self._stop_asked = None
-            rig = (open_rig(self.backend, self.cfg, lockstep=self.sim_lockstep)
+            experiment = experiment if experiment is not None else self.experiment
+            self.run_experiment = experiment
+            rig_cfg = self.cfg
+            if experiment is not None and self.backend == "sim":
+                # the simulated rig's pendulum hangs at rest, as a rig's does before an
+                # experiment
+                rig_cfg = rig_cfg.with_values({"sim.initial_angle": math.pi})
+            rig = (open_rig(self.backend, rig_cfg, lockstep=self.sim_lockstep,
+                            duration=self.duration)
                    if isinstance(self.backend, str)
                    else self.backend)
             rig.open(h=self.cfg.design.h, cancel=lambda: self._stop_asked is not None)
@@ -182,7 +218,10 @@ class RealtimeController:
                 loop = Loop(rig, self.clock, self._params, safety=self.safety,
                             scaling=self.scaling, duration=self.duration,
                             realtime=self.realtime, manage_gc=self.manage_gc,
-                            prewarm_us=self.prewarm_us, cpu=self.cpu)
+                            prewarm_us=self.prewarm_us, cpu=self.cpu,
+                            experiment=experiment,
+                            swingup=self.cfg.swingup if swing_up and experiment is None
+                            else None)
                 self._writer = None
                 if self.log_dir is not None:
                     self._writer = self._open_log(loop)
@@ -248,7 +287,8 @@ class RealtimeController:
                 # the last rows are written after the loop stopped: if that failed, the
                 # run's outcome is a failed log whatever ended it (no silent data loss)
                 failed = self._writer.failed
-                if failed and loop.stop_reason in ("duration", "user", "signal", "exit"):
+                if failed and loop.stop_reason in ("duration", "user", "signal", "exit",
+                                                   "finished"):
                     loop.stop_detail = (f"{failed} (after the run had stopped: "
                                         f"{loop.stop_reason}, {loop.stop_detail})")
                     loop.stop_reason = "log_failed"
@@ -359,6 +399,15 @@ class RealtimeController:
         rig.push(float(kick))
         self._event("push", kick=float(kick))
 
+    def hand(self, action: dict) -> None:
+        """The emulated operator's hand (``rig-sim`` over UDP: a lap of the pendulum or
+        the arm, a push; see :data:`.rigsim.HAND`); ``RigError`` on another rig."""
+        rig = self._rig
+        if not self.running or rig is None:
+            raise RuntimeError("the hand needs a running controller")
+        rig.hand(dict(action))
+        self._event("hand", **{k: v for k, v in action.items() if k != "event"})
+
     # --- Save Data ------------------------------------------------------------------
 
     def record_start(self) -> None:
@@ -369,6 +418,16 @@ class RealtimeController:
         w.record_start()
         self._unnamed_recording = None
         self._event("record_start")
+
+    @property
+    def unnamed_recording(self) -> dict | None:
+        """The recording the end of the run closed under an automatic name, or None.
+
+        ``{"dat": path, "csv": path, "rows": n}``, set before :attr:`running`
+        turns false and kept until :meth:`record_stop` takes it (or a new
+        recording starts): a console asks the operator for its name.
+        """
+        return self._unnamed_recording
 
     def record_stop(self, name: str | None = None) -> dict:
         """End the recording; save it as ``<log_dir>/<name>.dat`` and ``.csv``.
@@ -422,19 +481,48 @@ class RealtimeController:
             "friction": self._plant_friction(),
             **applied.describe(),
             "loop_check": applied.loop_check.to_json(),
+            "adaptation": self._adaptation(),
             "pending_changes": len(loop.mailbox) if loop is not None else 0,
             "recording": bool(self._writer is not None and self._writer.recording),
             "safety": dataclasses.asdict(self.safety),
         }
+        exp = self.run_experiment
+        if exp is not None:
+            out["experiment"] = {**exp.describe(), "progress": exp.progress,
+                                 "phase": exp.phase}
         if loop is None:
             out.update({"stop_reason": None, "ticks": 0, "missed": 0, "overruns": 0,
-                        "t": 0.0})
+                        "t": 0.0, "swing_up": None})
             return out
         st = self._stats()
         out.update(st)
         out["t"] = loop.k * loop.h
         out["rt_note"] = loop.rt_note
+        out["swing_up"] = loop.swing_status()
         out.pop("stall_list", None)
+        return out
+
+    def _adaptation(self) -> dict | None:
+        """The adaptive compensator's estimates now (None with another compensator).
+
+        ``coulomb``/``stiction``: the adapted levels F_C, F_S (m/s^2) the
+        compensator uses; ``start``: the values it started from (its
+        ``compensation.*`` parameters); ``status``: what the law did at the
+        last tick (:data:`frictionlab.adaptive.ADAPT_STATES`: ``adapting``,
+        or frozen: ``stuck``, ``presliding``, ``bad_signal``, ``saturated``;
+        ``off``: not started yet).
+        """
+        loop = self._loop
+        params = loop.params if loop is not None else self._params
+        if params.comp_kind != "adaptive" or not params.comp_enabled:
+            return None
+        start = params.comp_params["adaptive"]
+        out = {"start": {"coulomb": start.coulomb, "stiction": start.stiction},
+               "coulomb": start.coulomb, "stiction": start.stiction, "status": "off"}
+        s = loop.state if loop is not None else None
+        if s is not None and s[S_ADAPT] > 0:
+            out.update(coulomb=float(s[S_FC_HAT]), stiction=float(s[S_FS_HAT]),
+                       status=ADAPT_STATES[int(s[S_ADAPT])])
         return out
 
     def _plant_friction(self) -> str | None:
@@ -469,6 +557,7 @@ class RealtimeController:
             "safety": dataclasses.asdict(self.safety),
             "initial": initial,
             "current": current,
+            "adaptation": self._adaptation(),
             "stop_reason": None if loop is None else loop.stop_reason,
             "stop_detail": None if loop is None else loop.stop_detail,
             "stop_tick": None if loop is None else loop.stop_tick,
@@ -482,6 +571,8 @@ class RealtimeController:
                          "switch_interval_s": _SWITCH_INTERVAL,
                          "blas_single_threaded": self.blas_single_threaded},
             "events": list(self.events),
+            "experiment": (None if self.run_experiment is None
+                           else self.run_experiment.describe()),
         }
 
 

@@ -8,13 +8,14 @@ nanoseconds on the monotonic clock, so there is no drift):
    latest deadline that has passed (never a burst of catch-up ticks),
    count the skipped ones as *missed* and record the stall;
 3. read the rig's raw (y, x, v), check them (finite, inside [-1, 1]),
-   convert them to SI with App. B (:class:`frictionlab.rig.RigScaling`;
-   the arm channel is unwrapped and its bias x_0 captured at the first tick,
-   so Omega = 0 at the start), check the angle limit;
+   convert them to SI with App. B (the laws of :mod:`frictionlab.sensor`
+   with the ``rig.*`` factors; the arm channel is unwrapped and its bias
+   x_0 captured at the first tick, so Omega = 0 at the start), check the
+   angle limit;
 4. run the compiled controller step - the simulator's own code
    (:func:`frictionlab.controller.controller_step`: u from the predicted
    estimates, saturation, observer update);
-5. write u_DA = -0.022 u (saturated to [-1, 1]); *compute* = u written -
+5. write u_DA = k_u u (``rig.u_scale``, saturated to [-1, 1]); *compute* = u written -
    wake-up, less the time spent reading the rig (*rig*: request to reply
    over UDP/serial, the plant's step for ``sim``), which is measured
    separately; an *overrun* is a u written after the next deadline;
@@ -22,8 +23,10 @@ nanoseconds on the monotonic clock, so there is no drift):
    (log writer, console subscriptions) without blocking;
 7. between ticks, after every tick (one without a reading too): apply
    pending parameter changes atomically (the mailbox; in effect from the
-   next tick), and the scheduled housekeeping (garbage collection once a
-   second, the host's steal time every 100 ms).
+   next tick; a change of compensator, or of the adaptive compensator's
+   parameters, restarts the compensator's state), and the scheduled
+   housekeeping (garbage collection once a second, the host's steal time
+   every 100 ms).
 
 Gain transitions: a change of the state-feedback gains L while the loop runs
 (a new design) moves L linearly from the gains in use to the new ones over
@@ -63,7 +66,9 @@ late, or a tick that took that long from its deadline to its output - the
 process was suspended, e.g. SIGSTOP, or the host stalled - so the
 controller's state is stale; the tick zeroes the motor instead of acting on
 it; not with a rig whose plant waits for the loop, ``Rig.realtime_plant``
-False), ``exception``, and the requested stops ``duration``, ``user``,
+False), ``exception``, an identification experiment's ``finished`` (its
+schedule is done) and ``experiment_limit`` (arm speed, travel or waiting
+time exceeded, :mod:`.experiment`), and the requested stops ``duration``, ``user``,
 ``signal``, ``exit`` and ``log_failed`` (the log writer could not write,
 :mod:`.datalog`).
 
@@ -84,34 +89,63 @@ import traceback
 from collections import deque
 from dataclasses import dataclass
 
+from ..model import sensor
 from ..model.controller import (
+    ADAPTIVE,
     G_COMP,
     G_L,
     G_W0,
     S_ARM,
     S_ARMDOT,
-    S_RELAY,
     S_X1,
     S_X2,
     S_ZHAT,
     controller_step,
+    reset_compensator,
 )
 from ..model.params import Validated, param
 from ..model.rig import RigScaling
+from ..model.swingup import (
+    BALANCING,
+    CAUGHT,
+    PHASES,
+    STOP_CODES,
+    SWINGING,
+    W_CATCH,
+    W_NCATCH,
+    W_PHASE,
+    W_STOP,
+    SwingUp,
+    SwingUpParams,
+    swingup_step,
+)
 from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
 from .protocol import STATUS_HELD, STATUS_WATCHDOG
 from .rigs import BadReading, Rig
-from .samples import CHANGED, COMPENSATE, MISSED, NO_READING, OVERRUN, START, STOP, Sample
+from .samples import (
+    CAUGHT_FLAG,
+    CHANGED,
+    COMPENSATE,
+    MISSED,
+    NO_READING,
+    OVERRUN,
+    START,
+    STOP,
+    SWINGING_FLAG,
+    Sample,
+)
 from .stats import Histogram, StallLog
 
-__all__ = ["STOP_REASONS", "Loop", "Safety"]
+__all__ = ["STOP_REASONS", "ExperimentEnd", "Loop", "Safety"]
 
 #: Every stop reason the loop records.
 STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_reading",
                 "rig_silent", "not_upright", "rig_fault", "nonfinite_u", "paused",
-                "log_failed", "exception")
+                "log_failed", "exception", "finished", "experiment_limit", "not_caught",
+                "arm_travel", "arm_speed")
 _NAN = math.nan
+_TWO_PI = 2.0 * math.pi
 _FMAX = sys.float_info.max
 _rt_warned = False
 
@@ -153,6 +187,16 @@ class Safety(Validated):
                             integer=True)
 
 
+class ExperimentEnd(Exception):
+    """Raised by an experiment's ``step`` to end the run: reason ``finished`` (its
+    schedule is done) or ``experiment_limit`` (one of its limits was exceeded)."""
+
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(detail)
+        self.reason = reason
+        self.detail = detail
+
+
 class _Stop(Exception):
     """Internal: leave the loop with a reason."""
 
@@ -186,6 +230,21 @@ class Loop:
     manage_gc : bool
         Freeze and disable the cyclic garbage collector during the run (see
         the module docstring).
+    experiment : object, optional
+        An identification experiment in place of the balancing controller
+        (:mod:`frictionlab.realtime.experiment`): ``step(t, theta, arm,
+        arm_dot, y, x, v) -> u`` (m/s^2) is called in the tick instead of the
+        controller step, and may raise :class:`ExperimentEnd`.  The
+        ``not_upright`` and ``angle_limit`` checks are off (the pendulum hangs
+        or swings freely); every other check, the timing and the logging are
+        those of a balancing run.
+    swingup : SwingUpParams, optional
+        Start hanging (or anywhere) and swing up (:mod:`frictionlab.swingup`,
+        the simulator's compiled :func:`~frictionlab.swingup.swingup_step`):
+        no ``not_upright`` check at the start, the angle limit only once the
+        phase is ``balancing``, and the swing-up's own stops ``not_caught``
+        (its time limit, counted in executed ticks), ``arm_travel`` and
+        ``arm_speed``.  Not with ``experiment``.
 
     Attributes read by other threads (single-word updates, no locks): ``k``,
     ``ticks``, ``missed``, ``overruns``, ``rig_timeouts``, ``jitter``,
@@ -197,12 +256,16 @@ class Loop:
                  safety: Safety | None = None, scaling: RigScaling | None = None,
                  duration: float | None = None, realtime: bool = True,
                  manage_gc: bool = True, priority: int = 50, prewarm_us: float = 0.0,
-                 cpu: int | None = None):
+                 cpu: int | None = None, experiment=None,
+                 swingup: SwingUpParams | None = None):
+        if experiment is not None and swingup is not None:
+            raise ValueError("a run is an experiment or a swing-up, not both")
         self.rig = rig
+        self.experiment = experiment
         self.clock = clock
         self.params = params
         self.safety = safety or Safety()
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or params.cfg.rig
         h = params.cfg.design.h
         self.h = h
         self.h_ns = round(h * 1e9)
@@ -242,6 +305,15 @@ class Loop:
         self.sched_fifo = False
         self.x0: float | None = None
         self.traceback: str | None = None
+        #: The controller state (:mod:`frictionlab.controller`'s table) from the first
+        #: reading on, updated in place by each tick (for the sidecar's adapted levels).
+        self.state = None
+        self.swingup = swingup
+        self._sp = (None if swingup is None
+                    else SwingUp(params.controller, swingup).pack()[2])
+        # swing-up state (read by other threads: phase code, catch tick)
+        self.swing_w = None
+        self.swing_caught_tick: int | None = None
 
     # --- requests from other threads -------------------------------------------
 
@@ -266,8 +338,11 @@ class Loop:
         # (a signal during the handshake) skips all that and stops at tick 0 at once.
         setup = self.stop_request is None
         p = self.params
-        if setup:
+        if setup and self.experiment is None:
             controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
+            if self.swingup is not None:
+                w_, s_ = SwingUp(p.controller, self.swingup).init(0.0)
+                swingup_step(w_, s_, p.gp, p.cp, self._sp, 0.0, 0.0, 0.0)
         gc_was = gc.isenabled()
         if self.manage_gc and setup:
             gc.collect()
@@ -342,6 +417,11 @@ class Loop:
         echo_bad = 0
         commanded = False
         sc = self.scaling
+        # App. B.5 from the sensor model, as plain Python (no dispatch in the tick)
+        theta_si = sensor.theta_from_raw.py_func
+        arm_si = sensor.arm_from_raw.py_func
+        velocity_si = sensor.velocity_from_raw.py_func
+        unwrap = sensor.unwrap.py_func
         ts, tb = sc.theta_scale, sc.theta_bias
         as_ = sc.arm_scale
         vs, vb = sc.velocity_scale, sc.velocity_bias
@@ -349,6 +429,8 @@ class Loop:
         jit_add, comp_add, rig_add = self.jitter.add, self.compute.add, self.rig_io.add
         n_ticks = self.n_ticks
         mailbox = self.mailbox
+        experiment = self.experiment
+        exp_step = experiment.step if experiment is not None else None
         params = self.params
         gp, cp = params.gp, params.cp
         w0 = gp[G_W0]
@@ -363,6 +445,9 @@ class Loop:
         gp_ramp = gp_work.view()
         gp_ramp.flags.writeable = False
         s = None
+        swing = self.swingup is not None
+        sp = self._sp
+        w = None
         first = True
         silent = unread = 0
         rx_seen = rig.rx_frames
@@ -484,42 +569,79 @@ class Loop:
                     x0 = x
                     self.x0 = x0
                 else:
-                    d = x - x_prev
-                    if d > 1.0:
-                        wraps -= 1
-                    elif d < -1.0:
-                        wraps += 1
+                    wraps = unwrap(x_prev, x, wraps)
                 x_prev = x
-                theta = ts * (y + tb)
-                arm = as_ * (x + 2.0 * wraps - x0)
-                arm_dot = vs * (v + vb)
-                if first:
-                    if not abs(theta) <= safety.start_tolerance:
-                        raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the start "
-                                    f"(tolerance {safety.start_tolerance} rad; no swing-up)", r)
-                    s = params.controller.init(theta)
-                    flags |= START
-                    first = False
-                if not abs(theta) <= angle_limit:
-                    raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
-                                f"{angle_limit} rad", r)
-                th_hat = s[S_X1]
-                thd_hat = w0 * s[S_X2]
-                arm_hat = s[S_ARM]
-                armd_hat = s[S_ARMDOT]
-                z_hat = s[S_ZHAT]
-                if ramp_k < ramp_n:
-                    ramp_k += 1
-                    if ramp_k == ramp_n:
-                        gp = params.gp
+                theta = theta_si(y, ts, tb)
+                arm = arm_si(x + 2.0 * wraps, x0, as_)
+                arm_dot = velocity_si(v, vs, vb)
+                if exp_step is not None:
+                    # an identification experiment: its own schedule and limits
+                    try:
+                        u = exp_step(k * h, theta, arm, arm_dot, y, x, v)
+                    except ExperimentEnd as end:
+                        raise _Stop(end.reason, end.detail, r) from None
+                    if first:
+                        flags |= START
+                        first = False
+                    th_hat = thd_hat = arm_hat = armd_hat = f_hat = z_hat = _NAN
+                    if not -_FMAX <= u <= _FMAX:
+                        raise _Stop("nonfinite_u", f"the experiment computed u = {float(u)!r}",
+                                    r)
+                else:
+                    if first and swing:
+                        w, s = SwingUp(params.controller, self.swingup).init(theta)
+                        self.swing_w = w
+                        self.state = s
+                        flags |= START
+                        first = False
+                    if first:
+                        if not abs(theta) <= safety.start_tolerance:
+                            raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the "
+                                        f"start (tolerance {safety.start_tolerance} rad; no "
+                                        "swing-up)", r)
+                        s = params.controller.init(theta)
+                        self.state = s
+                        flags |= START
+                        first = False
+                    if not abs(theta) <= angle_limit and (
+                            not swing or (w[W_PHASE] == BALANCING and not abs(
+                                math.remainder(theta, _TWO_PI)) <= angle_limit)):
+                        raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
+                                    f"{angle_limit} rad", r)
+                    th_hat = s[S_X1]
+                    thd_hat = w0 * s[S_X2]
+                    arm_hat = s[S_ARM]
+                    armd_hat = s[S_ARMDOT]
+                    z_hat = s[S_ZHAT]
+                    if ramp_k < ramp_n:
+                        ramp_k += 1
+                        if ramp_k == ramp_n:
+                            gp = params.gp
+                        else:
+                            gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
+                    if swing:
+                        u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, theta, arm, arm_dot)
+                        ph = w[W_PHASE]
+                        if ph == SWINGING:
+                            flags |= SWINGING_FLAG
+                            th_hat = w[3]
+                            thd_hat = w[4]
+                        elif ph == CAUGHT:
+                            flags |= CAUGHT_FLAG
+                        elif ph == BALANCING:
+                            if self.swing_caught_tick is None:
+                                self.swing_caught_tick = int(w[W_CATCH])
+                        else:
+                            code = STOP_CODES[int(w[W_STOP])]
+                            raise _Stop(code, _swing_stop_detail(code, self.swingup, arm,
+                                                                 arm_dot), r)
                     else:
-                        gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
-                u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
-                if not -_FMAX <= u <= _FMAX:
-                    raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
-                                "from the estimates theta, theta', arm, arm', z = "
-                                f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, {armd_hat:.4g}, "
-                                f"{z_hat:.4g}", r)
+                        u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
+                    if not -_FMAX <= u <= _FMAX:
+                        raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
+                                    "from the estimates theta, theta', arm, arm', z = "
+                                    f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, "
+                                    f"{armd_hat:.4g}, {z_hat:.4g}", r)
                 u_da = us * u
                 if u_da > 1.0:
                     u_da = 1.0
@@ -550,6 +672,7 @@ class Loop:
             # ---- between ticks ----
             if mailbox:
                 old_kind = gp[G_COMP]
+                old_cp = cp
                 applied = []
                 while mailbox:
                     applied.append(mailbox.popleft())
@@ -568,9 +691,11 @@ class Loop:
                     ramp_k = ramp_n
                 w0 = gp[G_W0]
                 comp_flag = COMPENSATE if params.comp_enabled else 0
-                if gp[G_COMP] != old_kind and s is not None:
-                    s[S_RELAY] = 0.0
-                    s[S_ZHAT] = 0.0
+                if s is not None and (gp[G_COMP] != old_kind or (
+                        gp[G_COMP] == ADAPTIVE and not (cp == old_cp).all())):
+                    # a new compensator, or new starting values of the adaptive one:
+                    # it starts afresh at the next tick
+                    reset_compensator(s)
                 pending_flags = CHANGED
                 self.changes_applied += len(applied)
                 for _p, fut in applied:
@@ -581,6 +706,18 @@ class Loop:
             elif k % 200 == 100:
                 self._housekeeping(k)
             k += 1
+
+    def swing_status(self) -> dict | None:
+        """The swing-up's phase, catch time and number of catches (None: no swing-up)."""
+        if self.swingup is None:
+            return None
+        w = self.swing_w
+        if w is None:
+            return {"phase": "swinging", "swing_up_time": None, "catches": 0}
+        caught = self.swing_caught_tick
+        return {"phase": PHASES[int(w[W_PHASE])],
+                "swing_up_time": None if caught is None else caught * self.h,
+                "catches": int(w[W_NCATCH])}
 
     def _housekeeping(self, k: int) -> None:
         """Scheduled garbage collection (outside the tick)."""
@@ -629,5 +766,15 @@ class Loop:
             "stop_reason": self.stop_reason,
             "stop_detail": self.stop_detail,
             "stop_tick": self.stop_tick,
+            **({"swing_up": self.swing_status()} if self.swingup is not None else {}),
             **self.rig.counters(),
         }
+
+
+def _swing_stop_detail(code: str, p: SwingUpParams, arm: float, arm_dot: float) -> str:
+    if code == "not_caught":
+        return f"the swing-up did not catch the pendulum within {p.time_limit:g} s"
+    if code == "arm_travel":
+        return f"|Omega| = {abs(arm):.3f} rad > swingup.arm_limit {p.arm_limit:g} rad"
+    return (f"|Omega'| = {abs(arm_dot):.3f} rad/s > swingup.arm_speed_limit "
+            f"{p.arm_speed_limit:g} rad/s")

@@ -14,8 +14,9 @@ Change requests are dicts (the console's and the mailbox's format):
     or a dict of ``design.*`` fields (``{"omega1": 5.0}``) applied to the
     current spec.  ``h`` cannot change while the loop exists.
 ``"compensation"``
-    ``"none"`` (off) or ``"coulomb"``/``"classical"``/``"lugre"`` (selects
-    the model and turns compensation on).
+    ``"none"`` (off) or ``"coulomb"``/``"classical"``/``"lugre"``/``"adaptive"``
+    (selects the model and turns compensation on; ``adaptive`` is the LuGre
+    observer with levels adapted online, :mod:`frictionlab.adaptive`).
 ``"compensation_enabled"``
     ``True``/``False``: the thesis's Compensation button (keeps the model).
 ``"compensation_params"``
@@ -157,7 +158,7 @@ class ControlParams:
                                   compensation=params[kind])
         d = design(spec, cfg.plant)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
-                          error_signal=error_signal)
+                          error_signal=error_signal, u_max=cfg.rig.u_max)
         gp, cp = ctrl.pack()
         gp.flags.writeable = False
         cp.flags.writeable = False

@@ -20,6 +20,9 @@ writes the DAC value u_DA to.  The interface (:class:`Rig`):
     Stop the motor and release the connection.
 ``push(kick) -> None``
     Emulated rigs only: add ``kick`` rad/s to the pendulum's velocity.
+``hand(action) -> None``
+    ``rig-sim`` over UDP only: the operator's hand (a lap of the pendulum or
+    the arm, App. B.1/B.2; :data:`.rigsim.HAND`).
 
 Backends (:func:`open_rig` parses the ``--backend`` string):
 
@@ -29,9 +32,10 @@ Backends (:func:`open_rig` parses the ``--backend`` string):
     integrator).  Paced in real time by the loop: reading tick k first
     advances the plant to step k with the last u held, so after missed
     deadlines the plant has moved on as a real one would.  Readings go
-    through :class:`AdcModel` (App. B scaling, arm offset, wrap-around,
-    optional 12-bit quantisation and noise per ``sim.quantization`` and
-    ``sim.noise``), so the loop's raw-to-SI conversion is exercised.
+    through :class:`AdcModel` (:mod:`frictionlab.sensor`: App. B scaling,
+    arm offset, wrap-around, optional 12-bit quantisation and noise per
+    ``sim.quantization``, ``sim.noise`` and ``sim.seed``), so the loop's
+    raw-to-SI conversion is exercised.
 ``udp://HOST:PORT``
     :class:`FramedRig` over :class:`UdpTransport`: the protocol of
     ``docs/protocol.md`` to ``frictionlab rig-sim`` or a real rig.
@@ -43,7 +47,6 @@ Backends (:func:`open_rig` parses the ``--backend`` string):
 from __future__ import annotations
 
 import math
-import random
 import select
 import socket
 import time
@@ -54,7 +57,8 @@ from urllib.parse import parse_qs, urlsplit
 
 from ..config import Config
 from ..model.params import ParamError
-from ..model.rig import ADC_BITS, RigScaling
+from ..model.rig import RigScaling
+from ..model.sensor import ARM_START, adc, sensor_params
 from ..model.simulation import SimulatedPlant
 from . import protocol as P
 from .protocol import Frame, FrameError, SensorReading
@@ -75,8 +79,6 @@ __all__ = [
     "serial_settings",
 ]
 
-#: Raw arm reading at the start of an emulated session (App. B.2's measured x_0).
-ARM_START = -0.0699
 #: How often :meth:`FramedRig.open` looks at its ``cancel`` callable while waiting (ns).
 CANCEL_POLL_NS = 10_000_000
 _MASK = 0xFFFFFFFF
@@ -93,10 +95,17 @@ class BadReading(Exception):
 class AdcModel:
     """SI plant signals to raw ADC values as the rig's converters produce them.
 
+    A runner of :func:`frictionlab.sensor.adc` (the one sensor model).  The
+    noise of a reading is that of its sample number: the tick (``SimRig``) or
+    the request's sequence number (``rig-sim``; the loop asks for tick k with
+    sequence number k), so tick k of a run carries the noise the simulator
+    adds at its tick k for the same seed.  Readings given no number are
+    numbered 0, 1, 2, ... in order.
+
     Parameters
     ----------
     scaling : RigScaling
-        App. B factors.
+        App. B factors (the rig's true ones).
     arm_offset : float
         Raw arm reading at Omega = 0 (the bias x_0 the loop captures).
     quantize : bool
@@ -105,35 +114,28 @@ class AdcModel:
         Standard deviation of Gaussian noise added to each signal in its SI
         unit before conversion (``sim.noise``).
     seed : int
-        Seed of the noise generator.
+        Seed of the noise stream (``sim.seed``).
     """
 
     def __init__(self, scaling: RigScaling, arm_offset: float = ARM_START,
                  quantize: bool = True, noise: float = 0.0, seed: int = 0):
-        self.ts, self.tb = scaling.theta_scale, scaling.theta_bias
-        self.as_ = scaling.arm_scale
-        self.vs, self.vb = scaling.velocity_scale, scaling.velocity_bias
+        self.sensor = sensor_params(scaling, 1.0 if quantize else 0.0, noise, seed, arm_offset)
         self.arm_offset = float(arm_offset)
-        self.q = 2.0 / 2**ADC_BITS if quantize else 0.0
-        self.top = 1.0 - self.q if quantize else 1.0  # largest ADC code
         self.noise = float(noise)
-        self._rng = random.Random(seed)
+        self.n = 0
+        # compile (or load) the converter now, not in the loop's first tick
+        adc(self.sensor, 0.0, 0.0, 0.0, 0)
 
-    def _quant(self, r: float) -> float:
-        q = self.q
-        return math.floor(r / q + 0.5) * q if q else r
-
-    def read(self, theta: float, arm: float, arm_dot: float) -> tuple[float, float, float]:
-        """Raw ``(y, x, v)`` for the plant signals (wrapped, clipped, quantised)."""
-        if self.noise:
-            g = self._rng.gauss
-            theta += g(0.0, self.noise)
-            arm += g(0.0, self.noise)
-            arm_dot += g(0.0, self.noise)
-        y = (self._quant(theta / self.ts - self.tb) + 1.0) % 2.0 - 1.0
-        x = (self._quant(arm / self.as_ + self.arm_offset) + 1.0) % 2.0 - 1.0
-        v = min(max(self._quant(arm_dot / self.vs - self.vb), -1.0), self.top)
-        return y, x, v
+    def read(self, theta: float, arm: float, arm_dot: float, n: int | None = None,
+             count: bool = True) -> tuple[float, float, float]:
+        """Raw ``(y, x, v)`` for the plant signals (wrapped, clipped, quantised) as
+        sample ``n`` (default: the next in order; ``count=False`` leaves the order
+        alone, e.g. to warm caches)."""
+        if n is None:
+            n = self.n
+        if count:
+            self.n = n + 1
+        return adc(self.sensor, theta, arm, arm_dot, n)
 
 
 class Rig(ABC):
@@ -185,6 +187,11 @@ class Rig(ABC):
     def push(self, kick: float) -> None:
         raise RigError(f"push needs an emulated rig; {self.name} is not one")
 
+    def hand(self, action: dict) -> None:
+        """The emulated operator's hand (``rig-sim``'s CONTROL ``hand``)."""
+        raise RigError(f"the operator's hand can be played by rig-sim over UDP only; "
+                       f"{self.name} is not one: do it by hand")
+
     def counters(self) -> dict:
         """Backend-specific counters for the run's statistics."""
         return {}
@@ -204,18 +211,22 @@ class SimRig(Rig):
         reproduces the simulator's whatever the machine's load.  Default
         False: the plant moves on in real time with u held, as a real one
         would.
+    duration : float, optional
+        The run's length (s): the time over which ``friction.drift`` acts
+        when ``friction.drift_time`` is unset (default ``sim.duration``).
     """
 
     name = "sim"
     emulated = True
 
     def __init__(self, cfg: Config, scaling: RigScaling | None = None,
-                 arm_offset: float = ARM_START, lockstep: bool = False):
+                 arm_offset: float = ARM_START, lockstep: bool = False,
+                 duration: float | None = None):
         self.cfg = cfg
         self.lockstep = lockstep
         self.realtime_plant = not lockstep  # in lockstep the plant waits for the loop
-        self.scaling = scaling or RigScaling()
-        self.plant = SimulatedPlant(cfg)
+        self.scaling = scaling or cfg.rig
+        self.plant = SimulatedPlant(cfg, duration)
         self.plant_friction = cfg.friction_kind
         self._arm_offset = arm_offset
         self._kicks: deque[float] = deque()
@@ -247,14 +258,14 @@ class SimRig(Rig):
         self.state = st
         self.rx_frames += 1
         x = st.x
-        y, xr, v = self.adc.read(x[0], x[2], x[3])
+        y, xr, v = self.adc.read(x[0], x[2], x[3], k)
         return SensorReading(y, xr, v, self.u_da, P.STATUS_EMULATED)
 
     def warm(self) -> None:
         self.plant.step(self.state, self._u)
         if not self.adc.noise:
             x = self.state.x
-            self.adc.read(x[0], x[2], x[3])
+            self.adc.read(x[0], x[2], x[3], count=False)
 
     def write(self, k: int, u_da: float) -> None:
         u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
@@ -622,12 +633,20 @@ class FramedRig(Rig):
         if not reply.get("ok"):
             raise RigError(f"rig refused the push: {reply.get('error')}")
 
+    def hand(self, action: dict) -> None:
+        if not self.emulated or not isinstance(self.tx, UdpTransport):
+            return super().hand(action)
+        reply = send_control(self.tx.addr[0], self.tx.addr[1], {"cmd": "hand", **action})
+        if not reply.get("ok"):
+            raise RigError(f"rig refused the hand: {reply.get('error')}")
+
     def counters(self) -> dict:
         return {"late_replies": self.late_replies, "ignored_frames": self.ignored,
                 "paused_waits": self.paused_waits}
 
 
-def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
+def open_rig(spec: str, cfg: Config, *, lockstep: bool = False,
+             duration: float | None = None) -> Rig:
     """The rig a ``--backend`` string names (not yet opened).
 
     ``lockstep`` applies to ``sim`` (see :class:`SimRig`).
@@ -640,7 +659,7 @@ def open_rig(spec: str, cfg: Config, *, lockstep: bool = False) -> Rig:
     """
     scheme, where, arg = parse_backend(spec)
     if scheme == "sim":
-        return SimRig(cfg, lockstep=lockstep)
+        return SimRig(cfg, lockstep=lockstep, duration=duration)
     if scheme == "udp":
         return FramedRig(UdpTransport(where, arg), spec)
     return FramedRig(SerialTransport(where, arg), spec)

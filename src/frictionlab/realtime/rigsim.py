@@ -13,12 +13,25 @@ running in real time:
   which it arrives.
 * **Raw signals.**  Readings are App. B raw values: the angle and arm
   channels wrap around at +-1, the velocity channel clips, all three are
-  quantised to 12 bits and carry ``sim.noise`` (SI units) of Gaussian noise.
-  The arm starts at the raw reading :data:`~frictionlab.realtime.rigs.ARM_START`
+  quantised to 12 bits and carry ``sim.noise`` (SI units) of Gaussian noise,
+  through the one sensor model :mod:`frictionlab.sensor` with the ``rig.*``
+  factors as the rig's true ones; the noise of a reading is that of the
+  request's sequence number (the loop's tick), so a reading at tick k is the
+  simulator's at tick k for the same state and ``sim.seed``.
+  The arm starts at the raw reading :data:`~frictionlab.sensor.ARM_START`
   (the controller captures it as x_0).
 * **Sessions.**  ``HELLO`` starts a session: the "operator" balances the
   pendulum upright (``sim.initial_angle``, at rest; the arm stays where it
-  is) and holds it there until the first COMMAND arrives (no swing-up).
+  is) and holds it there until the first COMMAND arrives.  With
+  ``sim.initial_angle`` = pi (3.14159; ``rig-sim --hanging``) the pendulum
+  hangs at rest instead, as the identification experiments and
+  ``run --swing-up`` want it.
+* **The operator's hand.**  CONTROL frames ``{"cmd": "hand", ...}``
+  (:data:`HAND`) turn the pendulum or the arm one full lap by hand (App.
+  B.1, B.2: the hand sets that angle and its velocity along a smooth lap of
+  ``seconds``, then lets go at rest) or push them, at once or ``after``
+  seconds; ``identify experiment ... --backend udp://...`` sends them when
+  it asks the operator for a lap and the rig is this emulator.
   ``HELLO`` also forgets the last command's sequence number, so the new
   session's commands (numbered from 0 again) are applied.
 * **Watchdog.**  When no COMMAND has arrived for ``watchdog`` seconds
@@ -57,7 +70,8 @@ from .osrt import try_realtime_priority
 from .protocol import Frame, FrameError
 from .rigs import ARM_START, AdcModel, send_control, serial_settings
 
-__all__ = ["FAULTS", "DirectTransport", "RigEmulator", "send_control", "serve_stream", "serve_udp"]
+__all__ = ["FAULTS", "HAND", "DirectTransport", "RigEmulator", "hand_error", "send_control",
+           "serve_stream", "serve_udp"]
 
 #: Fault-injection keys of ``{"cmd": "fault", ...}`` (plus ``"after": seconds``).
 FAULTS = {
@@ -74,6 +88,38 @@ FAULTS = {
 }
 _COUNTED = ("nan", "out_of_range", "corrupt", "duplicate", "drop", "ignore_commands")
 
+#: Keys of ``{"cmd": "hand", ...}``: the operator's hand (plus ``"after": seconds``).
+HAND = {
+    "lap": "'pendulum' or 'arm': turn it one full lap by hand (the pendulum from hanging "
+           "to hanging, App. B.1; the arm exactly one lap, App. B.2), then let go at rest",
+    "seconds": "how long the lap takes (default 2 s)",
+    "direction": "+1 or -1: the lap's direction (default +1)",
+    "push": "add this many rad/s to the pendulum's velocity",
+    "push_arm": "add this many rad/s to the arm's velocity",
+}
+
+
+def hand_error(msg: dict) -> str | None:
+    """What is wrong with a ``{"cmd": "hand", ...}`` object (:data:`HAND`), or None."""
+    keys = {k: v for k, v in msg.items() if k not in ("cmd", "after")}
+    unknown = sorted(set(keys) - set(HAND))
+    if unknown:
+        return f"unknown hand key {unknown[0]!r}; known: {', '.join(HAND)}"
+    if not keys:
+        return f"hand: say what to do ({', '.join(HAND)})"
+    if "lap" in keys and keys["lap"] not in ("pendulum", "arm"):
+        return f"hand lap: 'pendulum' or 'arm', got {keys['lap']!r}"
+    for k in ("seconds", "direction", "push", "push_arm"):
+        if k in keys:
+            v = keys[k]
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                return f"hand {k}: {v!r} is not a finite number"
+    if "seconds" in keys and not 0.05 <= keys["seconds"] <= 60:
+        return f"hand seconds: must be in [0.05, 60], got {keys['seconds']!r}"
+    if "direction" in keys and keys["direction"] == 0:
+        return "hand direction: +1 or -1"
+    return None
+
 
 class RigEmulator:
     """The rig's I/O in front of a simulated plant (see the module docstring).
@@ -84,7 +130,7 @@ class RigEmulator:
         Plant, friction, ``design.h``, ``sim.substeps`` (integration quantum
         ``h / substeps``; the pendulum steps every ``Config.pendulum_ratio``
         quanta, as in the simulator), ``sim.initial_angle``, ``sim.noise``,
-        ``sim.seed``.
+        ``sim.seed``, ``rig.*`` (the rig's true conversion factors).
     clock : object with ``now_ns()``
         Time source (the monotonic clock, or a fake one in tests).
     watchdog : float
@@ -99,7 +145,7 @@ class RigEmulator:
             raise ValueError(f"watchdog must be > 0 s, got {watchdog}")
         self.cfg = cfg
         self.clock = clock
-        self.scaling = scaling or RigScaling()
+        self.scaling = scaling or cfg.rig
         self.h = cfg.design.h
         self.dt_ns = max(1, round(self.h / cfg.substeps * 1e9))
         self._ratio = cfg.pendulum_ratio
@@ -127,6 +173,7 @@ class RigEmulator:
         self.held = True
         self.tripped = False
         self.saturated = False
+        self._hand: dict | None = None
 
     # --- plant in real time --------------------------------------------------
 
@@ -154,6 +201,8 @@ class RigEmulator:
             n -= skip
         st = self.state
         t_wd = self._t_cmd + self.watchdog_ns
+        if self._hand is not None:
+            st, n = self._advance_hand(st, n, t_wd)
         while n > 0:
             if self.t_state < t_wd:
                 m = min(n, self._chunk_max, -(-(t_wd - self.t_state) // dt))
@@ -168,6 +217,49 @@ class RigEmulator:
             self.t_state += m * dt
             n -= m
         self.state = st
+
+    def _advance_hand(self, st, n: int, t_wd: int):
+        """Step quantum by quantum while the operator's hand turns the pendulum or the
+        arm through its lap (the hand sets that angle and its velocity; everything
+        else moves as the plant does)."""
+        hand = self._hand
+        dt = self.dt_ns
+        one = self._plant(1)
+        i = 0 if hand["lap"] == "pendulum" else 2
+        while n > 0 and hand is not None:
+            st = one.step(st, self._u if self.t_state < t_wd else 0.0)
+            self.t_state += dt
+            n -= 1
+            frac = (self.t_state - hand["t0"]) / hand["T"]
+            x = st.x.copy()
+            if frac >= 1.0:
+                x[i] = hand["a0"] + hand["dir"] * 2.0 * math.pi
+                x[i + 1] = 0.0
+                self._hand = hand = None
+            else:
+                x[i] = hand["a0"] + hand["dir"] * math.pi * (1.0 - math.cos(math.pi * frac))
+                x[i + 1] = (hand["dir"] * math.pi * math.pi * math.sin(math.pi * frac)
+                            / (hand["T"] / 1e9))
+            st = dataclasses.replace(st, x=x)
+        return st, n
+
+    def _apply_hand(self, msg: dict, t: int) -> None:
+        self._advance(t)
+        if "push" in msg:
+            self.state = self._plant(1).push(self.state, float(msg["push"]))
+            self._applied("hand_push", -1, float(msg["push"]))
+        if "push_arm" in msg:
+            x = self.state.x.copy()
+            x[3] += float(msg["push_arm"])
+            self.state = dataclasses.replace(self.state, x=x)
+            self._applied("hand_push_arm", -1, float(msg["push_arm"]))
+        if "lap" in msg:
+            i = 0 if msg["lap"] == "pendulum" else 2
+            self._hand = {"lap": msg["lap"], "t0": self.t_state,
+                          "T": int(float(msg.get("seconds", 2.0)) * 1e9),
+                          "dir": 1.0 if msg.get("direction", 1) > 0 else -1.0,
+                          "a0": float(self.state.x[i])}
+            self._applied(f"hand_lap_{msg['lap']}", -1, float(msg.get("seconds", 2.0)))
 
     # --- frames --------------------------------------------------------------
 
@@ -223,6 +315,7 @@ class RigEmulator:
         self.t_state = t
         self.held = True
         self.tripped = False
+        self._hand = None
         self.u_da = 0.0
         self._u = 0.0
         self._t_cmd = t
@@ -258,7 +351,7 @@ class RigEmulator:
         self._advance(t)
         self.counts["samples"] += 1
         x = self.state.x
-        y, xr, v = self.adc.read(x[0], x[2], x[3])
+        y, xr, v = self.adc.read(x[0], x[2], x[3], seq)
         status = P.STATUS_EMULATED
         if self.held:
             status |= P.STATUS_HELD
@@ -318,7 +411,7 @@ class RigEmulator:
             self._advance(self.clock.now_ns())
             x = self.state.x
             if not self.adc.noise:
-                y, xr, v = self.adc.read(x[0], x[2], x[3])
+                y, xr, v = self.adc.read(x[0], x[2], x[3], count=False)
                 P.encode(P.MSG_SENSOR, 0, P.sensor_payload(y, xr, v, self.u_da, 0))
 
     # --- fault injection and status -------------------------------------------
@@ -332,7 +425,9 @@ class RigEmulator:
 
     def _apply_faults(self, faults: dict, t: int) -> None:
         for key, value in faults.items():
-            if key == "push":
+            if key == "hand":
+                self._apply_hand(value, t)
+            elif key == "push":
                 self._advance(t)
                 self.state = self._plant(1).push(self.state, float(value))
                 self._applied("push", -1, float(value))
@@ -346,7 +441,9 @@ class RigEmulator:
                 self._faults[key] = self._faults.get(key, 0) + int(value)
 
     def control(self, msg: dict, _locked: bool = False) -> dict:
-        """Handle a CONTROL object: ``fault``, ``clear`` or ``status``."""
+        """Handle a CONTROL object: ``fault``, ``hand`` (:data:`HAND`: the operator's
+        hand turning the pendulum or the arm a lap, or pushing them), ``clear`` or
+        ``status``."""
         if not _locked:
             with self._lock:
                 return self.control(msg, _locked=True)
@@ -358,6 +455,20 @@ class RigEmulator:
             self._faults.clear()
             self._armed.clear()
             self._silent_until = None
+            return {"ok": True}
+        if cmd == "hand":
+            error = hand_error(msg)
+            if error:
+                return {"ok": False, "error": error}
+            after = msg.get("after", 0)
+            if isinstance(after, bool) or not isinstance(after, int | float) or after < 0:
+                return {"ok": False, "error": f"after must be a number >= 0, got {after!r}"}
+            hand = {k: v for k, v in msg.items() if k not in ("cmd", "after")}
+            if after:
+                self._armed.append((t + int(after * 1e9), {"hand": hand}))
+                self._armed.sort(key=lambda a: a[0])
+            else:
+                self._apply_hand(hand, t)
             return {"ok": True}
         if cmd == "fault":
             faults = {k: v for k, v in msg.items() if k not in ("cmd", "after")}
@@ -379,7 +490,7 @@ class RigEmulator:
             else:
                 self._apply_faults(faults, t)
             return {"ok": True}
-        return {"ok": False, "error": f"unknown cmd {cmd!r}; known: fault, clear, status"}
+        return {"ok": False, "error": f"unknown cmd {cmd!r}; known: fault, hand, clear, status"}
 
     def status(self, t: int | None = None) -> dict:
         t = self.clock.now_ns() if t is None else t
@@ -393,6 +504,7 @@ class RigEmulator:
             "arm": float(st.x[2]),
             "u_da": 0.0 if self.tripped else self.u_da,
             "watchdog_tripped": self.tripped,
+            "hand": None if self._hand is None else self._hand["lap"],
             "last_command_seq": self.last_command_seq,
             "applied": list(self.applied)[-12:],
             **self.counts,
@@ -524,7 +636,7 @@ def serve_stream(emulator: RigEmulator, fd: int, stop: threading.Event | None = 
 def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,
                 serial_device: str | None = None, faults: dict | None = None,
                 fault_after: float = 0.0, realtime: bool = True, cpu: int | None = None,
-                announce=None) -> None:
+                announce=None, hand: dict | None = None) -> None:
     """The ``frictionlab rig-sim`` process: serve until SIGINT/SIGTERM."""
     import signal
 
@@ -543,6 +655,10 @@ def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,
         if fault_after:
             msg["after"] = fault_after
         reply = emulator.control(msg)
+        if not reply.get("ok"):
+            raise ValueError(reply.get("error"))
+    if hand:
+        reply = emulator.control(hand)  # {"cmd": "hand", ...} (``after`` from start-up)
         if not reply.get("ok"):
             raise ValueError(reply.get("error"))
     # serve in the main thread: a single-threaded process never waits for the GIL

@@ -17,6 +17,11 @@ COMPENSATE  8      friction compensation active
 CHANGED     16     parameter changes were applied just before this tick
 STOP        32     the loop stopped at this tick (u = 0 written)
 START       64     first tick of the run (arm bias x_0 captured)
+SWINGING    128    swing-up: the energy-control law computed u (the
+                   ``theta_hat``/``theta_dot_hat`` columns are the swing-up
+                   observer's)
+CAUGHT      256    swing-up: caught, the balancing controller acts; no flag
+                   (after CAUGHT) is balancing
 ==========  =====  ==========================================================
 """
 
@@ -43,8 +48,10 @@ __all__ = [
 ]
 
 MISSED, OVERRUN, NO_READING, COMPENSATE, CHANGED, STOP, START = (1, 2, 4, 8, 16, 32, 64)
+SWINGING_FLAG, CAUGHT_FLAG = 128, 256
 FLAG_NAMES = {MISSED: "missed", OVERRUN: "overrun", NO_READING: "no_reading",
-              COMPENSATE: "compensate", CHANGED: "changed", STOP: "stop", START: "start"}
+              COMPENSATE: "compensate", CHANGED: "changed", STOP: "stop", START: "start",
+              SWINGING_FLAG: "swinging", CAUGHT_FLAG: "caught"}
 
 
 class Sample(NamedTuple):

@@ -16,6 +16,11 @@ intended :math:`u_{fb}`.  Three compensators, as in Sec. 6.1-6.3:
     \mathrm{sgn}\,\dot\Omega`.  Memoryless.
 ``lugre``
     The observer of eq. (19) with gain k (Sec. 6.3; state: :math:`\hat z`).
+``adaptive``
+    The same observer with its Coulomb and stiction levels adapted online
+    from the applied u and the measured arm velocity (the adaptive friction
+    estimator Sec. 8 proposes; law, stability conditions and safety rules in
+    :mod:`frictionlab.adaptive`; state: :math:`\hat z` and the law's).
 
 The force laws are those of :mod:`frictionlab.friction`, called through the
 compiled :func:`frictionlab.controller.compensator_force` that the simulator
@@ -78,15 +83,20 @@ import numpy as np
 
 from ..config import COMPENSATOR_FIELDS, Config, ConfigError, check_compensator
 from ..model.controller import (
+    COMPENSATOR_CODES,
     COMPENSATORS,
     DEFAULT_ERROR_SIGNAL,
     ERROR_SIGNALS,
     NS,
     S_RELAY,
+    S_SLIDE,
+    S_U,
+    S_VHAT,
     S_ZHAT,
+    adaptive_force,
     compensator_force,
 )
-from ..model.friction import COULOMB, LUGRE, STRIBECK, FrictionParams
+from ..model.friction import FrictionParams
 from ..model.rig import RigScaling
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
@@ -98,6 +108,7 @@ PEAK_TO_PEAK_FLOOR = RigScaling().quanta()[0]
 __all__ = [
     "COMPENSATORS",
     "DEFAULT_GRIDS",
+    "AdaptiveCompensator",
     "ChatterMetrics",
     "ClassicalCompensator",
     "Comparison",
@@ -116,6 +127,7 @@ __all__ = [
     "tune",
 ]
 
+
 @dataclass(frozen=True)
 class CompensatorState:
     """Explicit state of a compensator.
@@ -128,11 +140,17 @@ class CompensatorState:
         LuGre bristle estimate :math:`\\hat z` (rad).
     friction_estimate : float
         The last :math:`\\hat F` (m/s^2).
+    adaptation : tuple of float
+        The adaptive law's state (``adaptive`` only): predicted and last
+        measured arm velocity, the estimated F_C and F_S, the status code and
+        the distance slid (the controller's entries ``S_VHAT`` ...
+        ``S_SLIDE``); empty before the first step.
     """
 
     relay: float = 0.0
     z_hat: float = 0.0
     friction_estimate: float = 0.0
+    adaptation: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -165,13 +183,14 @@ class Compensator:
             raise ValueError("params must be a FrictionParams")
         if not (isinstance(self.h, int | float) and math.isfinite(self.h) and 0 < self.h <= 1):
             raise ValueError(f"h must be in (0, 1] s, got {self.h!r}")
-        check_compensator(self.kind, self.params)
+        check_compensator(self.kind, self.params, h=self.h,
+                          arm_length=getattr(self, "arm_length", None))
         object.__setattr__(self, "_cp", self.params.pack())
 
     @property
     def code(self) -> int:
         """The compiled code's compensator number."""
-        return {"coulomb": COULOMB, "classical": STRIBECK, "lugre": LUGRE}[self.kind]
+        return COMPENSATOR_CODES[self.kind]
 
     def init(self, z_hat: float = 0.0) -> CompensatorState:
         """Initial state: relay undecided, bristle at ``z_hat`` (default relaxed)."""
@@ -240,8 +259,39 @@ class LuGreCompensator(Compensator):
                              f"got {self.error_signal!r}")
 
 
+@dataclass(frozen=True)
+class AdaptiveCompensator(LuGreCompensator):
+    """The LuGre observer of eq. (19) with F_C and F_S adapted online
+    (:mod:`frictionlab.adaptive`).
+
+    ``arm_length`` (:math:`L_1`, m) and ``u_max`` (the saturation of u) are
+    the law's; its gains must meet the stability conditions of
+    :func:`frictionlab.adaptive.check_gains` for ``h`` and ``arm_length``.
+    :meth:`step` takes ``u_prev``, the control applied over the last sample.
+    """
+
+    kind: ClassVar[str] = "adaptive"
+    arm_length: float = 0.21
+    u_max: float = 1.0 / 0.022
+
+    def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0, e: float = 0.0,
+             u_prev: float = 0.0) -> tuple[float, CompensatorState]:
+        """Friction estimate for the coming sample: one tick of the adaptation law
+        (with ``u_prev``, the control applied over the last sample), then the
+        observer with the adapted levels.  See :meth:`Compensator.step`."""
+        s = np.zeros(NS)
+        s[S_ZHAT] = state.z_hat
+        if state.adaptation:
+            s[S_VHAT:S_SLIDE + 1] = state.adaptation
+        s[S_U] = u_prev
+        f = float(adaptive_force(s, self._cp, float(v), float(e), float(self.h),
+                                 float(self.arm_length), float(self.u_max)))
+        return f, CompensatorState(0.0, float(s[S_ZHAT]), f,
+                                   tuple(float(x) for x in s[S_VHAT:S_SLIDE + 1]))
+
+
 _CLASSES = {"coulomb": CoulombCompensator, "classical": ClassicalCompensator,
-            "lugre": LuGreCompensator}
+            "lugre": LuGreCompensator, "adaptive": AdaptiveCompensator}
 
 
 def make_compensator(kind: str, params: FrictionParams | None = None, h: float = 0.005,
@@ -250,7 +300,7 @@ def make_compensator(kind: str, params: FrictionParams | None = None, h: float =
 
     Parameters
     ----------
-    kind : {"coulomb", "classical", "lugre"}
+    kind : {"coulomb", "classical", "lugre", "adaptive"}
         The compensator.
     params : FrictionParams, optional
         Its model (default: the compensator's Sec. 6 settings).
@@ -262,8 +312,8 @@ def make_compensator(kind: str, params: FrictionParams | None = None, h: float =
     Returns
     -------
     Compensator
-        A :class:`CoulombCompensator`, :class:`ClassicalCompensator` or
-        :class:`LuGreCompensator`.
+        A :class:`CoulombCompensator`, :class:`ClassicalCompensator`,
+        :class:`LuGreCompensator` or :class:`AdaptiveCompensator`.
 
     Raises
     ------
@@ -455,7 +505,8 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
 # ---------------------------------------------------------------------------
 
 #: Default search grids of ``frictionlab compensate tune`` around the values
-#: Sec. 6 explored (the thesis varied sigma0, sigma1 and k for LuGre).
+#: Sec. 6 explored (the thesis varied sigma0, sigma1 and k for LuGre; the
+#: adaptive compensator's grid varies its law's gains).
 DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
     "coulomb": [("compensation.coulomb", [1.1, 1.3, 1.5, 1.7, 1.9]),
                 ("compensation.hysteresis", [0.0, 0.01, 0.02, 0.05, 0.08, 0.12])],
@@ -466,6 +517,10 @@ DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
     "lugre": [("compensation.sigma0", [50.0, 100.0, 300.0, 1000.0]),
               ("compensation.sigma1", [2.0, 4.0, 6.0, 10.0]),
               ("compensation.observer_gain", [1.0, 3.0, 7.0, 15.0])],
+    # the adaptation law's gain and bandwidth, with and without eq. (19)'s correction
+    "adaptive": [("compensation.adaptation_gain", [50.0, 200.0, 1000.0]),
+                 ("compensation.adaptation_bandwidth", [10.0, 20.0, 50.0]),
+                 ("compensation.observer_gain", [0.0, 7.0])],
 }
 
 

@@ -136,7 +136,9 @@
   // The server refuses a change that would make the loop unstable or saturate u (422 with
   // confirm_required, the reason and what would pass); the operator may apply it anyway.
   let confirmResolve = null;
-  function confirmUnsafe(data) {
+  function confirmUnsafe(data, title, apply) {
+    $("confirm-title").textContent = title || "The model predicts this change is unsafe";
+    $("confirm-apply").textContent = apply || "Apply anyway";
     $("confirm-text").textContent = data.detail;
     $("confirm").hidden = false;
     $("confirm-cancel").focus();
@@ -189,7 +191,7 @@
       panel.fields[f.name] = f;
       panel.inputs[f.name] = fieldRow(box, f, "friction", () => { panel.dirty = true; });
     }
-    $("error-signal-row").hidden = kind !== "lugre";
+    $("error-signal-row").hidden = kind !== "lugre" && kind !== "adaptive";
   }
 
   async function applyDesign(name) {
@@ -217,7 +219,7 @@
     const values = collect(panel);
     if (!values) { setMsg("friction-msg", "not applied: correct the marked fields", true); return; }
     const body = { params: values };
-    if (panel.kind === "lugre") body.error_signal = $("error-signal").value;
+    if (panel.kind === "lugre" || panel.kind === "adaptive") body.error_signal = $("error-signal").value;
     const r = await change("/api/compensation", body);
     if (r.ok) { panel.dirty = false; setMsg("friction-msg", r.confirmed ? "applied (unsafe, confirmed)" : "applied", r.confirmed); }
     else showServerErrors(panel, r.data, "friction-msg");
@@ -261,6 +263,13 @@
     $("setup").textContent = `backend ${st.backend} (${friction}) · design ${(st.design && st.design.preset) || "custom"} · ` +
       `compensation ${comp.enabled ? "on" : "off"} (${comp.kind || "-"})` + (st.pending_changes ? " · change pending" : "");
 
+    const sw = st.swing_up;
+    const phase = $("swing-phase");
+    phase.dataset.phase = sw ? sw.phase : "";
+    phase.textContent = sw ? ` · swing-up: ${sw.phase}` +
+      (sw.swing_up_time !== null && sw.swing_up_time !== undefined ? ` (caught at ${fmt(sw.swing_up_time, 4)} s)` : "") : "";
+    $("swingup").disabled = running || !!(st.console && st.console.exited);
+
     const start = $("start");
     start.disabled = !!(st.console && st.console.exited);
     start.textContent = running ? "Stop" : "Start";
@@ -284,6 +293,18 @@
       const es = $("error-signal");
       if (document.activeElement !== es && comp.error_signal && !panels.friction.dirty) es.value = comp.error_signal;
     }
+    // the adaptive compensator: its estimates beside the panel, and F̂ on the plot
+    const ad = st.adaptation;
+    $("adapted").hidden = !ad;
+    if (ad) {
+      $("adapted-coulomb").textContent = fmt(ad.coulomb);
+      $("adapted-stiction").textContent = fmt(ad.stiction);
+      $("adapted-status").textContent = String(ad.status).replace("_", " ");
+      if (!ui.estimateShown) {
+        ui.estimateShown = true;
+        showSignal("friction_hat");
+      }
+    }
     const save = $("save");
     const recording = !!st.recording;
     save.setAttribute("aria-pressed", recording ? "true" : "false");
@@ -295,6 +316,54 @@
     const emulated = st.backend === "sim" || String(st.backend || "").startsWith("udp://");
     $("push").disabled = !running || !emulated;
     $("push").title = emulated ? "disturb the pendulum" : "only on simulated rigs";
+    showExperiment(st, running);
+  }
+
+  // --- Experiments panel: progress while it runs, the estimate when done ----------------------
+  function showExperiment(st, running) {
+    $("experiment-run").disabled = running;
+    const e = st.console && st.console.experiment;
+    if (!e) return;
+    const live = st.experiment;
+    if (e.state === "running") {
+      const pct = live ? Math.round(100 * (live.progress || 0)) : 0;
+      setMsg("experiment-msg", `${e.name}: ${pct} % - ${live ? live.phase : ""}`);
+      $("experiment-result").textContent = "";
+    } else {
+      setMsg("experiment-msg", `${e.name}: ${e.message || e.state}`, e.state !== "done");
+      const lines = [];
+      for (const [k, v] of Object.entries(e.estimates || {})) {
+        lines.push(`${k} = ${v === null ? "-" : Number(v).toPrecision(5)}`);
+      }
+      for (const w of e.warnings || []) lines.push(`warning: ${w}`);
+      if (e.log) lines.push(`log: ${e.log}`);
+      $("experiment-result").textContent = lines.join("\n");
+    }
+  }
+
+  async function runExperiment() {
+    let options = {};
+    try {
+      options = JSON.parse($("experiment-options").value || "{}");
+      if (typeof options !== "object" || options === null || Array.isArray(options)) throw new Error("an object");
+    } catch (err) {
+      setError($("experiment-options"), 'options must be a JSON object, e.g. {"hold": 0.2}');
+      return;
+    }
+    setError($("experiment-options"), "");
+    const body = { name: $("experiment-name").value, options };
+    let r = await api("POST", "/api/experiment", body);
+    if (!r.ok && r.data && r.data.confirm_required) {
+      if (!(await confirmUnsafe(r.data, "The experiment drives the motor", "Run"))) { setMsg("experiment-msg", "cancelled"); return; }
+      r = await api("POST", "/api/experiment", { ...body, confirm: true });
+    }
+    if (!r.ok) {
+      const e = (r.data && r.data.errors && r.data.errors[0]) || {};
+      if (e.field === "options") setError($("experiment-options"), e.message);
+      setMsg("experiment-msg", "refused: " + ((r.data && r.data.detail) || "invalid input"), true);
+      return;
+    }
+    showStatus(r.data.status);
   }
 
   // --- plot ------------------------------------------------------------------------------------
@@ -363,6 +432,17 @@
       const w = Math.max(320, box.clientWidth - 4);
       for (const c of Object.values(charts)) c.plot.setSize({ width: w, height: c.plot.height });
     });
+  }
+
+  // Turn a signal's curve on (as its toggle would), if it is off.
+  function showSignal(key) {
+    const s = SIGNALS.find((x) => x.key === key);
+    if (s.on) return;
+    s.on = true;
+    const b = document.querySelector(`#signal-toggles [data-signal="${key}"]`);
+    if (b) b.setAttribute("aria-pressed", "true");
+    const c = charts[s.group];
+    if (c) c.plot.setSeries(c.sigs.indexOf(s) + 1, { show: true });
   }
 
   function buildToggles() {
@@ -474,6 +554,11 @@
       if (!r.ok) setMsg("feedback-msg", "refused: " + r.data.detail, true);
     });
 
+    $("swingup").addEventListener("click", async () => {
+      const r = await api("POST", "/api/swingup");
+      if (!r.ok) setMsg("feedback-msg", "refused: " + r.data.detail, true);
+    });
+
     let exitArmed = null;
     $("exit").addEventListener("click", async () => {
       if (!exitArmed) {   // two presses: a stray click must not drop the pendulum
@@ -560,6 +645,8 @@
       else setMsg("push-msg", `pushed ${r0.value} rad/s`);
     });
     $("kick").addEventListener("input", () => setError($("kick"), ""));
+    $("experiment-run").addEventListener("click", runExperiment);
+    $("experiment-options").addEventListener("input", () => setError($("experiment-options"), ""));
 
     $("confirm-apply").addEventListener("click", () => closeConfirm(true));
     $("confirm-cancel").addEventListener("click", () => closeConfirm(false));

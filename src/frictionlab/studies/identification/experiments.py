@@ -27,6 +27,8 @@ stiction           ``t``, ``u``, ``arm_dot_m``
 stribeck           ``t``, ``u``, ``arm_dot_m``
 free-oscillation   ``t``, ``theta_m``
 control-scaling    ``t``, ``u``, ``arm_dot_m``
+velocity-scale     ``t``, ``arm_m``, ``v`` (the raw velocity channel)
+angle-scales       ``t``, ``y``, ``x`` (raw) and the run's marks
 =================  ==========================================
 """
 
@@ -41,15 +43,18 @@ import numpy as np
 from ...config import Config
 from ...model.params import ParamError, check_range
 from ...model.rig import RigScaling
-from ...model.simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory
+from ...model.sensor import measure
+from ...model.simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory, make_sensor
 
 __all__ = [
     "EXPERIMENTS",
     "IdentificationError",
+    "analyse_angle_scales",
     "analyse_control_scaling",
     "analyse_free_oscillation",
     "analyse_stiction",
     "analyse_stribeck",
+    "analyse_velocity_scale",
     "simulate_control_scaling",
     "simulate_free_oscillation",
     "simulate_stiction",
@@ -58,7 +63,8 @@ __all__ = [
 ]
 
 #: Experiment names of ``frictionlab identify experiment``.
-EXPERIMENTS = ("stiction", "stribeck", "free-oscillation", "control-scaling")
+EXPERIMENTS = ("stiction", "stribeck", "free-oscillation", "control-scaling",
+               "velocity-scale", "angle-scales")
 
 _I = {name: i for i, name in enumerate(COLUMNS)}
 
@@ -88,7 +94,9 @@ MAX_LEVELS = 100
 class _Recorder:
     """Steps a :class:`SimulatedPlant` and records one row of COLUMNS per tick.
 
-    The measured signals get ``sim.noise`` (seeded by ``sim.seed``); the
+    The measured signals are the simulator's (:func:`frictionlab.sensor.measure`:
+    ``sim.noise`` seeded by ``sim.seed``, the 12-bit converter with
+    ``sim.quantization``, the ``rig.*`` factors; sample n = tick n); the
     controller-estimate columns stay zero (the experiments run open loop).
     """
 
@@ -99,8 +107,8 @@ class _Recorder:
         self.state = self.plant.init(theta0=theta0)
         self.rows: list[np.ndarray] = []
         self.max_rows = round(MAX_EXPERIMENT_S / self.plant.h)
-        self.noise = cfg.sim.noise
-        self.rng = np.random.default_rng(cfg.sim.seed)
+        self.sensor = make_sensor(cfg)
+        self._x0 = 0.0
 
     @property
     def h(self) -> float:
@@ -108,10 +116,8 @@ class _Recorder:
 
     def measure(self) -> tuple[float, float, float]:
         x = self.state.x
-        th, arm, ad = float(x[0]), float(x[2]), float(x[3])
-        if self.noise > 0:
-            e = self.noise * self.rng.standard_normal(3)
-            th, arm, ad = th + e[0], arm + e[1], ad + e[2]
+        th, arm, ad, self._x0 = measure(self.sensor, float(x[0]), float(x[2]), float(x[3]),
+                                        len(self.rows), self._x0)
         return th, arm, ad
 
     def step(self, u: float, measured: tuple[float, float, float] | None = None) -> None:
@@ -139,7 +145,7 @@ class _Recorder:
         """Give the arm a push: set its velocity (the hand of App. E.1)."""
         x = self.state.x.copy()
         x[3] = velocity
-        self.state = PlantState(x, self.state.memory, self.state.friction)
+        self.state = PlantState(x, self.state.memory, self.state.friction, self.state.tick)
 
     @property
     def arm_dot(self) -> float:
@@ -172,6 +178,14 @@ def _noise_level(y: np.ndarray) -> float:
     d2 = np.diff(y, 2)
     mad = np.median(np.abs(d2 - np.median(d2)))
     return float(1.4826 * mad / math.sqrt(6.0))
+
+
+def _quantum(y: np.ndarray) -> float:
+    """The step of a quantised signal: the most common smallest change between samples
+    (the 10th percentile of the nonzero absolute differences; 0 if it never changes)."""
+    d = np.abs(np.diff(y[np.isfinite(y)]))
+    d = d[d > 1e-12]
+    return float(np.percentile(d, 10)) if len(d) else 0.0
 
 
 def _runs(u: np.ndarray) -> list[tuple[int, int]]:
@@ -415,7 +429,10 @@ def _steady_points(t, u, v, chunk: float, v_min: float) -> np.ndarray:
     """
     h = float(np.median(np.diff(t)))
     n = max(8, round(chunk / h))
-    sig_v, sig_u = _noise_level(v), _noise_level(u)
+    # noise, and the converters' resolution (a quantised signal at rest has no second
+    # differences but its steps; under a P loop u moves in steps of gain x quantum)
+    tol_v = 8.0 * _noise_level(v) + 2.0 * _quantum(v) + 1e-9
+    tol_u = 8.0 * _noise_level(u) + 2.0 * _quantum(u) + 1e-9
     pts = []
     for a in range(0, len(t) - n + 1, n):
         s = slice(a, a + n)
@@ -423,9 +440,9 @@ def _steady_points(t, u, v, chunk: float, v_min: float) -> np.ndarray:
         vm, um = float(vv.mean()), float(uu.mean())
         if abs(vm) < v_min or np.mean(np.sign(vv) != np.sign(vm)) > 0.05:
             continue
-        if np.ptp(vv) > 0.02 * abs(vm) + 8.0 * sig_v + 1e-9:
+        if np.ptp(vv) > 0.02 * abs(vm) + tol_v:
             continue
-        if np.ptp(uu) > 0.05 * abs(um) + 8.0 * sig_u + 1e-9:
+        if np.ptp(uu) > 0.05 * abs(um) + tol_u:
             continue
         pts.append((vm, um, n))
     return np.array(pts).reshape(-1, 3)
@@ -727,6 +744,140 @@ def analyse_control_scaling(log: Any, *, coulomb: float = 1.5, arm_length: float
         out["input_gain_free"] = float(slope)
         out["coulomb_free"] = float(-icpt)
     return out
+
+
+# ---------------------------------------------------------------------------
+# B.3: the arm-velocity channel
+# ---------------------------------------------------------------------------
+
+
+def analyse_velocity_scale(log: Any, *, chunk: float = 0.25, v_min: float = 0.5) -> dict:
+    r"""Scale and bias of the arm-velocity channel (App. B.3).
+
+    The arm angle :math:`\Omega` (``arm_m``, whose scale ``rig.arm_scale`` is
+    known from App. B.2) gives the true arm velocity; the raw velocity
+    channel ``v`` is compared with it at several steady speeds.  The log is
+    cut into chunks of ``chunk`` s; in each the velocity is the slope of a
+    straight line fitted to :math:`\Omega(t)` and the raw reading is the
+    mean of ``v``.  A chunk counts when the arm moves faster than ``v_min``
+    rad/s, the raw reading is steady (its range below 3 % of its level plus
+    8 noise standard deviations) and the line fits (residual below 2 % of
+    the distance travelled plus the angle's noise).  A straight line through
+    the (raw, velocity) points of both directions, velocity =
+    :math:`s(v + b)`, gives the scale s (``velocity_scale``) and bias b
+    (``velocity_bias``) in the convention of ``rig.velocity_scale`` and
+    ``rig.velocity_bias``.
+
+    Returns
+    -------
+    dict
+        ``velocity_scale``, ``velocity_bias``, ``points`` ([raw v, velocity]
+        per chunk), ``residual_rms`` (rad/s), ``warnings``.
+    """
+    t = _time(log)
+    arm = _signal(log, "arm_m")
+    v = _signal(log, "v")
+    ok = np.isfinite(t) & np.isfinite(arm) & np.isfinite(v)
+    t, arm, v = t[ok], arm[ok], v[ok]
+    if len(t) < 16:
+        raise IdentificationError("the log is too short for the velocity-scale analysis")
+    h = float(np.median(np.diff(t)))
+    n = max(8, round(chunk / h))
+    sig_v, sig_a = _noise_level(v), _noise_level(arm)
+    pts = []
+    for a in range(0, len(t) - n + 1, n):
+        s = slice(a, a + n)
+        tt, aa, vv = t[s], arm[s], v[s]
+        if np.any(np.diff(tt) > 3.0 * h):
+            continue  # a gap in the log (missed ticks)
+        vel, icpt, _ = _slope(tt, aa)
+        vm = float(vv.mean())
+        if abs(vel) < v_min:
+            continue
+        if np.ptp(vv) > 0.03 * abs(vm) + 8.0 * sig_v + 1e-9:
+            continue
+        res = aa - (vel * tt + icpt)
+        if float(np.sqrt(np.mean(res * res))) > 0.02 * abs(vel) * (tt[-1] - tt[0]) + 3 * sig_a:
+            continue
+        pts.append((vm, vel))
+    if len(pts) < 4:
+        raise IdentificationError(f"only {len(pts)} steady chunk(s) of arm motion faster "
+                                  f"than {v_min:g} rad/s; the velocity-scale fit needs at "
+                                  "least 4")
+    p = np.array(pts)
+    warnings = []
+    if not (p[:, 1].min() < 0 < p[:, 1].max()):
+        warnings.append("steady motion in one direction only: the bias is extrapolated")
+    slope, icpt = np.polyfit(p[:, 0], p[:, 1], 1)
+    res = p[:, 1] - (slope * p[:, 0] + icpt)
+    return {"velocity_scale": float(slope), "velocity_bias": float(icpt / slope),
+            "residual_rms": float(np.sqrt(np.mean(res * res))),
+            "points": [[float(a), float(b)] for a, b in p], "warnings": warnings}
+
+
+# ---------------------------------------------------------------------------
+# B.1, B.2: the angle channels (a lap by hand)
+# ---------------------------------------------------------------------------
+
+
+def _unwrap_raw(r: np.ndarray) -> np.ndarray:
+    """Undo the +-1 wrap-around of a raw angle channel (jumps of more than 1)."""
+    d = np.diff(r)
+    steps = np.where(d > 1.0, -2.0, np.where(d < -1.0, 2.0, 0.0))
+    return r + np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def analyse_angle_scales(log: Any, marks: Mapping[str, float]) -> dict:
+    r"""Scale and bias of the pendulum angle and scale of the arm angle (App. B.1, B.2).
+
+    The log is the guided ``angle-scales`` run: the pendulum hanging at rest
+    (``pendulum_before_*`` marks), one lap by hand, hanging at rest again
+    (``pendulum_after_*``), then the arm turned exactly one lap and held
+    (``arm_after_*``).  The raw channels are unwrapped (a jump of more than 1
+    is the converter's wrap-around, 2 units); a lap is :math:`2\pi` rad, so
+
+    * ``theta_scale`` = :math:`2\pi/|\Delta y|`,
+    * ``theta_bias``: the hanging pendulum is at :math:`	heta = \pi`, so
+      :math:`b = \pi/s_	heta - y_{hang}`, wrapped into [-1, 1) (the
+      convention of ``rig.theta_bias``: :math:`	heta = s_	heta(y + b)`),
+    * ``arm_scale`` = :math:`2\pi/|\Delta x|` (x before the arm's lap: its
+      rest during ``pendulum_after``).
+
+    Returns
+    -------
+    dict
+        ``theta_scale``, ``theta_bias``, ``arm_scale``, ``pendulum_lap_raw``,
+        ``arm_lap_raw``, ``warnings``.
+    """
+    t = _time(log)
+    y = _unwrap_raw(_signal(log, "y"))
+    x = _unwrap_raw(_signal(log, "x"))
+    need = ("pendulum_before_start", "pendulum_before_end", "pendulum_after_start",
+            "pendulum_after_end", "arm_after_start", "arm_after_end")
+    missing = [k for k in need if k not in marks]
+    if missing:
+        raise IdentificationError(f"the run has no {missing[0]!r} mark (is it a complete "
+                                  "angle-scales run? its sidecar holds the marks)")
+
+    def mean(sig, a, b):
+        sel = (t >= marks[a]) & (t <= marks[b])
+        if not sel.any():
+            raise IdentificationError(f"no samples between the marks {a} and {b}")
+        return float(sig[sel].mean())
+
+    y0 = mean(y, "pendulum_before_start", "pendulum_before_end")
+    y1 = mean(y, "pendulum_after_start", "pendulum_after_end")
+    x0 = mean(x, "pendulum_after_start", "pendulum_after_end")
+    x1 = mean(x, "arm_after_start", "arm_after_end")
+    span_y, span_x = y1 - y0, x1 - x0
+    if abs(span_y) < 0.5 or abs(span_x) < 1e-3:
+        raise IdentificationError("no lap in the log (the readings before and after hardly "
+                                  "differ)")
+    ts = 2.0 * math.pi / abs(span_y)
+    y_hang = (y0 + 1.0) % 2.0 - 1.0
+    tb = (math.pi / ts - y_hang + 1.0) % 2.0 - 1.0
+    return {"theta_scale": ts, "theta_bias": tb, "arm_scale": 2.0 * math.pi / abs(span_x),
+            "pendulum_lap_raw": span_y, "arm_lap_raw": span_x, "warnings": []}
 
 
 def estimates_only(result: Mapping[str, Any]) -> dict[str, float]:

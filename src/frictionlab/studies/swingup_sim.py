@@ -1,0 +1,194 @@
+r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.swingup`).
+
+The runner of :func:`frictionlab.swingup.swingup_step` on the simulator's
+plant (:func:`frictionlab.simulation.plant_tick`, the same compiled
+integrator, sensor (:func:`frictionlab.sensor.measure`) and friction drift as
+:func:`frictionlab.simulation.simulate_config`).  The pendulum's angle is
+unbounded in the plant (it may go over the top); the recorded ``theta`` and
+``theta_m`` columns are wrapped into [-pi, pi).
+
+A run ends early when the swing-up stops (its time limit, arm travel or arm
+speed, :data:`frictionlab.swingup.STOP_CODES`) or, once balancing, when the
+pendulum falls (``|theta| > sim.fall_angle``, wrapped) or the state becomes
+non-finite.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Config
+from ..model._jit import jit
+from ..model.controller import ADAPTIVE, G_COMP, S_FC_HAT, S_FS_HAT, Controller
+from ..model.friction import KINDS, P_DRIFT, P_DRIFT_TIME, P_FC, P_FS, drifted_params, resolve_drift
+from ..model.sensor import measure
+from ..model.simulation import NC, Trajectory, _pack_plant, make_controller, make_sensor, plant_tick
+from ..model.swingup import (
+    BALANCING,
+    PHASES,
+    STOP_CODES,
+    W_CATCH,
+    W_PHASE,
+    W_STOP,
+    W_T,
+    SwingUp,
+    swingup_step,
+    wrap_angle,
+)
+
+__all__ = ["SwingUpResult", "simulate_swingup", "swingup_outcome"]
+
+#: Run status codes of :func:`_run_swingup`.
+_OK, _FELL, _STOPPED = 0, 1, 2
+
+
+@jit
+def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
+                 fall_angle, out, phase_out):
+    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
+    h = gp[11]
+    w0 = gp[8]
+    adaptive = gp[G_COMP] == ADAPTIVE
+    fc_fixed = cp[P_FC] if gp[G_COMP] != 0.0 else 0.0
+    fs_fixed = cp[P_FS] if gp[G_COMP] != 0.0 else 0.0
+    drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
+    fpt = fp.copy()
+    mem = 0.0
+    x0 = 0.0
+    for k in range(n_ticks):
+        th_m, arm_m, armd_m, x0 = measure(sens, x[0], x[2], x[3], k, x0)
+        th_m = wrap_angle(th_m)
+        est = (s[0], w0 * s[1], s[2], s[3], s[5])
+        u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
+        balancing = w[W_PHASE] >= 1.0 and w[W_PHASE] <= 2.0
+        out[k, 0] = th_m
+        out[k, 1] = est[0] if balancing else w[3]
+        out[k, 2] = est[1] if balancing else w[4]
+        out[k, 3] = u
+        out[k, 4] = arm_m
+        out[k, 5] = armd_m
+        out[k, 6] = est[2]
+        out[k, 7] = est[3]
+        out[k, 8] = f_hat
+        out[k, 9] = est[4]
+        out[k, 10] = wrap_angle(x[0])
+        out[k, 11] = x[1]
+        out[k, 12] = x[2]
+        out[k, 13] = x[3]
+        out[k, 14] = x[4]
+        out[k, 16] = s[S_FC_HAT] if adaptive else fc_fixed
+        out[k, 17] = s[S_FS_HAT] if adaptive else fs_fixed
+        phase_out[k] = w[W_PHASE]
+        if drifting:
+            drifted_params(fp, k * h, fpt)
+        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
+        out[k, 15] = f_mean
+        if w[W_PHASE] == 3.0:
+            return k + 1, _STOPPED
+        if not np.isfinite(x[0] + x[1] + x[3] + x[4]):
+            return k + 1, _FELL
+        if w[W_PHASE] == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
+            return k + 1, _FELL
+    return n_ticks, _OK
+
+
+@dataclass(frozen=True)
+class SwingUpResult:
+    """Outcome of a swing-up run.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        The signals (``meta["phase"]`` holds the phase code of every tick).
+    swing_up_time : float or None
+        Time of the catch that led to balancing (s), None if never balancing.
+    balanced : bool
+        The phase reached ``balancing``.
+    stop_reason : str
+        ``not_caught``, ``arm_travel``, ``arm_speed`` (the swing-up stopped),
+        ``fell`` (fell after balancing) or ``""`` (ran to the end).
+    catches : int
+        Number of hand-overs (failed catches return to swinging).
+    max_u_swinging : float
+        Largest |u| while swinging (m/s^2).
+    """
+
+    trajectory: Trajectory
+    swing_up_time: float | None
+    balanced: bool
+    stop_reason: str
+    catches: int
+    max_u_swinging: float
+
+
+def simulate_swingup(cfg: Config, duration: float | None = None, *,
+                     controller: Controller | None = None) -> SwingUpResult:
+    """Swing the pendulum up from ``sim.initial_angle`` (pi = hanging) and balance it.
+
+    Parameters
+    ----------
+    cfg : Config
+        Plant, design, friction, compensation, ``sim.*`` and ``swingup.*``.
+    duration : float, optional
+        Simulated time in s (default ``cfg.sim.duration``).
+    controller : Controller, optional
+        The balancing controller (default: the one ``cfg`` describes).
+    """
+    duration = cfg.sim.duration if duration is None else float(duration)
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    h = cfg.design.h
+    n = max(1, round(duration / h))
+    if n > 20_000_000:
+        raise ValueError(f"duration {duration:g} s is too long for a recorded swing-up run")
+    sw = SwingUp(controller or make_controller(cfg), cfg.swingup)
+    gp, cp, sp = sw.pack()
+    w, s = sw.init(cfg.sim.initial_angle)
+    x = np.zeros(5)
+    x[0] = cfg.sim.initial_angle
+    out = np.zeros((n, NC))
+    phase = np.zeros(n)
+    done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, _pack_plant(cfg),
+                                KINDS.index(cfg.friction_kind),
+                                resolve_drift(cfg.friction.pack(), n * h), gp, cp, sp, s, w,
+                                make_sensor(cfg), cfg.sim.fall_angle, out, phase)
+    phase = phase[:done]
+    balanced = bool((phase == BALANCING).any())
+    stop = STOP_CODES[int(w[W_STOP])] if status == _STOPPED else ""
+    if status == _FELL:
+        stop = "fell"
+    catch_time = float(w[W_CATCH]) * h if balanced and w[W_CATCH] >= 0 else None
+    swinging = phase == 0
+    u = out[:done, 3]
+    max_u = float(np.abs(u[swinging]).max()) if swinging.any() else 0.0
+    traj = Trajectory(np.arange(done), h, out[:done], "fell" if status == _FELL else "ok", cfg,
+                      meta={"phase": phase, "phases": PHASES, "ticks": int(w[W_T])})
+    return SwingUpResult(traj, catch_time, balanced, stop, int(w[10]), max_u)
+
+
+def swingup_outcome(res: SwingUpResult, window: float | None = None):
+    """``(status, features)`` of a swing-up run, as ``simulate --swing-up`` reports them.
+
+    ``status`` is the features' ``limit_cycle``/``settled`` once balanced (the
+    features measured over the last ``window`` s, by default the last half of
+    the balancing part), ``fell`` if the pendulum fell (or a swing-up safety limit stopped the
+    run) after balancing, and
+    ``not_caught`` otherwise.
+    """
+    from ..model.limit_cycles import LimitCycleFeatures, trajectory_features
+
+    traj = res.trajectory
+    if not res.balanced:
+        return "not_caught", LimitCycleFeatures("not_caught", *([None] * 7))
+    if res.stop_reason:
+        return "fell", LimitCycleFeatures("fell", *([None] * 7))
+    first = int(np.argmax(traj.meta["phase"] == BALANCING))
+    part = Trajectory(traj.k[first:] - first, traj.h, traj.data[first:], traj.status,
+                      traj.config)
+    if window is None:
+        window = 0.5 * len(part) * traj.h
+    feats = trajectory_features(part, window)
+    return feats.status, feats
