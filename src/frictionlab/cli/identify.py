@@ -18,6 +18,7 @@ from .common import (
     check_output_path,
     check_workers,
     emit_json,
+    error_message,
     finite,
     parse_sets,
     progress_bar,
@@ -417,7 +418,7 @@ def cmd_experiment(args) -> int:
             try:
                 _check_backend(args.backend)
             except ValueError as exc:
-                raise UsageError(str(exc)) from None
+                raise UsageError(error_message(exc)) from None
         if args.backend is None and args.save and not args.save.endswith(".csv"):
             raise UsageError("--save: a simulated velocity-scale run is saved as .csv")
         try:
