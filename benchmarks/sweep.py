@@ -1,4 +1,4 @@
-r"""Sweep benchmark: parameter sets per second, serial, process pool and Dask LocalCluster.
+r"""Sweep benchmark: parameter sets per second, threads, Dask, process pool, serial.
 
 The sweep: 1,000 parameter sets, a 40 x 25 grid of ``friction.coulomb``
 (F_C 1.0 ... 2.0) and ``friction.stiction`` (F_S 2.1 ... 2.9) around eq.
@@ -9,13 +9,27 @@ band 0.03 rad/s of Sec. 5.2, reduced to its limit-cycle features by
 
 Figures (sets per second of wall time):
 
-* ``pool_sets_per_s`` - the local process pool on all cores
-  (``workers=None``, i.e. ``os.cpu_count()`` processes);
+* ``sets_per_s`` - the default backend, the compiled batch evaluator
+  (:mod:`frictionlab.batch`) on numba threads, one per core
+  (``workers=None``);
 * ``dask_sets_per_s`` - a Dask ``LocalCluster`` with one single-threaded
-  worker process per core (``dask="local"``);
-* ``serial_sets_per_s`` - in-process (``workers=1``), timed on the first
-  ``--serial-points`` sets (default 200) and reported as a rate; the rate of a
-  serial sweep does not depend on its length, so it extrapolates to 1,000.
+  worker process per core (``dask="local"``), each evaluating its chunks with
+  the compiled batch on one thread;
+* ``per_run_pool_sets_per_s`` - the previous default: a process pool of all
+  cores running one Python-driven simulation and feature extraction per set
+  (``reduce=reduce_features``, as a custom reduction runs);
+* ``serial_sets_per_s`` - the compiled batch on one thread (``workers=1``),
+  timed on the first ``--serial-points`` sets (default 200);
+* ``ceiling_sets_per_s`` - cores / the CPU time of the simulation alone (one
+  30 s run without recording or features, :func:`simulate_config` with
+  ``record=False``): the rate if the cores did nothing but simulate;
+  ``fraction_of_ceiling`` = ``sets_per_s`` / it.  On a busy machine the
+  wall-clock rates fall with the share of the cores the benchmark gets, so
+  the CPU times are compared too: ``batch_fraction_simulation`` is the
+  simulation alone over the compiled batch on one thread (both timed in
+  alternation on the same 100 sets), and ``threads_cpu_ms`` the CPU per set
+  of the threaded sweep; ``cores / threads_cpu_ms`` is its rate with the
+  cores free.
 
 Besides wall-clock rates it prints the CPU time per set summed over all the
 benchmark's processes (main, pool or Dask workers, forkserver, nannies): on a
@@ -24,35 +38,38 @@ machine shared with other jobs this shows the engine's own cost, and
 
 The pool and the cluster are started and warmed up (compiled simulator loaded
 in every worker) before the timed sweep, as they are in a session that runs
-several sweeps (identification, tuning; the engine keeps them); their start-up
-times are printed separately.  Each timed figure is the best of ``--repeats``
-sweeps (default 3; the least disturbed on a shared machine), the medians are
-printed too.  The benchmark also checks that the three backends return
-identical rows.  The last printed line is a JSON object.
+several sweeps (the engine keeps them); their start-up times are printed
+separately.  Each timed figure is the best of ``--repeats`` sweeps (default
+3; the least disturbed on a shared machine), the medians are printed too.
+The backends run one after the other, so on a busy machine compare the
+figures of one run of the benchmark.  It also checks that every backend
+returns identical rows.  The last printed line is a JSON object.
 
 Usage::
 
-    .venv/bin/python benchmarks/sweep.py [--repeats 3] [--serial-points 200]
+    .venv/bin/python benchmarks/sweep.py [--repeats 3] [--serial-points 200] [--workers N]
 """
 
 from __future__ import annotations
 
 import os
 
-if __name__ == "__main__":  # single-threaded numerics in every process (inherited by workers)
-    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                 "NUMBA_NUM_THREADS"):
+if __name__ == "__main__":  # single-threaded BLAS in every process (inherited by workers);
+    # numba's threads are the default backend's workers
+    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[_var] = "1"
 
 import argparse
 import json
+import math
 import statistics
 import time
 
 import psutil
 
 from frictionlab.config import Config, build_config
-from frictionlab.sweep import evaluate, make_points, parse_vary, shutdown
+from frictionlab.simulation import simulate_config
+from frictionlab.sweep import evaluate, make_points, parse_vary, reduce_features, shutdown
 
 DURATION = 30.0
 N_SETS = 1000
@@ -94,39 +111,63 @@ def _rates(fn, n_sets: int, repeats: int) -> tuple[float, float, float, list]:
             1e3 * statistics.median(cpu) / n_sets, rows)
 
 
+def sim_vs_batch_ms(base: Config, points: list[dict], repeats: int) -> tuple[float, float]:
+    """CPU ms per set of the simulation alone (no recording, no features) and of the
+    compiled batch on one thread (configurations built, simulation, features, rows),
+    measured in alternation on the same ``points`` (best of ``repeats`` passes each),
+    so that a busy machine disturbs both alike."""
+    cfgs = [base.with_values(p) for p in points]
+    sim, bat = math.inf, math.inf
+    for _ in range(repeats):
+        t0 = time.process_time()
+        for cfg in cfgs:
+            simulate_config(cfg, DURATION, record=False)
+        sim = min(sim, (time.process_time() - t0) / len(cfgs))
+        t0 = time.process_time()
+        evaluate(base, points, duration=DURATION, workers=1)
+        bat = min(bat, (time.process_time() - t0) / len(cfgs))
+    return 1e3 * sim, 1e3 * bat
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3, help="timed sweeps per backend (best)")
     ap.add_argument("--serial-points", type=int, default=200,
                     help="sets timed in-process for the serial rate")
     ap.add_argument("--workers", type=int, default=None,
-                    help="processes / Dask workers (default: all cores)")
+                    help="threads / processes / Dask workers (default: all cores)")
     args = ap.parse_args(argv)
 
     cores = args.workers or os.cpu_count() or 1
     base = build_config("fast", "classical", sets=list(CLASSICAL_SETS))
     points = sweep_points(base)
     print(f"{N_SETS} sets x {DURATION:g} s, fast design, classical friction, {cores} workers "
-          f"(os.cpu_count() = {os.cpu_count()})")
+          f"(os.cpu_count() = {os.cpu_count()}; load average "
+          f"{', '.join(f'{x:.1f}' for x in os.getloadavg())})")
 
     def run(**kw):
         return evaluate(base, points, duration=DURATION, **kw)
 
     sub = points[:args.serial_points]
     evaluate(base, sub[:2], duration=DURATION, workers=1)  # load the compiled code
+    evaluate(base, sub[:4 * cores], duration=DURATION, workers=cores)
+    sim_ms, batch_ms = sim_vs_batch_ms(base, sub[:100], 2 * args.repeats)
+    ceiling = cores * 1e3 / sim_ms
+    print(f"simulation alone: {sim_ms:.2f} ms CPU per set (ceiling {ceiling:.0f} sets/s on "
+          f"{cores} cores); the compiled batch on one thread, alternated with it: "
+          f"{batch_ms:.2f} ms ({100 * sim_ms / batch_ms:.0f} % simulation)")
     serial, serial_med, serial_cpu, serial_rows = _rates(
         lambda: evaluate(base, sub, duration=DURATION, workers=1), len(sub), args.repeats)
-    print(f"serial: {serial:.1f} sets/s (median {serial_med:.1f}), timed on {len(sub)} sets "
-          f"({1e3 / serial:.2f} ms per set; CPU {serial_cpu:.2f} ms per set)")
+    print(f"serial (compiled batch, one thread): {serial:.1f} sets/s (median "
+          f"{serial_med:.1f}), timed on {len(sub)} sets; CPU {serial_cpu:.2f} ms per set")
 
-    t0 = time.perf_counter()
-    evaluate(base, points[:4 * cores], duration=DURATION, workers=cores, chunk_size=1)
-    print(f"pool start-up and warm-up: {time.perf_counter() - t0:.2f} s")
-    pool, pool_med, pool_cpu, pool_rows = _rates(lambda: run(workers=cores), N_SETS,
-                                                 args.repeats)
-    print(f"pool: {pool:.1f} sets/s (median {pool_med:.1f}); CPU {pool_cpu:.2f} ms per set, "
-          f"i.e. {cores * 1e3 / pool_cpu:.0f} sets/s if {cores} cores were free")
-    shutdown()
+    threads, threads_med, threads_cpu, threads_rows = _rates(lambda: run(workers=cores),
+                                                             N_SETS, args.repeats)
+    print(f"threads (default): {threads:.1f} sets/s (median {threads_med:.1f}), "
+          f"{100 * threads / ceiling:.0f} % of the ceiling; CPU {threads_cpu:.2f} ms per set, "
+          f"i.e. {cores * 1e3 / threads_cpu:.0f} sets/s if {cores} cores were free")
+    print(f"threads vs one thread, CPU per set: {threads_cpu:.2f} / {serial_cpu:.2f} ms "
+          f"(x{threads_cpu / serial_cpu:.2f})")
 
     t0 = time.perf_counter()
     evaluate(base, points[:4 * cores], duration=DURATION, dask="local", workers=cores,
@@ -134,17 +175,35 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"dask LocalCluster start-up and warm-up: {time.perf_counter() - t0:.2f} s")
     dask, dask_med, dask_cpu, dask_rows = _rates(lambda: run(dask="local", workers=cores),
                                                  N_SETS, args.repeats)
-    print(f"dask: {dask:.1f} sets/s (median {dask_med:.1f}); {dask / pool:.2f} x the pool; "
-          f"CPU {dask_cpu:.2f} ms per set, i.e. {cores * 1e3 / dask_cpu:.0f} sets/s if "
-          f"{cores} cores were free")
+    print(f"dask: {dask:.1f} sets/s (median {dask_med:.1f}); {dask / threads:.2f} x the "
+          f"threads; CPU {dask_cpu:.2f} ms per set, i.e. {cores * 1e3 / dask_cpu:.0f} sets/s "
+          f"if {cores} cores were free")
     shutdown()
 
-    identical = pool_rows == dask_rows and pool_rows[:len(sub)] == serial_rows
-    statuses = {s: sum(r["status"] == s for r in pool_rows)
-                for s in sorted({r["status"] for r in pool_rows})}
+    t0 = time.perf_counter()
+    evaluate(base, points[:4 * cores], duration=DURATION, workers=cores, chunk_size=1,
+             reduce=reduce_features)
+    print(f"per-run process pool start-up and warm-up: {time.perf_counter() - t0:.2f} s")
+    pool, pool_med, pool_cpu, pool_rows = _rates(
+        lambda: run(workers=cores, reduce=reduce_features), N_SETS, args.repeats)
+    print(f"per-run process pool (previous default): {pool:.1f} sets/s (median "
+          f"{pool_med:.1f}); CPU {pool_cpu:.2f} ms per set")
+    shutdown()
+
+    identical = (threads_rows == dask_rows == pool_rows
+                 and threads_rows[:len(sub)] == serial_rows)
+    statuses = {s: sum(r["status"] == s for r in threads_rows)
+                for s in sorted({r["status"] for r in threads_rows})}
     print(f"rows identical across backends: {identical}; statuses: {statuses}")
-    result = {"pool_sets_per_s": round(pool, 1), "dask_sets_per_s": round(dask, 1),
-              "serial_sets_per_s": round(serial, 1)}
+    result = {"sets_per_s": round(threads, 1), "dask_sets_per_s": round(dask, 1),
+              "dask_vs_threads": round(dask / threads, 3),
+              "per_run_pool_sets_per_s": round(pool, 1),
+              "serial_sets_per_s": round(serial, 1), "sim_only_ms": round(sim_ms, 3),
+              "batch_one_thread_ms": round(batch_ms, 3),
+              "batch_fraction_simulation": round(sim_ms / batch_ms, 3),
+              "threads_cpu_ms": round(threads_cpu, 3),
+              "ceiling_sets_per_s": round(ceiling, 1),
+              "fraction_of_ceiling": round(threads / ceiling, 3), "identical": identical}
     print(json.dumps(result))
     return result
 

@@ -31,6 +31,7 @@ def _max_diff(ref, traj, name, seconds):
     return float(np.max(np.abs(ref[name][:n] - traj[name][:n])))
 
 
+@pytest.mark.slow
 def test_frictionless_loop_matches_compiled(bench):
     cfg = build_config("fast", "none")
     ref = bench.scipy_closed_loop(cfg, 2.0)
@@ -52,6 +53,7 @@ def test_comparison_is_sensitive_to_the_plant(bench):
     assert _max_diff(ref, traj, "theta_m", 2.0) > 1e-4
 
 
+@pytest.mark.slow
 def test_classical_friction_loop_close_to_compiled(bench):
     cfg = bench.classical_config()
     assert cfg.friction.zero_velocity_band == 0.03
@@ -73,6 +75,7 @@ def test_lugre_loop_close_to_compiled(bench):
     assert _max_diff(ref, traj, "arm_dot_m", 1.0) < 1e-2
 
 
+@pytest.mark.slow
 def test_lugre_observer_term_loop_close_to_compiled(bench):
     """eq. (19) with e = -theta: scipy evaluates the term with the continuous angle
     inside the right-hand side, the compiled loop with the predicted midpoint angle."""

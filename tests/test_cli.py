@@ -98,6 +98,7 @@ def test_every_subcommand_has_a_one_line_summary_and_a_description():
         assert sub.description, path
 
 
+@pytest.mark.slow
 def test_top_level_help_lists_each_subcommand_on_one_line():
     res = subprocess.run([sys.executable, "-m", "frictionlab", "--help"], capture_output=True,
                          text=True, env={"COLUMNS": "80", "PATH": ""}, timeout=60, check=True)

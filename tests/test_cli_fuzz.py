@@ -397,6 +397,7 @@ def check_outcome(argv, rc, out, err, peak):
         assert len(out.splitlines()) == 1 and isinstance(json.loads(out), dict), argv
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(WORK), ids=" ".join)
 @FUZZ
 @given(data=st.data())
@@ -453,6 +454,7 @@ def test_reported_bad_input_in_process(stubbed, tmp_path, argv, message):
     assert rc == 2 and message in err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv, message", [REPORTED[i] for i in (0, 1, 2, 5, 7, 8)],
                          ids=lambda v: " ".join(v)[:40] if isinstance(v, list) else "")
 def test_reported_bad_input_through_the_entry_point(tmp_path, argv, message):

@@ -128,6 +128,7 @@ def test_observers_must_be_fed_the_net_acceleration():
 # ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(v=st.floats(0.05, 5.0), sign=st.sampled_from([-1.0, 1.0]),
        sigma0=st.floats(50.0, 1000.0), z0=st.floats(-0.05, 0.05))
@@ -173,6 +174,7 @@ def true_lugre_friction(prm, velocity, velocity_integral, h, n):
     return (s0 * np.diff(z_int) + s1 * np.diff(z) + fv * np.diff(velocity_integral(tk))) / h
 
 
+@pytest.mark.slow
 def test_observer_tracks_true_lugre_friction_at_sigma0_1000():
     """Bounded and within 5% of F_C of the true friction (mean over each sample, from
     an independent stiff ODE solution) wherever the arm slides, for a slowly varying
@@ -242,6 +244,7 @@ def test_reversals_count_only_full_swings():
 # ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(vs=st.lists(st.floats(-0.2, 0.2), min_size=1, max_size=30),
        eps=st.floats(0.0, 0.1))
@@ -439,6 +442,7 @@ def test_tune_without_penalty_prefers_smallest_limit_cycle(small_tune):
     assert res.best == best["values"]
 
 
+@pytest.mark.slow
 def test_tune_matches_an_independent_computation():
     """Every grid point and the baseline computed here with simulate_config and
     chatter (what tune re-ran in-process before the engine carried chatter):
@@ -559,6 +563,7 @@ def test_features_and_chatter_is_the_default_row_plus_chatter():
     assert {k: row[k] for k in ("reversals_per_s", "u_roughness")} == chatter(traj).as_dict()
 
 
+@pytest.mark.slow
 def test_tune_cli_json_and_plot(tmp_path):
     png = tmp_path / "ba.png"
     rc, out, err = run_cli("compensate", "tune", "--friction", "lugre", "--compensation",
@@ -584,6 +589,7 @@ def test_tune_cli_json_and_plot(tmp_path):
     assert res["plot"] == str(png)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("plant", PLANT_FRICTION_KINDS)
 def test_simulate_cli_runs_every_compensator_against_every_plant(plant):
     statuses = {}
@@ -617,6 +623,7 @@ def test_compare_needs_a_compensator():
     assert compare(cfg, 4.0).baseline_status in ("limit_cycle", "settled")
 
 
+@pytest.mark.slow
 def test_compare_cli_reports_chatter_and_reduction(tmp_path):
     rc, out, err = run_cli("compensate", "compare", "--friction", "classical",
                            "--compensation", "coulomb", "--set", NOISE, "--set",

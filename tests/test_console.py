@@ -379,6 +379,7 @@ def _backlog_samples(texts: list[str]) -> np.ndarray:
     return np.array(t)
 
 
+@pytest.mark.slow
 def test_a_connecting_page_gets_the_history_already_serialised():
     """History is serialised once per chunk of samples, never per page.
 
@@ -460,6 +461,7 @@ def app_and_controller(tmp_path):
     ctl.close()
 
 
+@pytest.mark.slow
 def test_design_changes_and_refusals_through_the_api(app_and_controller):
     client, _ctl, _ = app_and_controller
     slow = design("slow")
@@ -591,6 +593,7 @@ def test_refusals_are_located_by_key_not_by_message(app_and_controller, monkeypa
                                                         "enabled", "error_signal"]
 
 
+@pytest.mark.slow
 def test_run_record_download_and_exit(app_and_controller, tmp_path):
     client, ctl, exits = app_and_controller
     assert client.post("/api/record/start", json={}).status_code == 409  # not running
@@ -669,6 +672,23 @@ def test_a_run_ending_by_itself_while_recording_asks_for_the_name(app_and_contro
     assert r.status_code == 200
     assert (tmp_path / "before_the_fall.dat").is_file()
     assert not client.get("/api/status").json()["console"]["pending_recording"]
+
+
+def test_a_recording_the_console_never_saw_running_still_asks_for_its_name(
+        app_and_controller):
+    """Whether a recording awaits its name is asked of the controller, not inferred from
+    an earlier status (a stale one, taken before the recording started, once hid it)."""
+    client, ctl, _ = app_and_controller
+    assert client.post("/api/start", json={}).status_code == 200
+    ctl.record_start()  # no status of the console has seen it recording
+    ctl.stop("angle_limit")
+    assert ctl.wait(5.0)
+    assert ctl.unnamed_recording is not None
+    st = client.get("/api/status").json()
+    assert not st["recording"] and st["console"]["pending_recording"]
+    assert ctl.unnamed_recording is None  # taken by the console: asked for only once
+    r = client.post("/api/record/name", json={"name": "unseen"})
+    assert r.status_code == 200 and r.json()["rows"] >= 1
 
 
 def test_guard_refuses_a_websocket_without_the_token(app_and_controller):
@@ -811,6 +831,7 @@ print(json.dumps(events))
 """
 
 
+@pytest.mark.slow
 def test_a_first_session_loads_nothing_while_the_loop_runs(tmp_path):
     """Everything a server thread would load on first use is loaded before the loop starts.
 
@@ -903,6 +924,7 @@ async def _read_backlog(ws_url: str) -> list[dict]:
                 return msgs
 
 
+@pytest.mark.slow
 def test_connecting_pages_cannot_stall_the_loop(tmp_path):
     """30 pages connecting at once and 10 reconnecting ones: the loop keeps its deadlines
     and the pendulum stays up; each page gets its history in small messages made once
@@ -975,6 +997,7 @@ def _closed_by_server(sock: socket.socket, timeout: float) -> bool:
         return False
 
 
+@pytest.mark.slow
 def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
     """100 idle TCP connections without the token: Stop and every authorised request still
     answer, refusals close their connection, idle and trickling connections are closed

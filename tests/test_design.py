@@ -1,11 +1,10 @@
 """Controller design: Appendix C/D, numerical placement, python-control, observers."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from inprocess import run_cli_in_process
 
 from frictionlab.design import design, observer_gains, preset
 from frictionlab.reference import APPENDIX_D
@@ -14,9 +13,7 @@ APP_D = APPENDIX_D
 
 
 def run_cli(*args):
-    res = subprocess.run([sys.executable, "-m", "frictionlab", *args], capture_output=True,
-                         text=True, timeout=120)
-    return res
+    return run_cli_in_process(args)
 
 
 @pytest.mark.parametrize("name", ["fast", "slow"])

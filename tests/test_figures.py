@@ -87,6 +87,7 @@ def _announced(err: str, path) -> bool:
     return f"frictionlab: plot written to {path}" in err
 
 
+@pytest.mark.slow
 def test_simulate_plot(figures, capsys, tmp_path):
     png = tmp_path / "cycle.png"
     assert main(["simulate", "--friction", "lugre", "--compensation", "lugre", "--duration",
@@ -106,6 +107,7 @@ def test_simulate_plot(figures, capsys, tmp_path):
     assert len({ln.get_linestyle() for ln in _labelled(ax_f)}) == 2
 
 
+@pytest.mark.slow
 def test_sweep_plot(figures, capsys, tmp_path):
     png = tmp_path / "grid.png"
     assert main(["sweep", "--friction", "classical", "--set", "friction.zero_velocity_band=0.03",
@@ -130,6 +132,7 @@ def test_sweep_plot(figures, capsys, tmp_path):
     assert a.get_marker() != b.get_marker()
 
 
+@pytest.mark.slow
 def test_compensate_compare_and_tune_plots(figures, capsys, tmp_path):
     png = tmp_path / "ba.png"
     assert main(["compensate", "compare", "--friction", "classical", "--compensation",
@@ -151,6 +154,7 @@ def test_compensate_compare_and_tune_plots(figures, capsys, tmp_path):
         assert fig.axes[-1].get_xlabel() == "time in the window [s]"
 
 
+@pytest.mark.slow
 def test_identify_limit_cycle_plot(figures, capsys, tmp_path):
     png = tmp_path / "fit.png"
     assert main(["identify", "limit-cycle", "--measured", str(EXAMPLES / "table1.json"),
@@ -169,6 +173,7 @@ def test_identify_limit_cycle_plot(figures, capsys, tmp_path):
     assert fig.axes[2].get_ylabel() == "fitted / measured feature [1]"  # row 2, column 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv,title", [
     (["stiction", "--simulate", "--step", "0.1", "--hold", "0.1"],
      "identify experiment stiction (App. E.1): simulated rig, classical friction"),
@@ -220,6 +225,7 @@ def test_features_the_plot_shows_are_the_ones_simulate_reports():
     assert np.isfinite(f.peak1) and f.peak1 < np.pi  # radians
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["angle_velocity", "control_friction"])
 def test_reproduce_cycle_figures(figures, capsys, tmp_path, kind):
     from frictionlab.plotting import plot_cycle_figure

@@ -61,6 +61,7 @@ def test_static_models_never_add_energy(v, fe, fs, fc, band, kind):
         assert F * v >= 0.0
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(v=st.floats(-20, 20), zr=st.floats(-1, 1), fs=levels, fc=levels,
        s0=st.floats(1, 1000), s1=st.floats(0, 20), fv=st.floats(0, 1))

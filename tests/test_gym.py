@@ -204,6 +204,7 @@ def test_bad_options_are_refused():
         env.reset(options={"initial_angle": 2.0})
 
 
+@pytest.mark.slow
 def test_make_vec_gives_the_native_vector_env():
     venv = gymnasium.make_vec(ENV_ID, num_envs=3, friction="lugre")
     assert isinstance(venv.unwrapped, FurutaVectorEnv) and venv.num_envs == 3

@@ -34,6 +34,7 @@ def _run(capsys, argv):
     return rc, out, err
 
 
+@pytest.mark.slow
 def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
     plot, report = tmp_path / "fit.png", tmp_path / "full.json"
     rc, out, err = _run(capsys, [
@@ -59,6 +60,7 @@ def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
     assert "warnings" in full and "singular_values" in full
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_limit_cycle_on_a_dask_localcluster_gives_the_pool_estimate(capsys, measured):
     from frictionlab.sweep import shutdown
@@ -113,6 +115,8 @@ GOOD = {"experiments": [{"design": "fast", "features": {"period": 1.0, "peak1": 
             "friction.coulomb=2:3", "--bounds", "friction.stiction=0.5:1.5"],
      "no stiction >= Coulomb"),
     ("{not json", [], "not valid JSON"),
+    (GOOD, ["--search-duration", "0"], "--search-duration must be > 0"),
+    (GOOD, ["--search-duration", "15", "--search-window", "20"], "--search-window"),
 ])
 def test_limit_cycle_infeasible_input_exits_2(capsys, tmp_path, measured, extra, match):
     argv = ["identify", "limit-cycle", "--measured", _write(tmp_path, measured),
@@ -132,6 +136,7 @@ def test_limit_cycle_missing_file_exits_2(capsys, tmp_path):
     assert rc == 2 and "cannot read" in err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, sets, expect", [
     ("stiction", ["friction.stiction=2.1", "friction.coulomb=1.35"],
      {"stiction": (2.1, 0.05), "coulomb": (1.35, 0.05)}),

@@ -214,6 +214,7 @@ def test_read_log_rejects(tmp_path, text, match):
         read_log(tmp_path / "bad.txt")
 
 
+@pytest.mark.slow
 def test_plots(tmp_path, stiction_log, stribeck_log, oscillation_log, scaling_log):
     from frictionlab.identification import plots
 

@@ -68,6 +68,7 @@ def _rel(est: dict, key: str) -> float:
     return abs(est[key] - TRUTH[key]) / TRUTH[key]
 
 
+@pytest.mark.slow
 def test_synthetic_recovery(clean_fit):
     """Acceptance: default bounds and budget, F_C and omega0 within 2 %, F_S within 10 %."""
     assert clean_fit.bounds == {k: DEFAULT_BOUNDS[k] for k in TRUTH}
@@ -79,6 +80,7 @@ def test_synthetic_recovery(clean_fit):
     assert _rel(est, "friction.stiction") < 0.10
 
 
+@pytest.mark.slow
 def test_residuals_cover_every_measured_feature(clean_fit):
     assert set(clean_fit.residuals) == {"fast", "slow"}
     for label, res in clean_fit.residuals.items():
@@ -100,6 +102,7 @@ def test_stderr_reported_and_no_flat_direction(clean_fit):
         assert abs(clean_fit.estimate[key] - value) < 3.0 * clean_fit.stderr[key]
 
 
+@pytest.mark.slow
 def test_noisy_features_truth_within_three_stderr(noisy_fit):
     """Acceptance: with 1 % feature noise the true values lie within 3
     reported standard errors, for each of the first three noise seeds."""
@@ -131,6 +134,7 @@ def test_json_fields(clean_fit):
     assert out["estimate"] == clean_fit.estimate
 
 
+@pytest.mark.slow
 def test_evaluates_generations_through_the_sweep_engine(monkeypatch):
     """Every evaluation goes through frictionlab.sweep.evaluate, one call per
     generation (population x experiments points), and a parameter with no
@@ -177,6 +181,7 @@ BELOW = {"experiments": [{"design": "fast",
                           "features": {"period": 2.0, "peak1": 0.05, "max_u": 3.5}}]}
 
 
+@pytest.mark.slow
 def test_fit_keeps_stiction_above_coulomb_unless_told_not_to():
     exps = parse_experiments(BELOW)
     keys = ["friction.coulomb", "friction.stiction"]
@@ -372,3 +377,46 @@ def test_a_broken_backend_raises_instead_of_fitting_penalties():
 
     with pytest.raises(RuntimeError, match="boom"):
         fit_limit_cycle(exps, ["friction.coulomb"], evaluate=broken, maxiter=1, popsize=2)
+
+
+# ---------------------------------------------------------------------------
+# a shorter global search (search_duration / search_window)
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_short_search_runs_reach_the_optimum_of_the_full_search():
+    """Two keys from two experiments: the search on 15 s runs (10 s window), polished
+    on 30 s runs, lands on the optimum of the 30 s search (the truth) at the same
+    cost, and every run of the polish and of the reported cost is 30 s long."""
+    truth = {"friction.coulomb": 1.35, "plant.omega0": 7.1}
+    exps = parse_experiments(_measured(truth))
+    keys = list(truth)
+    durations = []
+
+    def spy(base, points, **kw):
+        durations.append(kw["duration"])
+        return sweep.evaluate(base, points, **kw)
+
+    kw = {"duration": DURATION, "window": WINDOW, "maxiter": 8, "popsize": 5, "seed": 0}
+    full = fit_limit_cycle(exps, keys, **kw)
+    short = fit_limit_cycle(exps, keys, search_duration=15.0, evaluate=spy, **kw)
+    assert set(durations) == {15.0, DURATION}
+    assert durations[-1] == DURATION  # the final evaluation and line fit: full runs
+    for k, v in truth.items():
+        assert short.estimate[k] == pytest.approx(v, rel=0.01)
+        assert short.estimate[k] == pytest.approx(full.estimate[k], rel=0.01)
+    assert short.cost <= 1.01 * full.cost + 1e-6
+
+
+def test_search_settings_default_and_validation():
+    from frictionlab.identification.limit_cycle import search_settings
+
+    assert search_settings(30.0, 20.0, None, None) == (30.0, 20.0)
+    assert search_settings(30.0, 20.0, 15.0, None) == (15.0, 10.0)
+    assert search_settings(30.0, None, 15.0, None) == (15.0, None)
+    assert search_settings(30.0, 20.0, 15.0, 12.0) == (15.0, 12.0)
+    assert search_settings(30.0, 20.0, None, 5.0) == (30.0, 5.0)
+    for bad in ((-1.0, None), (float("nan"), None), (15.0, 16.0), (15.0, 0.0)):
+        with pytest.raises(ConfigError, match="--search-"):
+            search_settings(30.0, 20.0, *bad)

@@ -20,6 +20,7 @@ from frictionlab.simulation import simulate_config
 CLI = [sys.executable, "-m", "frictionlab"]
 
 
+@pytest.mark.slow
 def test_import_frictionlab_does_not_import_python_control():
     code = ("import sys, frictionlab; assert 'control' not in sys.modules; "
             "f = frictionlab.linearize; assert 'control' in sys.modules; print(f.__module__)")
@@ -174,6 +175,7 @@ def _worst_sample_error(cfg):
     return worst
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("friction,k,fine_bound", [("none", 0, 1e-7), ("lugre", 0, 5e-6),
                                                    ("lugre", 1, 5e-6)])
 def test_the_simulator_converges_to_to_controls_plant(friction, k, fine_bound):
@@ -188,13 +190,13 @@ def test_the_simulator_converges_to_to_controls_plant(friction, k, fine_bound):
     assert fine < fine_bound and fine < coarse / 20, (coarse, fine)
 
 
-def test_lqr_from_python_control_through_design_gains():
+@pytest.mark.slow
+def test_lqr_from_python_control_through_design_gains(cli):
     cfg = build_config("fast", "none", sets=["plant.zeta=0"])
     sysd = control.c2d(fl.linearize(cfg), cfg.design.h)
     K, _, E = control.dlqr(sysd.A, sysd.B, np.diag([100.0, 0.0, 100.0, 1.0]), 1.0)
     gains = ",".join(f"{k:.17g}" for k in K.ravel())
-    out = subprocess.run([*CLI, "design", "--set", f"design.gains={gains}", "--json"],
-                         capture_output=True, text=True, timeout=120)
+    out = cli("design", "--set", f"design.gains={gains}", "--json")
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
     np.testing.assert_array_equal(d["L"], K.ravel())

@@ -120,6 +120,7 @@ def test_short_window_on_a_large_oscillation_is_not_settled():
     assert g.peak_to_peak > 2e-3 and g.status == "settled"
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.integers(-20, 20), min_size=3, max_size=60), st.floats(0.0, 10.0))
 def test_compiled_peaks_match_scipy(values, prom):

@@ -125,6 +125,7 @@ def test_discrete_time_workaround_returns_rad_per_s():
     assert raw.intersections[0][1] == pytest.approx(math.sin(w * Ts), rel=5e-3)
 
 
+@pytest.mark.slow
 def test_static_friction_describing_function():
     nl_relay = StaticFrictionNonlinearity(lambda v: 1.5 * np.sign(v), "relay")
     for A in (0.1, 1.0, 7.0):
@@ -177,6 +178,7 @@ def test_linear_loop_equals_the_loop_built_by_hand(name):
     assert np.abs(L.poles()).max() < 1
 
 
+@pytest.mark.slow
 def test_describing_function_of_coulomb_friction_scales_with_the_level():
     """N is real for the relay, so the cycle sits at the loop's phase crossover
     whatever F_C, with A = 4 F_C |H| / pi."""
@@ -233,6 +235,7 @@ def assert_features_close(orbit_features, ref, rel=0.01):
             assert a == pytest.approx(b, rel=rel), k
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("design,row", TABLE_ROWS)
 def test_orbit_features_match_long_runs_on_the_table_grids(design, row):
     cfg = build_config(design, "classical", sets=[TABLE_BAND[design], row])
@@ -354,6 +357,7 @@ def test_compensated_loop_has_an_orbit_but_no_describing_function():
 # --------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_cli_predict_json(capsys, tmp_path):
     plot = tmp_path / "p.png"
     assert main(["predict", "--set", BAND, "--json", "--plot", str(plot)]) == 0
@@ -366,6 +370,7 @@ def test_cli_predict_json(capsys, tmp_path):
     assert plot.stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_cli_predict_text_and_noise_note(capsys):
     assert main(["predict", "--design", "slow", "--friction", "lugre", "--set",
                  "sim.noise=0.001"]) == 0

@@ -17,12 +17,14 @@ from __future__ import annotations
 import json
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from inprocess import run_cli_in_process
 
 from frictionlab.config import build_config
 
@@ -37,6 +39,8 @@ SKIPPED = [
      "the main job, a console server until Ctrl-C: tests/test_scripts.py::"
      "test_scripts_run_installs_and_serves_the_console"),
     (r"^\./scripts/test\b", "the test suite itself (CI runs it as .ci/run)"),
+    (r"^\./scripts/stress\b", "the test suite under load; scripts/stress itself: "
+     "tests/test_stress_script.py"),
     (r"^frictionlab run(?!.*--headless)",
      "the console server, until stopped: tests/test_realtime_cli.py::"
      "test_console_mode_stops_on_a_signal (and the browser tests)"),
@@ -105,8 +109,11 @@ def test_the_documents_show_commands_and_every_skip_is_used():
     assert len(COMMANDS) >= 30
     for pattern, _why in SKIPPED:
         assert any(re.search(pattern, c) for _, _, c in COMMANDS), f"unused skip {pattern!r}"
-    skipped = [c for _, _, c in COMMANDS if skip_reason(c)]
-    assert len(skipped) <= 12, skipped  # a small list: servers only
+    # the test suite's own lines (the suite cannot run itself) aside, a small list:
+    # servers only
+    skipped = [c for _, _, c in COMMANDS
+               if skip_reason(c) and not re.match(r"\./scripts/(test|stress)\b", c)]
+    assert len(skipped) <= 12, skipped
 
 
 @pytest.fixture(scope="module")
@@ -125,6 +132,27 @@ def folders(tmp_path_factory):
     return get
 
 
+_SHELL_SYNTAX = re.compile(r"[|&;<>()$`*?{}\\!]")
+
+
+def plain_frictionlab(command: str) -> list[str] | None:
+    """The arguments of a plain ``frictionlab ...`` command line (no pipes,
+    redirections, variables or globs: bash would pass it on unchanged), else None.
+
+    Such a line runs in-process (:func:`inprocess.run_cli_in_process`); the
+    installed ``frictionlab`` executable itself is tested in tests/test_cli.py
+    and tests/test_startup.py.
+    """
+    try:
+        words = shlex.split(command, comments=True)
+    except ValueError:
+        return None
+    code = command.split(" #", 1)[0]
+    if words[:1] != ["frictionlab"] or _SHELL_SYNTAX.search(code) or "=" in words[0]:
+        return None
+    return words[1:]
+
+
 def _env() -> dict:
     env = dict(os.environ)
     # the frictionlab of this interpreter first on PATH
@@ -133,12 +161,20 @@ def _env() -> dict:
     return env
 
 
+# the lines of one document run in order in one folder: under pytest-xdist, on one worker
+# (``--dist loadgroup``, as scripts/test runs it)
+@pytest.mark.slow
 @pytest.mark.parametrize("doc,line,command", [
-    pytest.param(p, n, c, id=f"{p.name}:{n}") for p, n, c in COMMANDS if not skip_reason(c)])
+    pytest.param(p, n, c, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
+    for p, n, c in COMMANDS if not skip_reason(c)])
 def test_documented_command_runs_as_written(folders, doc, line, command):
     cwd = folders(doc)
-    res = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(), capture_output=True,
-                         text=True, timeout=TIMEOUT)
+    argv = plain_frictionlab(command)
+    if argv is not None:  # the same command line, without paying the interpreter's start-up
+        res = run_cli_in_process(argv, cwd=cwd, env={"MPLBACKEND": "Agg"})
+    else:
+        res = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(),
+                             capture_output=True, text=True, timeout=TIMEOUT)
     where = f"{doc.name}:{line}: {command}"
     assert res.returncode == 0, f"{where}\nexit {res.returncode}\n{res.stderr[-3000:]}"
     if "--json" in command.split():
@@ -162,8 +198,10 @@ def _fragment(doc: Path, text: str) -> bool:
     return any(doc.name == name and marker in text for name, marker in PYTHON_FRAGMENTS)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("doc,line,code", [
-    pytest.param(p, n, t, id=f"{p.name}:{n}") for p, n, t in PYTHON if not _fragment(p, t)])
+    pytest.param(p, n, t, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
+    for p, n, t in PYTHON if not _fragment(p, t)])
 def test_documented_python_runs(folders, doc, line, code):
     res = subprocess.run([sys.executable, "-c", code], cwd=folders(doc), env=_env(),
                          capture_output=True, text=True, timeout=TIMEOUT)

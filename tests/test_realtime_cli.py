@@ -45,7 +45,8 @@ def rig_sim():
         proc.wait(10)
 
 
-def wait_for(pred, timeout=60.0):
+def wait_for(pred, timeout=60.0, proc=None):
+    """The first true value of ``pred()``, polled; fails at once if ``proc`` ended."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         try:
@@ -54,8 +55,34 @@ def wait_for(pred, timeout=60.0):
             value = None
         if value:
             return value
-        time.sleep(0.05)
+        if proc is not None and proc.poll() is not None:
+            raise AssertionError(f"the process ended (status {proc.returncode}) while "
+                                 f"waiting: {proc.stderr.read() if proc.stderr else ''}")
+        time.sleep(0.02)
     raise AssertionError("timed out waiting")
+
+
+def logged_rows(csv: Path) -> int:
+    try:
+        return csv.read_bytes().count(b"\n") - 1
+    except OSError:
+        return 0
+
+
+def wait_running(log_dir: Path, proc, rows: int = 100):
+    """(csv, sidecar) of the run once ``rows`` ticks are in its log: it is controlling
+    (a condition, not a sleep: a busy machine takes as long as it takes)."""
+    csv, meta = wait_for(lambda: started_log(log_dir), proc=proc)
+    wait_for(lambda: logged_rows(csv) >= rows, proc=proc)
+    return csv, meta
+
+
+def popen(args, **kw):
+    """``frictionlab ARGS`` in its own process group (a signal meant for it reaches
+    nothing else; its Ctrl-Z suspends it wherever the test runs), pipes as text."""
+    kw.setdefault("stdout", subprocess.PIPE)
+    kw.setdefault("stderr", subprocess.PIPE)
+    return subprocess.Popen([*CLI, *args], text=True, process_group=0, **kw)
 
 
 def started_log(log_dir: Path):
@@ -70,6 +97,7 @@ def started_log(log_dir: Path):
     return None
 
 
+@pytest.mark.slow
 def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path):
     # lockstep: a pause of this shared machine pauses the simulated plant too (in the
     # default mode it would act as a disturbance and change the cycle)
@@ -100,18 +128,15 @@ def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path
     assert meta["stats"]["ticks"] == st["ticks"]
 
 
+@pytest.mark.slow
 def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     host, port = rig_sim
     # a wide angle limit: a pause of this shared machine must not end the run early
-    proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--backend",
-                             f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir",
-                             str(tmp_path)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = popen(["run", "--headless", "--duration", "60", "--backend",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)],
+                 stdout=subprocess.DEVNULL)
     try:
-        csv, meta = wait_for(lambda: started_log(tmp_path))
-        t_kill = meta["t0_monotonic_ns"] + 3_000_000_000
-        while time.monotonic_ns() < t_kill:
-            time.sleep(0.01)
+        csv, _meta = wait_running(tmp_path, proc, rows=300)
         assert proc.poll() is None, proc.stderr.read()
         proc.kill()
         proc.wait(10)
@@ -136,23 +161,21 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     assert json.loads(csv.with_suffix(".json").read_text())["running"] is True
     # ... and a reader can tell that the run did not finish
     assert read_sidecar(csv.with_suffix(".json"))["state"] == "interrupted"
-    # and the rig's own watchdog has zeroed the motor
-    time.sleep(0.1)
-    rig = send_control(host, port, {"cmd": "status"})
-    assert rig["watchdog_tripped"] and rig["u_da"] == 0.0
+    # and the rig's own watchdog zeroes the motor
+    rig = wait_for(lambda: (r := send_control(host, port, {"cmd": "status"}))[
+        "watchdog_tripped"] and r)
+    assert rig["u_da"] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP,
                                  signal.SIGQUIT])
 def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     host, port = rig_sim
-    proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--json",
-                             "--backend", f"udp://{host}:{port}", "--angle-limit", "1.2",
-                             "--log-dir", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)])
     try:
-        wait_for(lambda: started_log(tmp_path))
-        time.sleep(0.5)
+        wait_running(tmp_path, proc)
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=20)
     finally:
@@ -170,13 +193,13 @@ def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     assert rig["u_da"] == 0.0 and rig["last_command_seq"] == meta["stop_tick"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_console_mode_stops_on_a_signal(tmp_path, sig):
     # console mode (no --headless) on a free port; lockstep and a wide angle limit: a pause
     # of this shared machine must not end the run before the signal does
-    proc = subprocess.Popen([*CLI, "run", "--port", "0", "--sim-lockstep", "--angle-limit",
-                             "1.2", "--log-dir", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = popen(["run", "--port", "0", "--sim-lockstep", "--angle-limit", "1.2",
+                  "--log-dir", str(tmp_path)])
     try:
         first = proc.stdout.readline()
         m = re.search(r"frictionlab console: (http://127\.0\.0\.1:(\d+)/)", first)
@@ -187,7 +210,7 @@ def test_console_mode_stops_on_a_signal(tmp_path, sig):
                 st = json.loads(resp.read())
             return st["running"] and st["ticks"] >= 100
 
-        wait_for(ticking)
+        wait_for(ticking, proc=proc)
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=30)
     finally:
@@ -283,6 +306,7 @@ def _proc_state(pid: int) -> str:
         return fh.read().rpartition(")")[2].split()[0]
 
 
+@pytest.mark.slow
 def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp_path):
     """SIGINT while the controller waits for the rig's HELLO_ACK (a rig still booting)."""
     import threading
@@ -308,12 +332,11 @@ def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp
     server.start()
     try:
         wait_for(lambda: addr)
-        proc = subprocess.Popen([*CLI, "run", "--headless", "--json", "--duration", "30",
-                                 "--backend", f"udp://127.0.0.1:{addr[0][1]}", "--log-dir",
-                                 str(tmp_path)],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = popen(["run", "--headless", "--json", "--duration", "30", "--backend",
+                      f"udp://127.0.0.1:{addr[0][1]}", "--log-dir", str(tmp_path)])
         try:
-            wait_for(lambda: P.MSG_HELLO in emu.seen)  # the controller waits for HELLO_ACK
+            # the controller waits for HELLO_ACK
+            wait_for(lambda: P.MSG_HELLO in emu.seen, proc=proc)
             proc.send_signal(signal.SIGINT)
             emu.control({"cmd": "clear"})  # and the rig answers from now on
             stdout, stderr = proc.communicate(timeout=60)
@@ -334,17 +357,15 @@ def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp
     assert meta["stop_reason"] == "signal" and meta["stop_detail"] == "SIGINT"
 
 
+@pytest.mark.slow
 def test_ctrl_z_stops_the_run_then_suspends(tmp_path, rig_sim):
     host, port = rig_sim
-    proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--json",
-                             "--backend", f"udp://{host}:{port}", "--angle-limit", "1.2",
-                             "--log-dir", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)])
     try:
-        csv, _ = wait_for(lambda: started_log(tmp_path))
-        time.sleep(0.5)
+        csv, _ = wait_running(tmp_path, proc)
         proc.send_signal(signal.SIGTSTP)
-        wait_for(lambda: _proc_state(proc.pid) == "T")
+        wait_for(lambda: _proc_state(proc.pid) == "T", proc=proc)
         # suspended after the run was stopped: the motor at zero, the final sidecar written
         meta = json.loads(csv.with_suffix(".json").read_text())
         assert (meta["stop_reason"], meta["stop_detail"], meta["running"]) == (
@@ -361,23 +382,24 @@ def test_ctrl_z_stops_the_run_then_suspends(tmp_path, rig_sim):
     assert json.loads(stdout)["stop_reason"] == "signal"
 
 
+@pytest.mark.slow
 def test_a_suspended_controller_stops_on_resume_without_acting(tmp_path, rig_sim):
     """SIGSTOP (not catchable) for 300 ms: the rig's watchdog zeroes the motor meanwhile,
     and on SIGCONT the loop stops (reason paused) without acting on its stale state."""
     host, port = rig_sim
-    proc = subprocess.Popen([*CLI, "run", "--headless", "--duration", "60", "--json",
-                             "--backend", f"udp://{host}:{port}", "--angle-limit", "1.2",
-                             "--log-dir", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)])
     try:
-        csv, meta = wait_for(lambda: started_log(tmp_path))
-        time.sleep(0.5)
+        csv, meta = wait_running(tmp_path, proc)
         proc.send_signal(signal.SIGSTOP)
-        wait_for(lambda: _proc_state(proc.pid) == "T")
+        wait_for(lambda: _proc_state(proc.pid) == "T", proc=proc)
         t_stopped = time.monotonic_ns()  # it is suspended by now
-        time.sleep(0.3)
-        rig = send_control(host, port, {"cmd": "status"})
-        assert rig["watchdog_tripped"] and rig["u_da"] == 0.0
+        # the rig's watchdog zeroes the motor meanwhile (at least 300 ms suspended)
+        rig = wait_for(lambda: (r := send_control(host, port, {"cmd": "status"}))[
+            "watchdog_tripped"] and r)
+        assert rig["u_da"] == 0.0
+        while time.monotonic_ns() < t_stopped + 300_000_000:
+            time.sleep(0.01)
         t_cont = time.monotonic_ns()  # it is still suspended now
         proc.send_signal(signal.SIGCONT)
         stdout, stderr = proc.communicate(timeout=30)
@@ -398,6 +420,7 @@ def test_a_suspended_controller_stops_on_resume_without_acting(tmp_path, rig_sim
     assert rig["u_da"] == 0.0 and rig["last_command_seq"] == int(log["tick"][-1])
 
 
+@pytest.mark.slow
 def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
     """A file-size limit (ulimit -f) makes the log writes fail, as a full disk does."""
     import resource

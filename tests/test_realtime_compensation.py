@@ -56,6 +56,7 @@ def peak_to_peak(log, t_from, t_to):
     return f.peak_to_peak, f.status
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", COMPENSATORS)
 def test_logged_control_equals_simulate_config_tick_by_tick(kind, tmp_path):
     cfg = build_config("fast", "lugre", kind)
@@ -74,6 +75,7 @@ def test_logged_control_equals_simulate_config_tick_by_tick(kind, tmp_path):
     assert np.max(np.abs(log["u"] - off["u"])) > 1.0
 
 
+@pytest.mark.slow
 def test_lugre_compensation_shrinks_the_noisy_limit_cycle_5x(tmp_path):
     sets = [f"sim.noise={NOISE}"]
     on = run_logged(build_config("fast", "lugre", "lugre", sets=sets), 20.0, tmp_path)
@@ -86,6 +88,7 @@ def test_lugre_compensation_shrinks_the_noisy_limit_cycle_5x(tmp_path):
     assert np.max(np.abs(on["friction_hat"])) > 1.0
 
 
+@pytest.mark.slow
 def test_switching_compensation_on_mid_run_removes_the_limit_cycle(tmp_path):
     """The operator's Compensation button (Sec. 7.1): LuGre on after 15 s."""
     cfg = build_config("fast", "lugre", "none", sets=[f"sim.noise={NOISE}"])

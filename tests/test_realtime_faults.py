@@ -445,6 +445,7 @@ def sample(k):
                   -0.0123, 12.5, 40.0, 30.0)
 
 
+@pytest.mark.slow
 def test_a_failing_write_cuts_the_files_to_complete_rows_and_reports_once(tmp_path, monkeypatch):
     disk = FullDisk(free=20_000 + datalog.RESERVE_BYTES)
     monkeypatch.setattr(datalog, "_write", disk.write)
@@ -537,6 +538,7 @@ def test_nothing_existing_is_overwritten_by_a_run_or_a_recording(cfg, tmp_path):
         datalog.link_no_clobber(tmp_path / "run3-save3.csv", tmp_path / "run3-save2.csv")
 
 
+@pytest.mark.slow
 def test_a_sidecar_tells_a_finished_run_from_a_dead_one(tmp_path):
     path = tmp_path / "run.json"
     identity = datalog.writer_identity()

@@ -136,6 +136,7 @@ def test_compute_rig_time_and_overruns_are_measured(cfg):
     assert loop.missed == 0
 
 
+@pytest.mark.slow
 def test_gc_is_kept_out_of_the_tick(cfg):
     seen = []
 
@@ -213,6 +214,7 @@ def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
     assert np.max(np.abs(u_wrong[k_new:] - u_log[k_new:])) > 1e-3
 
 
+@pytest.mark.slow
 def test_new_gains_replace_the_running_ones_linearly_over_the_transition(cfg):
     clock = FakeClock()
     ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=clock, duration=1.5,
@@ -246,6 +248,7 @@ def test_new_gains_replace_the_running_ones_linearly_over_the_transition(cfg):
     assert ctl.status()["design"]["L"] == pytest.approx(list(l_new))
 
 
+@pytest.mark.slow
 def test_slow_to_fast_in_mid_cycle_stays_inside_the_angle_limit():
     # the slow design's arm swings 1.4 rad about its reference at up to 5 rad/s:
     # the fast gains switched at once throw the pendulum past 0.35 rad (two times in
@@ -338,6 +341,7 @@ print(json.dumps({"new_modules": sorted(set(sys.modules) - modules), "threads": 
 """
 
 
+@pytest.mark.slow
 def test_first_changes_import_nothing_and_blas_is_single_threaded():
     # a fresh process: what the first change of each kind would load is loaded by then
     out = subprocess.run([sys.executable, "-c", _FIRST_CHANGES], capture_output=True,

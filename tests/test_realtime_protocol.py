@@ -33,6 +33,7 @@ def test_sensor_payload_layout():
     assert r == P.SensorReading(0.5, -0.25, 1.0, 0.125, 0x81)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(seq=u32, y=f32, x=f32, v=f32, u=f32, status=st.integers(0, 255))
 def test_sensor_round_trip(seq, y, x, v, u, status):
@@ -41,6 +42,7 @@ def test_sensor_round_trip(seq, y, x, v, u, status):
     assert P.parse_sensor(frame) == (y, x, v, u, status)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(seq=u32, u=f32, bit=st.integers(0, 8 * (P.OVERHEAD + 4) - 1))
 def test_any_single_bit_flip_is_detected(seq, u, bit):
@@ -66,6 +68,7 @@ def test_wrong_payload_size_is_a_corrupted_message():
         P.parse_sensor(frame)
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(seqs=st.lists(u32, min_size=1, max_size=8),
        noise=st.binary(max_size=30).filter(lambda b: b"\xa5" not in b),

@@ -26,6 +26,7 @@ def cfg():
     return build_config("fast", "classical")
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(theta=st.floats(-1.2, 1.2), arm=st.floats(-200.0, 200.0), arm_dot=st.floats(-25, 25))
 def test_adc_model_is_app_b_with_12_bit_quantisation(theta, arm, arm_dot):

@@ -46,6 +46,7 @@ def _varied(row):
     return keys[0], row[keys[0]]
 
 
+@pytest.mark.slow
 def test_json_is_the_documented_object(report):
     result, out = report
     assert set(result) == {"out", "seconds", "figures", "tables"}
@@ -62,6 +63,7 @@ def test_json_is_the_documented_object(report):
     assert lugre == APPENDIX_F_KEYS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("number", ["2", "3"])
 def test_tables_2_and_3_within_5_percent_of_the_thesis(report, number):
     key, thesis = THESIS[number]
@@ -133,23 +135,31 @@ def test_rows_match_simulate(report):
             assert sim["features"][name] == row[name], (number, row["key"], name)
 
 
+@pytest.mark.slow
 def test_every_run_goes_through_the_sweep_engine(monkeypatch):
+    import frictionlab.batch as batch
     import frictionlab.simulation as simulation
     import frictionlab.sweep as sweep
 
     points, sims = [], []
-    evaluate, simulate_config = sweep.evaluate, simulation.simulate_config
+    evaluate, run_batch = sweep.evaluate, batch.run
+    simulate_config = simulation.simulate_config
 
     def counting_evaluate(base, pts, **kw):
         points.extend(pts)
         assert kw["workers"] == 1 and kw["duration"] == rp.DURATION
         return evaluate(base, pts, **kw)
 
-    def counting_simulate(*a, **kw):
+    def counting_run(b, *a, **kw):  # the compiled batch (features): a simulation per set
+        sims.extend([1] * len(b.index))
+        return run_batch(b, *a, **kw)
+
+    def counting_simulate(*a, **kw):  # the runs whose traces are kept (a custom reduce)
         sims.append(1)
         return simulate_config(*a, **kw)
 
     monkeypatch.setattr(sweep, "evaluate", counting_evaluate)
+    monkeypatch.setattr(batch, "run", counting_run)
     monkeypatch.setattr(simulation, "simulate_config", counting_simulate)
     results = rp.run(workers=1)
     assert len(points) == len(sims) == rp.count_runs()
@@ -188,6 +198,7 @@ def _failing_reduce(cfg, duration, window):
 _REAL_REDUCE = rp.reduce_with_trace
 
 
+@pytest.mark.slow
 def test_a_failed_run_is_a_row_not_a_crash(tmp_path, monkeypatch):
     """A run that raises becomes an error row; the report is still written, without
     the figures of that run."""

@@ -1,6 +1,7 @@
 """Appendix B conversions."""
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -17,6 +18,7 @@ def test_appendix_b_factors():
     assert np.isclose(r.u_max, 1 / 0.022)
 
 
+@pytest.mark.slow
 @given(theta=st.floats(-1.5, 1.5), arm=st.floats(-20, 20), v=st.floats(-25, 25))
 def test_round_trip(theta, arm, v):
     r = RigScaling(arm_bias=-0.0699)

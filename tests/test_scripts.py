@@ -21,6 +21,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 def test_scripts_run_installs_and_serves_the_console(tmp_path):
     if Path(sys.prefix).resolve() != (ROOT / ".venv").resolve():
         # scripts/run (re)installs into ROOT/.venv: only from that environment (as

@@ -135,6 +135,7 @@ def test_falling_pendulum_stops_early_with_status_fell():
     assert f.status == "fell" and f.peak1 is None
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     kind=st.sampled_from(["none", "viscous", "coulomb", "classical", "stribeck", "lugre"]),
@@ -253,6 +254,7 @@ def test_save_dat_and_csv(tmp_path):
         traj.save(tmp_path / "run.txt")
 
 
+@pytest.mark.slow
 def test_simulate_cli_save_plot_and_progress(tmp_path, capsys):
     png, dat = tmp_path / "c.png", tmp_path / "c.dat"
     rc = main(["simulate", "--duration", "10", "--plot", str(png), "--save", str(dat),

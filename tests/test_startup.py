@@ -38,6 +38,7 @@ def _probe(argv):
     return json.loads(res.stdout)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv", [
     None,  # import frictionlab
     ["--help"],
@@ -56,6 +57,7 @@ def test_light_commands_load_no_heavy_module(argv):
         assert "L" in got["stdout"]
 
 
+@pytest.mark.slow
 def test_design_json_is_the_closed_form_design():
     obj = json.loads(_probe(["design", "--json"])["stdout"])
     from frictionlab.design import design

@@ -172,16 +172,20 @@ def test_serial_rows_are_run_features_and_failures_are_rows():
     assert [d for d, _ in calls] == sorted(d for d, _ in calls)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
-    """Acceptance: Table 2's F_C values, pool vs Dask LocalCluster vs in-process."""
+    """Acceptance: Table 2's F_C values, threads vs Dask LocalCluster vs in-process,
+    and the compiled batch vs one Python-driven run per point in a process pool."""
     base = build_config("fast", "classical", sets=[BAND])
     points = [{"friction.coulomb": v} for v in TABLE2_FC]
     serial = evaluate(base, points, duration=10, workers=1)
     pool = evaluate(base, points, duration=10, workers=2)
     dask = evaluate(base, points, duration=10, dask="local", workers=2)
+    per_run = evaluate(base, points, duration=10, workers=2, reduce=reduce_features)
     assert pool == serial
     assert dask == pool
+    assert per_run == pool
     # the cluster's workers run without Dask's malloc trim threshold (see _local_dask_config)
     client = _get_dask("local", 2)
     trim = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
@@ -234,6 +238,7 @@ def _reduce_without_status(cfg, duration, window):
     return dict.fromkeys(FEATURES, 0.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_reduce_hook_replaces_the_feature_reduction(workers):
     """A caller's reduce runs for every point (in-process and in the pool): its
@@ -298,7 +303,8 @@ def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
     base = build_config("fast", "classical")
     points = [{"friction.coulomb": v} for v in (1.3, 1.5, 1.7, 1.9)]
     monkeypatch.setattr(sweep_module, "_run_chunk", _chunk_that_kills_its_worker)
-    rows = evaluate(base, points, duration=3, workers=2, chunk_size=1)
+    # a custom reduce runs in the process pool (the default reduction runs on threads)
+    rows = evaluate(base, points, duration=3, workers=2, chunk_size=1, reduce=reduce_features)
     monkeypatch.undo()
     assert [r["friction.coulomb"] for r in rows] == [1.3, 1.5, 1.7, 1.9]
     dead = rows[2]
@@ -309,7 +315,7 @@ def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
     for r in rows:
         assert (r["status"], r["error"] is None) in {("limit_cycle", True), ("error", False)}
     # the broken pool was dropped: the next sweep gets a fresh one
-    again = evaluate(base, points, duration=3, workers=2, chunk_size=1)
+    again = evaluate(base, points, duration=3, workers=2, chunk_size=1, reduce=reduce_features)
     assert [r["status"] for r in again] == ["limit_cycle"] * 4
 
 
@@ -325,6 +331,7 @@ def _data_lines(path):
     return max(0, Path(path).read_text().count("\n") - 1) if Path(path).exists() else 0
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(400)
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["term", "kill"])
 def test_killed_sweep_resumes_with_every_point_exactly_once(tmp_path, sig):
@@ -420,6 +427,7 @@ def test_resume_refuses_a_different_setup(tmp_path):
     assert rc == 0 and json.loads(out)["rows"] == 2 and len(read_csv(path)) == 2
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_file_with_the_earlier_column_order(tmp_path):
     """Files of an earlier frictionlab (status between the keys and the
     features) are not resumed into: exit 2, one line, the file untouched."""
@@ -556,6 +564,7 @@ def test_table_marks_rows_that_are_not_limit_cycles():
     assert lines[3].split("|")[2].strip() == "-" and lines[3].rstrip("| ").endswith("fell")
 
 
+@pytest.mark.slow
 def test_plot_leaves_undefined_features_out_and_marks_falls_on_the_edge(tmp_path, monkeypatch):
     """A fallen run is no point of the line (which breaks there) but a marker
     on the panel's bottom edge, outside the data: the y range is that of the
@@ -599,6 +608,7 @@ def test_plot_leaves_undefined_features_out_and_marks_falls_on_the_edge(tmp_path
     assert any(t.startswith("fell") for t in legend)
 
 
+@pytest.mark.slow
 def test_plot_file(tmp_path):
     png = tmp_path / "s.png"
     rc, out, _ = run_cli("--vary", "friction.coulomb=1.1,1.5", "--vary", "plant.omega0=6.8,7.5",
@@ -612,6 +622,7 @@ def test_plot_file(tmp_path):
 EDGE_MODULES = ("frictionlab.cli", "frictionlab.sweep_cli", "matplotlib", "rich")
 
 
+@pytest.mark.slow
 def test_engine_imports_no_cli_plotting_or_terminal_code():
     """frictionlab.sweep is numerics and files: no import of the CLI, matplotlib or
     rich anywhere in its source (also inside functions), and none at run time."""

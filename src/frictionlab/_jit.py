@@ -23,14 +23,17 @@ import functools
 from importlib import import_module
 from typing import Any
 
-__all__ = ["Kernel", "jit"]
+__all__ = ["Kernel", "jit", "jit_parallel"]
 
 
 @functools.cache
-def _njit():
+def _njit(parallel: bool = False):
     import_module("._numba_cache", __package__)  # sets NUMBA_CACHE_DIR before numba loads
     from numba import njit
 
+    if parallel:
+        # a batch driver (frictionlab.batch): prange over threads, GIL released
+        return njit(cache=True, error_model="numpy", parallel=True, nogil=True)
     return njit(cache=True, error_model="numpy")
 
 
@@ -43,8 +46,9 @@ class Kernel:
         The Python function (as numba's dispatchers call it).
     """
 
-    def __init__(self, fn):
+    def __init__(self, fn, parallel: bool = False):
         self.py_func = fn
+        self._parallel = parallel
         self._dispatcher = None
         functools.update_wrapper(self, fn)
 
@@ -52,7 +56,7 @@ class Kernel:
     def dispatcher(self):
         """The numba dispatcher (created, and numba imported, on first access)."""
         if self._dispatcher is None:
-            self._dispatcher = _njit()(self.py_func)
+            self._dispatcher = _njit(self._parallel)(self.py_func)
         return self._dispatcher
 
     def __call__(self, *args: Any) -> Any:
@@ -79,3 +83,9 @@ class Kernel:
 def jit(fn) -> Kernel:
     """Decorate a kernel: nopython, cached, numpy error model; compiled on first use."""
     return Kernel(fn)
+
+
+def jit_parallel(fn) -> Kernel:
+    """As :func:`jit`, with numba's ``parallel=True`` (``prange`` loops run on
+    numba's threads) and ``nogil=True``; compiled on first use."""
+    return Kernel(fn, parallel=True)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import difflib
+import functools
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -277,18 +278,28 @@ def inert_keys(cfg: Config, keys: Iterable[str]) -> list[str]:
     return out
 
 
-def valid_keys() -> list[str]:
-    """Every accepted ``section.field`` key."""
+@functools.cache
+def _key_tuple() -> tuple[str, ...]:
     keys = []
     for section in _SECTIONS:
         for f in dataclasses.fields(_CLASSES[section]):
             if "doc" in f.metadata:
                 keys.append(f"{section}.{f.name}")
-    return keys
+    return tuple(keys)
+
+
+@functools.cache
+def _key_set() -> frozenset[str]:
+    return frozenset(_key_tuple())
+
+
+def valid_keys() -> list[str]:
+    """Every accepted ``section.field`` key."""
+    return list(_key_tuple())
 
 
 def _split(key: str) -> tuple[str, str]:
-    if not isinstance(key, str) or key not in valid_keys():
+    if not isinstance(key, str) or key not in _key_set():
         raise UnknownKeyError(str(key))
     section, field = key.split(".")
     return section, field

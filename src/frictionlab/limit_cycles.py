@@ -74,12 +74,6 @@ class LimitCycleFeatures:
         return {k: getattr(self, k) for k in FEATURES}
 
 
-def _mean(values: np.ndarray) -> float | None:
-    """Mean of the finite entries (the half-cycles that have the feature), or None."""
-    v = values[np.isfinite(values)]
-    return float(v.sum() / len(v)) if len(v) else None
-
-
 @jit
 def _crossings_kernel(t, y, hyst):
     n = len(y)
@@ -187,12 +181,201 @@ def _half_cycle_kernel(y, starts, ends, noise, rel_prominence):
     return p1, p2, va
 
 
-def _half_cycles(starts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+@jit
+def _half_cycles(starts, ends):
     """Pair each crossing in ``starts`` with the first crossing in ``ends`` after it
     (both sorted sample indices); starts with no later end are dropped."""
-    j = np.searchsorted(ends, starts, side="right")
-    ok = j < len(ends)
-    return starts[ok], ends[j[ok]]
+    a = np.empty(len(starts), dtype=np.int64)
+    b = np.empty(len(starts), dtype=np.int64)
+    m = 0
+    j = 0
+    for s in starts:
+        while j < len(ends) and ends[j] <= s:
+            j += 1
+        if j == len(ends):
+            break
+        a[m] = s
+        b[m] = ends[j]
+        m += 1
+    return a[:m], b[:m]
+
+
+@jit
+def _block_sum(a, lo, n):
+    """numpy's pairwise summation of ``a[lo:lo + n]`` for n <= 128 (eight accumulators)."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@jit
+def _pairwise_sum(a):
+    """``a.sum()`` in numpy's pairwise order, bit for bit (halves of whole blocks
+    of 8 down to 128 entries, :func:`_block_sum`); without recursion, which
+    numba's on-disk cache does not handle."""
+    n = len(a)
+    if n <= 128:
+        return _block_sum(a, 0, n)
+    # post-order walk of numpy's split tree: tasks (lo, n, combine?), partial sums
+    t_lo = np.empty(256, dtype=np.int64)
+    t_n = np.empty(256, dtype=np.int64)
+    t_c = np.empty(256, dtype=np.int64)
+    vals = np.empty(128)
+    nt = 1
+    nv = 0
+    t_lo[0], t_n[0], t_c[0] = 0, n, 0
+    while nt > 0:
+        nt -= 1
+        lo, m, c = t_lo[nt], t_n[nt], t_c[nt]
+        if c == 1:
+            nv -= 1
+            vals[nv - 1] = vals[nv - 1] + vals[nv]
+        elif m <= 128:
+            vals[nv] = _block_sum(a, lo, m)
+            nv += 1
+        else:
+            m2 = m // 2
+            m2 -= m2 % 8
+            t_lo[nt], t_n[nt], t_c[nt] = 0, 0, 1
+            t_lo[nt + 1], t_n[nt + 1], t_c[nt + 1] = lo + m2, m - m2, 0
+            t_lo[nt + 2], t_n[nt + 2], t_c[nt + 2] = lo, m2, 0
+            nt += 3
+    return vals[0]
+
+
+@jit
+def _finite_mean(values):
+    """Mean of the finite entries (the half-cycles that have the feature), or nan."""
+    v = values[np.isfinite(values)]
+    if len(v) == 0:
+        return np.nan
+    return _pairwise_sum(v) / len(v)
+
+
+@jit
+def _abs_max(a):
+    """``max |a|`` (nan if any entry is nan, as numpy's max)."""
+    m = -np.inf
+    for x in a:
+        if np.isnan(x):
+            return np.nan
+        ax = abs(x)
+        if ax > m:
+            m = ax
+    return m
+
+
+@jit
+def _moving_average(y, size):
+    """Centred ``size``-sample moving average, the ends extended with the end values
+    (``scipy.ndimage.uniform_filter1d(y, size, mode="nearest")`` up to rounding)."""
+    n = len(y)
+    s1 = size // 2
+    out = np.empty(n)
+    for i in range(n):
+        acc = 0.0
+        for k in range(i - s1, i - s1 + size):
+            acc += y[min(max(k, 0), n - 1)]
+        out[i] = acc / size
+    return out
+
+
+#: Status codes of :func:`_features_kernel`.
+ST_LIMIT_CYCLE, ST_SETTLED, ST_FELL = 0, 1, 2
+STATUS_CODES = ("limit_cycle", "settled", "fell")
+#: Value order of :func:`_features_kernel`'s result (nan = None).
+KERNEL_VALUES = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity",
+                 "peak_to_peak", "neg_peak1", "neg_peak2", "neg_valley")
+
+
+@jit
+def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, smooth):
+    """The features of :func:`features`, compiled (also run by the batch evaluator).
+
+    ``u`` and ``v`` of length 0 stand for "not given".  Returns ``(status code,
+    values, cycles)`` with ``values`` in :data:`KERNEL_VALUES` order, nan where
+    undefined.
+    """
+    vals = np.full(10, np.nan)
+    empty_code = ST_FELL if fell else ST_SETTLED
+    n = len(t)
+    if n < 3:
+        return empty_code, vals, 0
+    m = t >= t[n - 1] - span - 1e-12
+    tw = t[m]
+    yw = y[m]
+    finite = np.isfinite(yw)
+    if not finite.all():
+        tw = tw[finite]
+        yw = yw[finite]
+        if len(yw) < 3:
+            return empty_code, vals, 0
+    if noise > 0.0 and len(yw) >= smooth:
+        # noisy measurements: a short centred moving average (default 9 samples,
+        # 45 ms at h = 5 ms, far shorter than any limit cycle) before peak search
+        yw = _moving_average(yw, smooth)
+    ptp = yw.max() - yw.min()
+    if len(u) > 0:
+        vals[4] = _abs_max(u[m])
+    if len(v) > 0:
+        vals[5] = _abs_max(v[m])
+    vals[6] = ptp
+    hyst = max(0.02 * 0.5 * ptp, 3.0 * noise)
+    up_t, up_i, _dn_t, dn_i = _crossings_kernel(tw, yw, hyst)
+    nup = len(up_t)
+    if fell:
+        # a falling run has no cycle shape: only the extremes are meaningful
+        return ST_FELL, vals, 0
+    if nup >= 2:
+        d = np.empty(nup - 1)
+        for i in range(nup - 1):
+            d[i] = up_t[i + 1] - up_t[i]
+        vals[3] = _pairwise_sum(d) / (nup - 1)
+    # positive half-cycles: an upward crossing followed by the next downward one
+    a, b = _half_cycles(up_i, dn_i)
+    p1, p2, va = _half_cycle_kernel(yw, a, b, noise, rel_prominence)
+    a, b = _half_cycles(dn_i, up_i)
+    n1, n2, nv = _half_cycle_kernel(-yw, a, b, noise, rel_prominence)
+    vals[0] = _finite_mean(p1)
+    vals[1] = _finite_mean(p2)
+    vals[2] = _finite_mean(va)
+    vals[7] = _finite_mean(n1)
+    vals[8] = _finite_mean(n2)
+    vals[9] = _finite_mean(nv)
+    cycles = 0
+    for x in p1:
+        if np.isfinite(x):
+            cycles += 1
+    if ptp < settle_tol or (nup < 2 and ptp < 10.0 * noise):
+        # at rest, or no cycle and no more motion than the noise drives
+        return ST_SETTLED, vals, cycles
+    return ST_LIMIT_CYCLE, vals, cycles
+
+
+def _from_kernel(code: int, vals: np.ndarray, cycles: int) -> LimitCycleFeatures:
+    """:class:`LimitCycleFeatures` from :func:`_features_kernel`'s result."""
+    f = [None if math.isnan(x) else float(x) for x in vals]
+    return LimitCycleFeatures(STATUS_CODES[code], *f[:7], *f[7:], int(cycles))
 
 
 def features(
@@ -234,57 +417,25 @@ def features(
     smooth : int
         Moving-average length (samples) used when ``noise > 0``.
     """
-    t = np.asarray(t, dtype=float)
-    y = np.asarray(theta, dtype=float)
+    t = np.ascontiguousarray(t, dtype=float)
+    y = np.ascontiguousarray(theta, dtype=float)
     if t.shape != y.shape or t.ndim != 1:
         raise ValueError("t and theta must be 1-D arrays of equal length")
     n = len(t)
-    empty = LimitCycleFeatures("fell" if fell else "settled", *([None] * 7))
     if n < 3:
-        return empty
+        return LimitCycleFeatures("fell" if fell else "settled", *([None] * 7))
     span = window if window is not None else 0.5 * (t[-1] - t[0])
     if not span > 0:
         raise ValueError(f"window must be > 0 s, got {window}")
-    m = t >= t[-1] - span - 1e-12
-    tw, yw = t[m], y[m]
-    finite = np.isfinite(yw)
-    if not finite.all():
-        tw, yw = tw[finite], yw[finite]
-        if len(yw) < 3:
-            return empty
-    if noise > 0.0 and len(yw) >= smooth:
-        # noisy measurements: a short centred moving average (default 9 samples,
-        # 45 ms at h = 5 ms, far shorter than any limit cycle) before peak search
-        from scipy.ndimage import uniform_filter1d  # heavy import, only when used
-
-        yw = uniform_filter1d(yw, size=smooth, mode="nearest")
-    ptp = float(yw.max() - yw.min())
-    max_u = float(np.max(np.abs(np.asarray(u, dtype=float)[m]))) if u is not None else None
-    max_v = (float(np.max(np.abs(np.asarray(arm_velocity, dtype=float)[m])))
-             if arm_velocity is not None else None)
-    hyst = max(0.02 * 0.5 * ptp, 3.0 * noise)
-    up_t, up_i, _dn_t, dn_i = _crossings(tw, yw, hyst)
-    period = float(np.mean(np.diff(up_t))) if len(up_t) >= 2 else None
-    # positive half-cycles: an upward crossing followed by the next downward one
-    yw = np.ascontiguousarray(yw, dtype=float)
-    p1, p2, va = _half_cycle_kernel(yw, *_half_cycles(up_i, dn_i), float(noise),
-                                    float(rel_prominence))
-    n1, n2, nv = _half_cycle_kernel(-yw, *_half_cycles(dn_i, up_i), float(noise),
-                                    float(rel_prominence))
-    if fell:
-        # a falling run has no cycle shape: only the extremes are meaningful
-        p1 = p2 = va = n1 = n2 = nv = np.empty(0)
-        period = None
-        status = "fell"
-    elif ptp < settle_tol or (len(up_t) < 2 and ptp < 10.0 * noise):
-        # at rest, or no cycle and no more motion than the noise drives
-        status = "settled"
-    else:
-        status = "limit_cycle"
-    return LimitCycleFeatures(
-        status, _mean(p1), _mean(p2), _mean(va), period, max_u, max_v, ptp,
-        _mean(n1), _mean(n2), _mean(nv), int(np.isfinite(p1).sum()),
-    )
+    none = np.empty(0)
+    us, vs = (none if a is None else np.ascontiguousarray(a, dtype=float)
+              for a in (u, arm_velocity))
+    for name, a in (("u", us), ("arm_velocity", vs)):
+        if a is not none and a.shape != t.shape:
+            raise ValueError(f"{name} must have the length of t ({n}), got {a.shape}")
+    return _from_kernel(*_features_kernel(t, y, us, vs, float(span), bool(fell), float(noise),
+                                          float(rel_prominence), float(settle_tol),
+                                          int(smooth)))
 
 
 def trajectory_features(traj, window: float | None = None) -> LimitCycleFeatures:

@@ -233,7 +233,7 @@ class Results:
     cases : list of (Case, row)
         The omega0 studies; a row with figures has ``trace``.
     workers : int
-        Local processes used (Dask workers with ``dask``).
+        Threads used (Dask workers with ``dask``).
     """
 
     tables: dict[str, list[dict[str, Any]]]
@@ -270,10 +270,8 @@ def run(workers: int | None = None, dask: str | None = None,
     Parameters
     ----------
     workers : int, optional
-        Local processes (Dask workers with ``dask="local"``).  Default: as
-        ``frictionlab sweep`` (:func:`frictionlab.sweep.auto_workers`): all
-        cores, unless the whole job is under about half a second of serial
-        work.
+        Threads of the compiled batch evaluator (Dask workers with
+        ``dask="local"``).  Default: all cores, as ``frictionlab sweep``.
     dask : {"local", "tcp://HOST:PORT"}, optional
         Run on Dask distributed.
     progress : callable, optional
@@ -283,11 +281,11 @@ def run(workers: int | None = None, dask: str | None = None,
     -------
     Results
     """
-    from .sweep import auto_workers, evaluate
+    from .sweep import evaluate
 
     groups, total = _jobs()
     if workers is None and dask is None:
-        workers = auto_workers(LUGRE_EQ21.config(), total, DURATION)
+        workers = os.cpu_count() or 1
     results: dict[tuple[Setting, bool], list[dict[str, Any]]] = {}
     done = 0
     for (setting, trace), points in groups.items():

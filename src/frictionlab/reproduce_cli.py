@@ -74,9 +74,8 @@ def register_cli(sub) -> None:
     p.add_argument("--out", default="reproduction", metavar="DIR",
                    help="report folder, created if missing (default: ./reproduction)")
     p.add_argument("--workers", type=int, default=None,
-                   help="local processes (default: all cores, unless the job is too small to "
-                        "pay a pool's start-up; 1 = in-process); with --dask local, the "
-                        "number of Dask workers")
+                   help="threads (default: all cores; 1 = the calling thread); with "
+                        "--dask local, the number of Dask workers")
     p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="run on Dask: start a LocalCluster, or join a running scheduler")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")

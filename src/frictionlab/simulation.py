@@ -449,6 +449,32 @@ def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Co
                       u_max=cfg.rig.u_max)
 
 
+def run_ticks(cfg: Config, duration: float | None = None, record: bool = True) -> int:
+    """Ticks of a run of ``duration`` s (default ``cfg.sim.duration``).
+
+    Raises
+    ------
+    ValueError
+        The duration is not positive and finite, is shorter than one sampling
+        period, or (``record``) is longer than a recorded run can hold
+        (:data:`MAX_TICKS`).
+    """
+    duration = cfg.sim.duration if duration is None else float(duration)
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    h = cfg.design.h
+    n = round(duration / h)
+    if n < 1:
+        raise ValueError(f"duration {duration:g} s is shorter than one sampling period "
+                         f"(design.h = {h:g} s)")
+    if record and n > MAX_TICKS:
+        raise ValueError(f"duration {duration:g} s at design.h = {h:g} s is {n:,} ticks; "
+                         f"a recorded run holds at most {MAX_TICKS:,} "
+                         f"({MAX_TICKS * NC * 8 / 2**30:.1f} GiB): shorten the duration "
+                         "or raise design.h")
+    return n
+
+
 def simulate_config(
     cfg: Config,
     duration: float | None = None,
@@ -473,19 +499,8 @@ def simulate_config(
     controller : Controller, optional
         Use this controller instead of the one ``cfg`` describes.
     """
-    duration = cfg.sim.duration if duration is None else float(duration)
-    if not (duration > 0 and math.isfinite(duration)):
-        raise ValueError(f"duration must be > 0 s, got {duration}")
+    n = run_ticks(cfg, duration, record)
     h = cfg.design.h
-    n = round(duration / h)
-    if n < 1:
-        raise ValueError(f"duration {duration:g} s is shorter than one sampling period "
-                         f"(design.h = {h:g} s)")
-    if record and n > MAX_TICKS:
-        raise ValueError(f"duration {duration:g} s at design.h = {h:g} s is {n:,} ticks; "
-                         f"a recorded run holds at most {MAX_TICKS:,} "
-                         f"({MAX_TICKS * NC * 8 / 2**30:.1f} GiB): shorten the duration "
-                         "or raise design.h")
     ctrl = controller or make_controller(cfg)
     gp, cp = ctrl.pack()
     x = np.zeros(5)

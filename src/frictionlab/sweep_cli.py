@@ -265,7 +265,7 @@ def register_cli(sub) -> None:
     p.add_argument("--window", type=float, default=None,
                    help="analyse the last S seconds of each run (default: the last half)")
     p.add_argument("--workers", type=int, default=None,
-                   help="local processes (default: all cores; 1 = in-process); with "
+                   help="threads (default: all cores; 1 = the calling thread); with "
                         "--dask local, the number of Dask workers")
     p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="run on Dask: start a LocalCluster, or join a running scheduler")

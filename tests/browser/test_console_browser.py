@@ -18,7 +18,9 @@ from frictionlab.design import PRESETS, design
 
 from .conftest import ConsoleProcess, wait_until
 
-pytestmark = pytest.mark.timeout(120)
+# a browser and a console server: slow; the tests share the console and go on from
+# each other's state, so under pytest-xdist they run in one worker, in order
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow, pytest.mark.xdist_group("browser")]
 
 
 @pytest.fixture(scope="module")

@@ -316,7 +316,6 @@ class _Console:
         self.pending: dict | None = None   # stopped recording awaiting its name
         self.saved: dict | None = None     # the last named recording
         self.exited = False
-        self.was_recording = False         # as of the last status
         self.lock = threading.Lock()
         #: the Experiments panel's last experiment: name, state (running, done,
         #: stopped, failed), estimates, message, log
@@ -456,18 +455,13 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
     def full_status() -> dict:
         st = dict(controller.status())
         with console.lock:
-            if not st.get("running"):
-                if console.was_recording and console.pending is None:
-                    # the run ended (a safety stop, say) while recording: the recording
-                    # was closed under an automatic name; ask the page for its name
-                    with contextlib.suppress(RuntimeError, ValueError, OSError):
-                        _pending(controller.record_stop(None))
-                console.was_recording = False
-            elif st.get("stop_reason") is None:
-                # only while the loop runs: once it has stopped, the log is closed (no
-                # longer recording) before the run counts as ended, and that must not
-                # hide the recording the run ended with
-                console.was_recording = bool(st.get("recording"))
+            if (console.pending is None and not st.get("running")
+                    and getattr(controller, "unnamed_recording", None) is not None):
+                # the run ended (a safety stop, say) while recording: the recording was
+                # closed under an automatic name; ask the page for its name (asked of the
+                # controller, not inferred from an earlier status that may be stale)
+                with contextlib.suppress(RuntimeError, ValueError, OSError):
+                    _pending(controller.record_stop(None))
         st["console"] = {
             "limit_cycle": hub.figures,
             "clients": len(hub.clients),

@@ -176,7 +176,12 @@ def _never(*args, **kwargs):  # pragma: no cover - validation only
 
 
 def cmd_limit_cycle(args) -> int:
-    from .limit_cycle import LimitCycleProblem, check_fit_keys, fit_limit_cycle
+    from .limit_cycle import (
+        LimitCycleProblem,
+        check_fit_keys,
+        fit_limit_cycle,
+        search_settings,
+    )
 
     experiments = load_measured(args.measured, args.sets)
     keys = check_fit_keys([k.strip() for k in args.fit.split(",") if k.strip()])
@@ -208,6 +213,7 @@ def cmd_limit_cycle(args) -> int:
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
                       evaluate=_never, stiction_above_coulomb=constrained)
+    search_settings(args.duration, args.window, args.search_duration, args.search_window)
     err = sys.stderr
     print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
           f"{', '.join(keys)} ({args.friction} friction, {args.duration:g} s runs)", file=err)
@@ -236,7 +242,8 @@ def cmd_limit_cycle(args) -> int:
                 weights=weights, duration=args.duration, window=args.window,
                 workers=args.workers, dask=args.dask, seed=args.seed, maxiter=args.maxiter,
                 popsize=args.popsize, rel_step=args.rel_step, progress=progress,
-                stiction_above_coulomb=constrained)
+                stiction_above_coulomb=constrained, search_duration=args.search_duration,
+                search_window=args.search_window)
     finally:
         signal.signal(signal.SIGTERM, previous)
     for w in result.warnings:
@@ -577,10 +584,15 @@ def register_cli(sub) -> None:
                    help="simulated seconds per run (default 30)")
     q.add_argument("--window", type=float, default=20.0,
                    help="features over the last S seconds (default 20)")
+    q.add_argument("--search-duration", type=float, default=None, metavar="S",
+                   help="simulated seconds per run of the global search only (default: "
+                        "--duration); the polish and standard errors use --duration")
+    q.add_argument("--search-window", type=float, default=None, metavar="S",
+                   help="feature window of the global search (default: --window scaled "
+                        "by --search-duration / --duration)")
     q.add_argument("--workers", type=int, default=None,
-                   help="parallel workers of the sweep engine (default: all cores, chosen "
-                        "once for the whole fit; in-process when the whole fit is under "
-                        "about half a second of simulation; 1 = in-process)")
+                   help="threads of the sweep engine (default: all cores; 1 = the "
+                        "calling thread); with --dask, the number of Dask workers")
     q.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
                    help="evaluate on a Dask cluster")
     q.add_argument("--allow-stiction-below-coulomb", action="store_true",

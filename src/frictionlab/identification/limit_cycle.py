@@ -30,11 +30,14 @@ Search
 1. Global: :func:`scipy.optimize.differential_evolution` over the bounds
    (in coordinates normalised to [0, 1]); each generation's population is
    evaluated in one batch through :func:`frictionlab.sweep.evaluate` (all
-   experiments of all members in one call, so a process pool or a Dask
-   cluster works on the whole generation).  The engine's workers are chosen
-   once for the whole fit (:func:`frictionlab.sweep.auto_workers` on the
-   fit's largest number of runs): a generation alone is too small to pay
-   for a process pool, the fit is not, and the pool is kept.
+   experiments of all members in one call of the compiled batch evaluator,
+   :mod:`frictionlab.batch`, on the engine's threads, or on a Dask cluster).
+   The engine's workers are chosen once for the whole fit
+   (:func:`frictionlab.sweep.auto_workers` on the fit's largest number of
+   runs: all cores, one thread for a fit under about half a second of
+   work).  The global search may run on shorter runs than the rest
+   (``search_duration``, ``search_window``): it only has to find the basin
+   of the optimum, which the polish then refines on full-length runs.
 2. Local: :func:`scipy.optimize.least_squares` (trust region reflective,
    within the bounds) from the best point, with a central-difference
    Jacobian whose relative step (default 1 %) lies well above the
@@ -821,6 +824,34 @@ def _max_runs(prob: LimitCycleProblem, maxiter: int, popsize: int) -> int:
     return len(prob.experiments) * (members * (maxiter + 1) + polish)
 
 
+def search_settings(duration: float, window: float | None, search_duration: float | None,
+                    search_window: float | None) -> tuple[float, float | None]:
+    """Run length and window of the global search (see :func:`fit_limit_cycle`).
+
+    Raises
+    ------
+    ConfigError
+        A search duration that is not positive, or a search window outside
+        (0, search duration].
+    """
+    if search_duration is None:
+        s_duration = float(duration)
+    else:
+        s_duration = float(search_duration)
+        if not (s_duration > 0 and math.isfinite(s_duration)):
+            raise ConfigError(f"--search-duration must be > 0 s, got {search_duration}")
+    if search_window is not None:
+        s_window: float | None = float(search_window)
+    elif window is None or search_duration is None:
+        s_window = window
+    else:
+        s_window = window * s_duration / duration
+    if s_window is not None and not (0 < s_window <= s_duration):
+        raise ConfigError(f"--search-window must be in (0, {s_duration:g}] s (the search "
+                          f"duration), got {s_window:g}")
+    return s_duration, s_window
+
+
 def fit_limit_cycle(
     experiments: Sequence[Experiment],
     keys: Sequence[str],
@@ -840,6 +871,8 @@ def fit_limit_cycle(
     evaluate: Evaluator | None = None,
     progress: Callable[[str, float], None] | None = None,
     stiction_above_coulomb: bool = True,
+    search_duration: float | None = None,
+    search_window: float | None = None,
 ) -> FitResult:
     """Fit parameter keys to measured limit-cycle features (see the module docstring).
 
@@ -853,8 +886,8 @@ def fit_limit_cycle(
         once for the whole fit by :func:`frictionlab.sweep.auto_workers`
         from the fit's largest number of runs (all cores unless the whole
         fit is under about half a second of serial work), not per
-        generation: a generation alone is too small to pay a pool's
-        start-up, the fit is not, and the pool is started once and kept.
+        generation.  With the default reduction these are threads of the
+        compiled batch evaluator.
     seed : int
         Seed of the global search.
     maxiter : int
@@ -866,6 +899,14 @@ def fit_limit_cycle(
     progress : callable, optional
         ``progress(stage, fraction, best_cost)`` with stage ``"global"`` (after
         every generation) or ``"local"`` (before and after the polish).
+    search_duration, search_window : float, optional
+        Run length and feature window (s) of the global search only; the
+        polish, the reported cost, the standard errors and the
+        identifiability check use ``duration`` and ``window``.  Shorter
+        search runs find the basin of the optimum for a fraction of the cost
+        (see docs/identification.md).  Default: ``duration``; the search
+        window defaults to ``window`` scaled by ``search_duration /
+        duration`` (``None``, the last half, stays ``None``).
 
     Returns
     -------
@@ -884,11 +925,18 @@ def fit_limit_cycle(
         from ..sweep import auto_workers
 
         prob.workers = auto_workers(prob.base, _max_runs(prob, maxiter, popsize), duration)
+    search = prob
+    s_duration, s_window = search_settings(duration, window, search_duration, search_window)
+    if (s_duration, s_window) != (prob.duration, prob.window):
+        search = LimitCycleProblem(experiments, keys, friction=friction, sets=sets,
+                                   bounds=bounds, weights=weights, duration=s_duration,
+                                   window=s_window, evaluate=evaluate, workers=prob.workers,
+                                   dask=dask, stiction_above_coulomb=stiction_above_coulomb)
     report = progress or (lambda stage, f, c: None)
 
     def cost_vec(xt: np.ndarray) -> np.ndarray:
         # vectorized DE: xt has shape (n, S)
-        res, _ = prob.evaluate_batch(prob.to_params(xt.T))
+        res, _ = search.evaluate_batch(search.to_params(xt.T))
         return np.sum(res**2, axis=1)
 
     gen = [0]
@@ -1001,7 +1049,7 @@ def fit_limit_cycle(
         correlation=corr,
         global_cost=global_cost,
         generations=int(de.nit),
-        evaluations=prob.nfev,
+        evaluations=prob.nfev + (search.nfev if search is not prob else 0),
         seconds=time.perf_counter() - t0,
         constraints=[f"{prob.keys[i_s]} >= {prob.keys[ic]}" for ic, i_s in prob.pairs],
         extra={"configs": prob.configs},

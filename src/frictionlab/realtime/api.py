@@ -419,6 +419,16 @@ class RealtimeController:
         self._unnamed_recording = None
         self._event("record_start")
 
+    @property
+    def unnamed_recording(self) -> dict | None:
+        """The recording the end of the run closed under an automatic name, or None.
+
+        ``{"dat": path, "csv": path, "rows": n}``, set before :attr:`running`
+        turns false and kept until :meth:`record_stop` takes it (or a new
+        recording starts): a console asks the operator for its name.
+        """
+        return self._unnamed_recording
+
     def record_stop(self, name: str | None = None) -> dict:
         """End the recording; save it as ``<log_dir>/<name>.dat`` and ``.csv``.
 

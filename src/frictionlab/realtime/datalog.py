@@ -443,8 +443,8 @@ class LogWriter:
         self._wake.set()
         if self._thread.is_alive():
             self._thread.join(timeout=10.0)
-        else:
-            self._drain()
+        if not self._thread.is_alive():
+            self._drain()  # anything left (a thread never started, or one that ended early)
         if self.recording:
             self.recording = False
             fut: Future = Future()
@@ -536,8 +536,11 @@ class LogWriter:
         while True:
             self._wake.wait(self.flush_interval)
             self._wake.clear()
+            # read the flag before draining: whatever was queued before close() set it
+            # (the loop's STOP row) is written by this drain, however the threads interleave
+            closing = self._closing
             self._drain()
-            if self._closing:
+            if closing:
                 return
             if self.meta_fn is not None and time.monotonic() >= next_meta:
                 next_meta = time.monotonic() + self.meta_interval

@@ -1,0 +1,304 @@
+r"""Compiled batch evaluation: many closed-loop runs reduced to their features in one call.
+
+The unit of work of sweeps and identification is one closed-loop run (Sec. 5)
+reduced to its limit-cycle features (Table 1's columns).  Run one at a time
+from Python, each costs the compiled simulation plus the Python around it
+(building the trajectory, slicing the window, the feature calls).  Here a
+whole batch of parameter sets - a sweep's chunk, one generation of the
+identification's global search - is packed into arrays once and handed to one
+compiled driver, which for every set runs the same compiled closed loop as
+:func:`frictionlab.simulation.simulate_config` (:func:`~frictionlab.simulation._run`:
+sensor model, controller step, plant tick) and the same compiled feature
+extraction as :func:`frictionlab.limit_cycles.features`
+(:func:`~frictionlab.limit_cycles._features_kernel`), with no Python per run.
+The features are those of :func:`frictionlab.simulation.run_features`, bit
+for bit (noise included: :func:`frictionlab.sensor.measure`'s noise is a
+function of the seed and the sample number, with no generator state to share
+between threads).
+
+Two drivers: :func:`_batch_serial` (one thread; the Dask and process-pool
+workers of :mod:`frictionlab.sweep`) and :func:`_batch_threads` (numba
+``prange`` over ``threads`` numba threads, the GIL released; the sets are
+dealt to the threads in turn, so that short runs - a pendulum that falls - do
+not pile up on one thread).  numba's ``workqueue`` threading layer (its
+fallback when neither OpenMP nor TBB is available) must not be entered by
+two Python threads at once; :func:`run` holds a lock.
+
+numba is imported on the first batch, as for every kernel
+(:mod:`frictionlab._jit`).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._jit import _njit, jit, jit_parallel
+from .config import Config
+from .controller import NS
+from .friction import KINDS, resolve_drift
+from .limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
+from .sensor import SensorParams
+from .simulation import NC, _pack_plant, _run, make_controller, make_sensor, run_ticks
+
+#: ``numba.prange`` once a parallel batch has run (:func:`_numba`); numba reads
+#: it when it compiles :func:`_batch_threads`, on that batch's first call.
+prange = range
+
+__all__ = ["Batch", "evaluate_rows", "max_threads", "prepare", "rows", "run"]
+
+#: Feature-extraction settings of :func:`frictionlab.limit_cycles.features`'s defaults.
+REL_PROMINENCE, SETTLE_TOL, SMOOTH = 0.02, 2e-3, 9
+#: Status code of a set whose window is not positive (an error row).
+_BAD_WINDOW = 3
+_FEATURE_INDEX = [KERNEL_VALUES.index(name) for name in FEATURES]
+
+
+@jit
+def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
+         buf, codes, vals, cycles):
+    """Run set ``i`` and store its status code, feature values and cycle count.
+
+    As :func:`frictionlab.simulation.run_features`: the closed loop for
+    ``nt[i]`` ticks recorded into ``buf``, then the features of the measured
+    angle over the window (``win[i]`` s, nan: the last half) by
+    :func:`frictionlab.limit_cycles.trajectory_features`'s rules.
+    """
+    x = np.zeros(5)
+    x[0] = x0[i]
+    s = s0[i].copy()
+    r = sens[i]
+    sp = SensorParams(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], int(r[8]))
+    done, fell_code, _mem, _x0 = _run(x, 0.0, nt[i], sub[i], rat[i], pp[i], fk[i], fp[i],
+                                      gp[i], cp[i], s, sp, 0, 0.0, fall[i], buf, True)
+    fell = fell_code == 1
+    for j in range(vals.shape[1]):
+        vals[i, j] = np.nan
+    cycles[i] = 0
+    if done < 3:
+        codes[i] = 2 if fell else 1
+        return
+    t = np.arange(done) * h[i]
+    w = win[i]
+    if np.isnan(w):
+        span = 0.5 * (t[done - 1] - t[0])
+    elif fell:
+        span = w
+    else:
+        span = min(w, t[done - 1])
+    if not span > 0:
+        codes[i] = _BAD_WINDOW
+        return
+    y = buf[:done, 0].copy()
+    u = buf[:done, 3].copy()
+    v = buf[:done, 5].copy()
+    code, fv, cyc = _features_kernel(t, y, u, v, span, fell, sens[i, 7], REL_PROMINENCE,
+                                     SETTLE_TOL, SMOOTH)
+    codes[i] = code
+    vals[i, :] = fv
+    cycles[i] = cyc
+
+
+@jit
+def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
+                  codes, vals, cycles):
+    """Every set of the batch in turn (one thread)."""
+    n = len(nt)
+    longest = 1
+    for i in range(n):
+        longest = max(longest, nt[i])
+    buf = np.empty((longest, NC))
+    for i in range(n):
+        _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
+             buf, codes, vals, cycles)
+
+
+@jit_parallel
+def _batch_threads(threads, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens,
+                   fall, win, codes, vals, cycles):
+    """The sets on ``threads`` numba threads: thread c runs sets c, c + threads, ..."""
+    n = len(nt)
+    for c in prange(threads):
+        longest = 1
+        for i in range(c, n, threads):
+            longest = max(longest, nt[i])
+        buf = np.empty((longest, NC))
+        for i in range(c, n, threads):
+            _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
+                 buf, codes, vals, cycles)
+
+
+@dataclass
+class Batch:
+    """Parameter sets packed for the compiled drivers.
+
+    ``points[k]`` is the point of set k; ``errors`` holds, by index into the
+    original point list, the message of every point that could not be packed
+    (invalid configuration or duration); ``index[k]`` is the original index
+    of set k.
+    """
+
+    points: list[Mapping[str, Any]]
+    index: list[int]
+    errors: dict[int, str]
+    arrays: tuple
+    window: float | None
+    codes: np.ndarray
+    vals: np.ndarray
+    cycles: np.ndarray
+    n_points: int
+
+
+def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None) -> tuple:
+    n = len(cfgs)
+    x0 = np.empty(n)
+    nt = np.empty(n, dtype=np.int64)
+    sub = np.empty(n, dtype=np.int64)
+    rat = np.empty(n, dtype=np.int64)
+    h = np.empty(n)
+    fk = np.empty(n, dtype=np.int64)
+    fall = np.empty(n)
+    win = np.full(n, np.nan if window is None else float(window))
+    pp, fp, gp, cp, s0, sens = [], [], [], [], [], []
+    for k, (cfg, ticks) in enumerate(zip(cfgs, durations, strict=True)):
+        ctrl = make_controller(cfg)
+        g, c = ctrl.pack()
+        gp.append(g)
+        cp.append(c)
+        s0.append(ctrl.init(cfg.sim.initial_angle))
+        pp.append(_pack_plant(cfg))
+        fp.append(resolve_drift(cfg.friction.pack(), ticks * cfg.design.h))
+        sens.append(np.array(make_sensor(cfg), dtype=float))
+        x0[k] = cfg.sim.initial_angle
+        nt[k] = ticks
+        sub[k] = cfg.substeps
+        rat[k] = cfg.pendulum_ratio
+        h[k] = cfg.design.h
+        fk[k] = KINDS.index(cfg.friction_kind)
+        fall[k] = cfg.sim.fall_angle
+
+    def stack(rows, width):
+        return np.ascontiguousarray(np.array(rows, dtype=float).reshape(n, width))
+
+    return (x0, nt, sub, rat, h, stack(pp, 5), fk, stack(fp, len(fp[0]) if n else 0),
+            stack(gp, len(gp[0]) if n else 0), stack(cp, len(cp[0]) if n else 0),
+            stack(s0, NS), stack(sens, len(SensorParams._fields)), fall, win)
+
+
+def prepare(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
+            window: float | None) -> Batch:
+    """Pack ``points`` (``{key: value}`` applied to ``base``) for :func:`run`.
+
+    A point whose configuration is invalid, or whose duration is, becomes an
+    error (the message a single run would raise).
+    """
+    cfgs, ticks, index, kept, errors = [], [], [], [], {}
+    for i, p in enumerate(points):
+        try:
+            cfg = base.with_values(p)
+            n = run_ticks(cfg, duration)
+        except Exception as exc:
+            errors[i] = f"{type(exc).__name__}: {exc}"
+            continue
+        cfgs.append(cfg)
+        ticks.append(n)
+        index.append(i)
+        kept.append(p)
+    n = len(cfgs)
+    return Batch(kept, index, errors, _pack(cfgs, ticks, window) if n else (), window,
+                 np.zeros(n, dtype=np.int64), np.full((n, len(KERNEL_VALUES)), np.nan),
+                 np.zeros(n, dtype=np.int64), len(points))
+
+
+def _numba():
+    """numba (imported after its cache directory is set), with ``prange`` bound."""
+    global prange
+    _njit()  # imports frictionlab._numba_cache, then numba
+    import numba
+
+    prange = numba.prange
+    return numba
+
+
+def max_threads() -> int:
+    """The most threads a batch can use (numba's ``NUMBA_NUM_THREADS``)."""
+    return int(_numba().config.NUMBA_NUM_THREADS)
+
+
+_lock = threading.Lock()
+
+
+def run(batch: Batch, threads: int = 1) -> Batch:
+    """Run every set of ``batch`` (in place; returns it).
+
+    ``threads`` above 1 runs the sets on that many numba threads (at most
+    :func:`max_threads`), with the GIL released.
+    """
+    if not batch.index:
+        return batch
+    out = (batch.codes, batch.vals, batch.cycles)
+    threads = max(1, min(int(threads), max_threads(), len(batch.index)))
+    if threads == 1:
+        _batch_serial(*batch.arrays, *out)
+        return batch
+    numba = _numba()
+    with _lock:
+        numba.set_num_threads(threads)
+        _batch_threads(threads, *batch.arrays, *out)
+    return batch
+
+
+def rows(batch: Batch, points: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Sweep rows of a run batch, in the order of ``points`` (the list it was prepared
+    from): the point, the seven features (``None`` where undefined), ``status``,
+    ``error``; a point that could not run is an ``error`` row."""
+    out: list[dict[str, Any] | None] = [None] * batch.n_points
+    for i, msg in batch.errors.items():
+        row = dict(points[i])
+        row.update(dict.fromkeys(FEATURES))
+        row["status"] = "error"
+        row["error"] = msg
+        out[i] = row
+    vals = batch.vals[:, _FEATURE_INDEX].tolist()
+    for k, i in enumerate(batch.index):
+        row = dict(points[i])
+        code = int(batch.codes[k])
+        if code == _BAD_WINDOW:
+            row.update(dict.fromkeys(FEATURES))
+            row["status"] = "error"
+            row["error"] = f"ValueError: window must be > 0 s, got {batch.window}"
+        else:
+            row.update({name: (v if math.isfinite(v) else None)
+                        for name, v in zip(FEATURES, vals[k], strict=True)})
+            row["status"] = STATUS_CODES[code]
+            row["error"] = None
+        out[i] = row
+    return out  # type: ignore[return-value]
+
+
+def evaluate_rows(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
+                  window: float | None, threads: int = 1) -> list[dict[str, Any]]:
+    """Rows of :func:`frictionlab.sweep.evaluate` with the default reduction, in one batch.
+
+    Parameters
+    ----------
+    base : Config
+        Configuration every point modifies.
+    points : sequence of mappings ``{key: value}``
+    duration, window : float or None
+        As for :func:`frictionlab.simulation.run_features`.
+    threads : int
+        numba threads (1: in the calling thread).
+
+    Returns
+    -------
+    list of dict
+        One row per point, as :func:`frictionlab.sweep.reduce_features` and
+        the sweep engine make it.
+    """
+    return rows(run(prepare(base, points, duration, window), threads), points)
