@@ -133,7 +133,8 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     host, port = rig_sim
     # a wide angle limit: a pause of this shared machine must not end the run early
     proc = popen(["run", "--headless", "--duration", "60", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)],
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  "--max-pause", "0.5", "--log-dir", str(tmp_path)],
                  stdout=subprocess.DEVNULL)
     try:
         csv, _meta = wait_running(tmp_path, proc, rows=300)
@@ -173,7 +174,8 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
 def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)])
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  "--max-pause", "0.5", "--log-dir", str(tmp_path)])
     try:
         wait_running(tmp_path, proc)
         proc.send_signal(sig)
@@ -361,7 +363,8 @@ def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp
 def test_ctrl_z_stops_the_run_then_suspends(tmp_path, rig_sim):
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)])
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  "--max-pause", "0.5", "--log-dir", str(tmp_path)])
     try:
         csv, _ = wait_running(tmp_path, proc)
         proc.send_signal(signal.SIGTSTP)
@@ -388,7 +391,8 @@ def test_a_suspended_controller_stops_on_resume_without_acting(tmp_path, rig_sim
     and on SIGCONT the loop stops (reason paused) without acting on its stale state."""
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--log-dir", str(tmp_path)])
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  "--max-pause", "0.15", "--log-dir", str(tmp_path)])
     try:
         csv, meta = wait_running(tmp_path, proc)
         proc.send_signal(signal.SIGSTOP)
@@ -432,6 +436,7 @@ def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
     host, port = rig_sim
     proc = subprocess.run([*CLI, "run", "--headless", "--duration", "60", "--json",
                            "--backend", f"udp://{host}:{port}", "--angle-limit", "1.2",
+                           "--silent-periods", "40", "--max-pause", "0.5",
                            "--log-dir", str(tmp_path)],
                           capture_output=True, text=True, timeout=120, preexec_fn=limit)
     assert proc.returncode == 1, proc.stderr

@@ -58,8 +58,11 @@ def stop(proc):
         proc.wait(10)
 
 
-#: Stops that a loaded 2-core test machine can cause (the rig-sim process or the loop not
-#: scheduled for 10 ms or more); the run is then repeated, up to twice.
+#: Slack for a loaded 2-core test machine: the rig-sim process or the loop not scheduled
+#: for 10 ms or more stops a run as rig_silent or paused, as it should on a rig.  What is
+#: tested here is the experiments, not those stops (tests/test_realtime_*): the runs get
+#: slack, and a run a stalled host stopped anyway is repeated, up to twice.
+SLACK = ("--silent-periods", "40", "--max-pause", "0.5")
 LOAD_STOPS = ("stopped before it finished: rig_silent", "stopped before it finished: paused")
 
 
@@ -68,7 +71,7 @@ def identify(name, backend, tmp_path, extra=()):
     for _ in range(3):
         r = subprocess.run([*CLI, "identify", "experiment", name, "--backend", backend,
                             "--log-dir", str(tmp_path), "--json", *OPTIONS[name], *sets,
-                            *extra], capture_output=True, text=True, timeout=300)
+                            *SLACK, *extra], capture_output=True, text=True, timeout=300)
         if r.returncode != 1 or not any(s in r.stderr for s in LOAD_STOPS):
             break
     return r

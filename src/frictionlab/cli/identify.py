@@ -344,6 +344,13 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
               f"(limits: arm speed {lim.max_speed:g} rad/s, travel {lim.max_travel:g} rad, "
               f"|u_DA| {lim.max_u_da:g}); Ctrl-C stops it with the motor at zero",
               file=err)
+    from ..realtime import Safety
+
+    try:
+        safety = Safety(silent_periods=args.silent_periods, max_pause=args.max_pause)
+    except ValueError as exc:
+        raise UsageError(str(exc).replace("safety.silent_periods", "--silent-periods")
+                         .replace("safety.max_pause", "--max-pause")) from None
     tty = err.isatty() and not args.quiet
     last = [None]
 
@@ -363,7 +370,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
                             realtime=not args.no_realtime, on_start=on_start,
                             poll=lambda e: poll(e, upd if tty else None),
                             on_prompt=lambda p: print(f">>> {p['text']}", file=err),
-                            hand=args.hand)
+                            hand=args.hand, safety=safety)
         except (RigError, OSError, RuntimeError) as exc:
             print(f"frictionlab identify experiment: error: {exc}", file=err)
             raise SystemExit(1) from None
@@ -674,6 +681,12 @@ def register_cli(sub) -> None:
                    help="stop when the arm is farther than this from its start (default 60)")
     g.add_argument("--max-u-da", type=float, default=0.5, metavar="U_DA",
                    help="largest |u_DA| commanded, u is clipped (default 0.5)")
+    g.add_argument("--silent-periods", type=int, default=2, metavar="N",
+                   help="stop (rig_silent) after N sample periods without a reading "
+                        "(default 2; as run's)")
+    g.add_argument("--max-pause", type=float, default=0.05, metavar="S",
+                   help="stop (paused) when the loop did not run for longer than S s "
+                        "(default 0.05; as run's)")
     g.add_argument("--no-realtime", action="store_true",
                    help="do not ask for SCHED_FIFO priority")
     g.add_argument("--hand", action="store_true",

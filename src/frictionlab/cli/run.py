@@ -100,6 +100,13 @@ def register_cli(sub) -> None:
                    help="stop when |theta| exceeds this (default 0.35 rad)")
     p.add_argument("--start-tolerance", type=float, default=0.15, metavar="RAD",
                    help="start only if |theta| <= this (default 0.15 rad; no swing-up)")
+    p.add_argument("--silent-periods", type=int, default=2, metavar="N",
+                   help="stop (rig_silent, motor zeroed) after N consecutive sample periods "
+                        "without a reading from the rig (default 2; raise it only for a rig "
+                        "or host known to stall, e.g. an emulator on a loaded machine)")
+    p.add_argument("--max-pause", type=float, default=0.05, metavar="S",
+                   help="stop (paused, motor zeroed) when the loop did not run for longer "
+                        "than S seconds (a suspended process, a stalled host; default 0.05)")
     p.add_argument("--gain-transition", type=float, default=2.0, metavar="S",
                    help="new state-feedback gains (a design change while running) replace "
                         "the running ones linearly over S seconds, so a switch in mid-cycle "
@@ -178,11 +185,14 @@ def cmd_run(args) -> int:
         raise UsageError(f"--port must be in 0..65535, got {args.port}")
     try:
         safety = Safety(angle_limit=args.angle_limit, start_tolerance=args.start_tolerance,
-                        gain_transition=args.gain_transition)
+                        gain_transition=args.gain_transition,
+                        silent_periods=args.silent_periods, max_pause=args.max_pause)
     except ValueError as exc:
         raise UsageError(str(exc).replace("safety.angle_limit", "--angle-limit")
                          .replace("safety.start_tolerance", "--start-tolerance")
-                         .replace("safety.gain_transition", "--gain-transition")) from None
+                         .replace("safety.gain_transition", "--gain-transition")
+                         .replace("safety.silent_periods", "--silent-periods")
+                         .replace("safety.max_pause", "--max-pause")) from None
     check_output_dir(args.log_dir, "--log-dir")
     flush_notes(args)
     with _RunSignals() as signals:

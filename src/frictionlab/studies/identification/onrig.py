@@ -50,7 +50,7 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
                realtime: bool = True, sim_lockstep: bool = False, on_start=None,
                poll=None, poll_interval: float = 0.5,
                scaling: RigScaling | None = None, on_prompt=None,
-               hand: bool = False) -> dict:
+               hand: bool = False, safety=None) -> dict:
     """Run ``experiment`` through the real-time loop; return the run's statistics.
 
     Parameters
@@ -80,6 +80,9 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
     hand : bool
         Let the rig play the operator's hand for each guided step
         (``rig-sim`` over UDP: :meth:`RealtimeController.hand`).
+    safety : Safety, optional
+        The loop's stops (:class:`~frictionlab.realtime.Safety`; default its
+        defaults).
 
     Returns
     -------
@@ -100,7 +103,8 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
     ctl = RealtimeController(cfg, backend, log_dir=log_dir, clock=clock,
                              realtime=realtime and not fake, manage_gc=not fake,
                              scaling=scaling or rig_scaling(cfg),
-                             sim_lockstep=sim_lockstep or fake, experiment=experiment)
+                             sim_lockstep=sim_lockstep or fake, experiment=experiment,
+                             safety=safety)
     if on_start is not None:
         on_start(ctl)
     try:
