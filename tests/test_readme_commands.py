@@ -55,6 +55,8 @@ PYTHON_FRAGMENTS = {
     ("compensation.md", "make_compensator"): "shows a call with the loop's signals as names",
     ("logs.md", "pd.read_parquet"): "needs pandas (not a dependency) and names a run's files",
 }
+#: Stop reasons a stalled host (not the command) causes in a real-time run.
+LOAD_STOPS = ("paused", "rig_silent")
 #: A run longer than this is a bug (the slowest documented command takes ~30 s).
 TIMEOUT = 600
 
@@ -182,8 +184,15 @@ def test_documented_command_runs_as_written(folders, doc, line, command):
     if argv is not None:  # the same command line, without paying the interpreter's start-up
         res = run_cli_in_process(argv, cwd=cwd, env={"MPLBACKEND": "Agg"})
     else:
-        res = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(),
-                             capture_output=True, text=True, timeout=TIMEOUT)
+        for _attempt in range(3):
+            res = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(),
+                                 capture_output=True, text=True, timeout=TIMEOUT)
+            # a real-time run that a stalled host stopped (as it must on a rig: the
+            # safety stops are tested in tests/test_realtime_*) is repeated; what is
+            # tested here is that the documented command works
+            if not (command.startswith("frictionlab run") and res.returncode == 1
+                    and any(f"stopped: {r}" in res.stderr for r in LOAD_STOPS)):
+                break
     where = f"{doc.name}:{line}: {command}"
     assert res.returncode == 0, f"{where}\nexit {res.returncode}\n{res.stderr[-3000:]}"
     if "--json" in command.split():

@@ -347,7 +347,9 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
     from ..realtime import Safety
 
     try:
-        safety = Safety(silent_periods=args.silent_periods, max_pause=args.max_pause)
+        safety = Safety(silent_periods=args.silent_periods,
+                        unread_limit=max(10, 5 * args.silent_periods),
+                        max_pause=args.max_pause)
     except ValueError as exc:
         raise UsageError(str(exc).replace("safety.silent_periods", "--silent-periods")
                          .replace("safety.max_pause", "--max-pause")) from None
@@ -682,8 +684,8 @@ def register_cli(sub) -> None:
     g.add_argument("--max-u-da", type=float, default=0.5, metavar="U_DA",
                    help="largest |u_DA| commanded, u is clipped (default 0.5)")
     g.add_argument("--silent-periods", type=int, default=2, metavar="N",
-                   help="stop (rig_silent) after N sample periods without a reading "
-                        "(default 2; as run's)")
+                   help="stop (rig_silent) after N sample periods with nothing from the "
+                        "rig, or 5N (at least 10) ticks of late replies (default 2; as run's)")
     g.add_argument("--max-pause", type=float, default=0.05, metavar="S",
                    help="stop (paused) when the loop did not run for longer than S s "
                         "(default 0.05; as run's)")

@@ -102,8 +102,9 @@ def register_cli(sub) -> None:
                    help="start only if |theta| <= this (default 0.15 rad; no swing-up)")
     p.add_argument("--silent-periods", type=int, default=2, metavar="N",
                    help="stop (rig_silent, motor zeroed) after N consecutive sample periods "
-                        "without a reading from the rig (default 2; raise it only for a rig "
-                        "or host known to stall, e.g. an emulator on a loaded machine)")
+                        "with nothing from the rig, or 5N (at least 10) ticks whose replies "
+                        "all came too late (default 2; raise it only for a rig or host known "
+                        "to stall, e.g. an emulator on a loaded machine)")
     p.add_argument("--max-pause", type=float, default=0.05, metavar="S",
                    help="stop (paused, motor zeroed) when the loop did not run for longer "
                         "than S seconds (a suspended process, a stalled host; default 0.05)")
@@ -186,7 +187,9 @@ def cmd_run(args) -> int:
     try:
         safety = Safety(angle_limit=args.angle_limit, start_tolerance=args.start_tolerance,
                         gain_transition=args.gain_transition,
-                        silent_periods=args.silent_periods, max_pause=args.max_pause)
+                        silent_periods=args.silent_periods,
+                        unread_limit=max(10, 5 * args.silent_periods),
+                        max_pause=args.max_pause)
     except ValueError as exc:
         raise UsageError(str(exc).replace("safety.angle_limit", "--angle-limit")
                          .replace("safety.start_tolerance", "--start-tolerance")
