@@ -37,6 +37,12 @@ def cli():
     return run
 
 
+#: Modules whose tests drive a real-time loop in real time against another process
+#: (marker ``realtime``: scripts/test runs them one at a time after the rest).
+REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
+                    "tests/test_rig_experiments_udp.py")
+
+
 def pytest_collection_modifyitems(config, items):
     """The modules holding slow tests first.
 
@@ -44,6 +50,9 @@ def pytest_collection_modifyitems(config, items):
     documents' commands run in order) and a module-scoped fixture is set up
     once in a serial run.
     """
+    for item in items:
+        if item.nodeid.startswith(REALTIME_MODULES) or "udp" in item.name:
+            item.add_marker(pytest.mark.realtime)
     slow = {item.nodeid.split("::")[0] for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.nodeid.split("::")[0] not in slow)
 

@@ -39,8 +39,9 @@ for _name in OPTIONS:
 
 def start_rig_sim(friction="classical", extra=()):
     sets = [a for s in RIG_SETS for a in ("--set", s)]
+    # the rig's watchdog with the same slack as the loop's stops (SLACK)
     proc = subprocess.Popen([*CLI, "rig-sim", "--port", "0", "--json", "--friction", friction,
-                             *sets, *extra],
+                             "--watchdog", "0.5", *sets, *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = proc.stdout.readline()
     if not line:
