@@ -40,7 +40,8 @@ def cli():
 #: Modules whose tests drive a real-time loop in real time against another process
 #: (marker ``realtime``: scripts/test runs them one at a time after the rest).
 REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
-                    "tests/test_rig_experiments_udp.py")
+                    "tests/test_rig_experiments_udp.py",
+                    "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop")
 
 
 def pytest_collection_modifyitems(config, items):

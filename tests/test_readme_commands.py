@@ -118,24 +118,11 @@ def test_the_documents_show_commands_and_every_skip_is_used():
     assert len(skipped) <= 12, skipped
 
 
-@pytest.fixture(scope="session")
-def folders(tmp_path_factory):
-    """One working folder per document, with a copy of examples/.
-
-    Session-scoped: a pytest-xdist worker may run other modules' tests between
-    a document's lines, and a module-scoped folder would then be made anew in
-    the middle of the document."""
-    made = {}
-
-    def get(doc: Path) -> Path:
-        if doc not in made:
-            d = tmp_path_factory.mktemp(doc.stem)
-            shutil.copytree(ROOT / "examples", d / "examples")
-            (d / "docs" / "figures").mkdir(parents=True)
-            made[doc] = d
-        return made[doc]
-
-    return get
+def _folder(tmp_path: Path) -> Path:
+    """A working folder for one document, with a copy of examples/."""
+    shutil.copytree(ROOT / "examples", tmp_path / "examples")
+    (tmp_path / "docs" / "figures").mkdir(parents=True)
+    return tmp_path
 
 
 _SHELL_SYNTAX = re.compile(r"[|&;<>()$`*?{}\\!]")
@@ -172,14 +159,7 @@ def _env() -> dict:
     return env
 
 
-# the lines of one document run in order in one folder: under pytest-xdist, on one worker
-# (``--dist loadgroup``, as scripts/test runs it)
-@pytest.mark.slow
-@pytest.mark.parametrize("doc,line,command", [
-    pytest.param(p, n, c, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
-    for p, n, c in COMMANDS if not skip_reason(c)])
-def test_documented_command_runs_as_written(folders, doc, line, command):
-    cwd = folders(doc)
+def _run_command(cwd: Path, doc: Path, line: int, command: str) -> None:
     argv = plain_frictionlab(command)
     if argv is not None:  # the same command line, without paying the interpreter's start-up
         res = run_cli_in_process(argv, cwd=cwd, env={"MPLBACKEND": "Agg"})
@@ -216,14 +196,28 @@ def _fragment(doc: Path, text: str) -> bool:
     return any(doc.name == name and marker in text for name, marker in PYTHON_FRAGMENTS)
 
 
+#: Per document: its command lines (not skipped), then its Python blocks (not fragments).
+WORK = {p: ([(n, c) for d, n, c in COMMANDS if d == p and not skip_reason(c)],
+            [(n, t) for d, n, t in PYTHON if d == p and not _fragment(d, t)])
+        for p in DOCUMENTS}
+
+
+# one test per document: its lines depend on each other (a file one writes, the next
+# reads), so they run in order, in one folder, in one process (under pytest-xdist a
+# group of separate tests was seen split across workers)
 @pytest.mark.slow
-@pytest.mark.parametrize("doc,line,code", [
-    pytest.param(p, n, t, id=f"{p.name}:{n}", marks=pytest.mark.xdist_group(f"doc-{p.name}"))
-    for p, n, t in PYTHON if not _fragment(p, t)])
-def test_documented_python_runs(folders, doc, line, code):
-    res = subprocess.run([sys.executable, "-c", code], cwd=folders(doc), env=_env(),
-                         capture_output=True, text=True, timeout=TIMEOUT)
-    assert res.returncode == 0, f"{doc.name}:{line}\n{res.stderr[-3000:]}"
+@pytest.mark.timeout(1800)
+@pytest.mark.parametrize("doc", [pytest.param(p, id=p.name) for p in DOCUMENTS
+                                 if WORK[p][0] or WORK[p][1]])
+def test_documented_commands_and_python_run_as_written(tmp_path, doc):
+    cwd = _folder(tmp_path)
+    commands, python = WORK[doc]
+    for line, command in commands:
+        _run_command(cwd, doc, line, command)
+    for line, code in python:
+        res = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=_env(),
+                             capture_output=True, text=True, timeout=TIMEOUT)
+        assert res.returncode == 0, f"{doc.name}:{line}\n{res.stderr[-3000:]}"
 
 
 def test_every_python_fragment_exemption_is_used():
