@@ -9,7 +9,7 @@ browser launch included) from ``/api/status`` and presses Exit.  ``--no-browser`
 measures the same without a page connected (the server still runs).
 
 Prints the figures; the last line is JSON: the statistics of
-``frictionlab run --headless --json`` (INTERFACE.md) plus ``console`` (frames
+``frictionlab run --headless --json`` plus ``console`` (frames
 sent and received, frame rate, samples the console dropped).
 
     .venv/bin/python benchmarks/console.py --duration 120 [--backend udp] [--no-browser]

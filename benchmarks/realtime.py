@@ -8,7 +8,7 @@ What it does, per run:
    pinned to every CPU except the one the loop and the rig are pinned to
    (``--cpu auto``: the last CPU);
 3. runs ``frictionlab run --headless --backend udp://127.0.0.1:PORT
-   --duration S --json`` and reads the INTERFACE statistics it prints and
+   --duration S --json`` and reads the statistics it prints and
    the fuller ones of the run's JSON sidecar.
 
 Before each run, with the other core already busy, a plain periodic timer
@@ -18,7 +18,7 @@ the loop does, and nothing else) measures what the host itself allows at
 that moment: its wake-up jitter and missed periods are the floor under the
 loop's figures (``--baseline 0`` skips it).
 
-Figures per run (INTERFACE.md's, plus): ``missed_fraction`` (missed /
+Figures per run (those of ``run --json``, plus): ``missed_fraction`` (missed /
 scheduled ticks), ``max_stall_ms`` and ``unaccounted_stalls_over_50ms``
 (stalls longer than 50 ms not covered by the host's steal time),
 ``dropped_log_samples``, ``rig_us`` (request-to-reply time of the UDP

@@ -423,8 +423,9 @@ class ControlScaling(RigExperiment):
             self.progress = (i + 1) / len(self.levels)
 
 
-class VelocityScale(RigExperiment):
-    """App. B.3: P velocity loop at ``references`` (each +r then -r), held ``hold`` s."""
+class VelocityScale(Stribeck):
+    """App. B.3: P velocity loop at ``references`` (each +r then -r), held ``hold`` s
+    (the schedule of :class:`Stribeck`, its own references and signals)."""
 
     name = "velocity-scale"
     signals = ("t", "arm_m", "v")
@@ -432,23 +433,7 @@ class VelocityScale(RigExperiment):
     def __init__(self, h, u_scale=-0.022, limits=None, *,
                  references: Sequence[float] = VELOCITY_REFERENCES, gain: float = 20.0,
                  hold: float = 2.0):
-        super().__init__(h, u_scale, limits)
-        check_range("gain", gain, 0.0, 1e4, lo_open=True)
-        check_range("hold", hold, 0.0, 60.0, lo_open=True)
-        self.references = sorted(_levels("references", references, positive=True))
-        self.gain, self.hold_s = float(gain), float(hold)
-
-    def schedule(self):
-        n = 2 * len(self.references)
-        i = 0
-        for r in self.references:
-            for d in (1.0, -1.0):
-                self.phase = f"velocity loop at {d * r:g} rad/s"
-                yield from self.velocity_loop(d * r, self.gain, self.hold_s)
-                i += 1
-                self.progress = i / n
-        self.phase = "stopping"
-        yield from self.coast()
+        super().__init__(h, u_scale, limits, references=references, gain=gain, hold=hold)
 
 
 class AngleScales(RigExperiment):
