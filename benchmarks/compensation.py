@@ -6,10 +6,10 @@ Measures:
   noise 0.002) per compensator (``none``, ``coulomb``, ``classical``,
   ``lugre``): what the compensator adds to the compiled loop (minimum of
   ``--repeats`` runs after a warm-up);
-* ``api_step_us`` - one :meth:`frictionlab.compensation.Compensator.step`
+* ``api_step_us`` - one :meth:`frictionlab.studies.compensation.Compensator.step`
   call from Python (LuGre; the per-tick cost of the public API outside the
   compiled loop), mean over 20000 calls;
-* ``tune_s`` - ``frictionlab.compensation.tune`` over the default LuGre grid
+* ``tune_s`` - ``frictionlab.studies.compensation.tune`` over the default LuGre grid
   (64 points, 30 s runs) in-process (``workers=1``) and on the sweep engine's
   process pool with ``--workers`` processes (default 2);
 * ``adaptive`` - the acceptance figures of the adaptive compensator
@@ -52,10 +52,10 @@ import time
 
 import numpy as np
 
-from frictionlab.compensation import make_compensator, tune
 from frictionlab.config import build_config
-from frictionlab.limit_cycles import trajectory_features
-from frictionlab.simulation import simulate_config
+from frictionlab.model.limit_cycles import trajectory_features
+from frictionlab.model.simulation import simulate_config
+from frictionlab.studies.compensation import make_compensator, tune
 
 NOISE = 0.002
 #: The plant's start levels (eq. 21) as compensator settings.

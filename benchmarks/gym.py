@@ -13,7 +13,7 @@ Measures, single-threaded, environment steps per second of:
   (``gymnasium.make_vec``) of N copies: all plants in one compiled loop;
 * ``vector_speedup_N`` - native over sync;
 * ``plant_tick_steps_per_s`` - the plant alone: the largest N plants advanced by
-  :func:`frictionlab.simulation.plant_tick` in one compiled loop, the upper
+  :func:`frictionlab.model.simulation.plant_tick` in one compiled loop, the upper
   bound of any batched environment;
 * ``kernel_fraction`` - the plant's share of one direct env step
   (``env_steps_per_s / plant_tick_steps_per_s``).
@@ -43,10 +43,10 @@ import gymnasium
 import numpy as np
 
 import frictionlab.gym as fgym
-from frictionlab._jit import jit
 from frictionlab.config import build_config
-from frictionlab.friction import KINDS
-from frictionlab.simulation import _pack_plant, plant_tick
+from frictionlab.model._jit import jit
+from frictionlab.model.friction import KINDS
+from frictionlab.model.simulation import _pack_plant, plant_tick
 
 SETS = ["sim.noise=0.002", "sim.quantization=1"]
 

@@ -1,6 +1,6 @@
 r"""Limit-cycle identification benchmark: two experiments, four free keys.
 
-Runs :func:`frictionlab.identification.fit_limit_cycle` exactly as
+Runs :func:`frictionlab.studies.identification.fit_limit_cycle` exactly as
 ``frictionlab identify limit-cycle`` does with its defaults (30 s runs,
 features over the last 20 s, differential evolution with 40 generations at
 most and a population of 8 per key, then the least-squares polish and the
@@ -17,9 +17,9 @@ Jacobian for the standard errors), on two problems:
   time, the estimates with standard errors, and the cost.
 
 The target of issue 5 is under 2 minutes per fit on the 2-core machine.  The
-evaluations go through :func:`frictionlab.sweep.evaluate` with ``--workers``
+evaluations go through :func:`frictionlab.studies.sweep.evaluate` with ``--workers``
 (default: all cores), i.e. the compiled batch evaluator
-(:mod:`frictionlab.batch`) on numba threads: one generation of the global
+(:mod:`frictionlab.studies.batch`) on numba threads: one generation of the global
 search is one compiled call.  The synthetic fit is repeated in-process
 (``synthetic_inprocess``, ``workers = 1``: the same batches on one thread).
 
@@ -56,8 +56,8 @@ import time
 from pathlib import Path
 
 from frictionlab.config import build_config
-from frictionlab.identification.limit_cycle import fit_limit_cycle, parse_experiments
-from frictionlab.simulation import run_features
+from frictionlab.model.simulation import run_features
+from frictionlab.studies.identification.limit_cycle import fit_limit_cycle, parse_experiments
 
 TRUTH = {"friction.coulomb": 1.35, "friction.stiction": 2.1, "plant.omega0": 7.1,
          "plant.input_gain": 1.1}
@@ -112,7 +112,7 @@ def run(measured: dict, workers: int | None, seed: int, **kw) -> tuple[dict, flo
 def _per_run_pool(base, points, **kw):
     """The previous engine: a Python-driven run and feature extraction per set, in a
     process pool (a custom ``reduce`` runs there)."""
-    from frictionlab.sweep import evaluate, reduce_features
+    from frictionlab.studies.sweep import evaluate, reduce_features
 
     kw["workers"] = kw.get("workers") or os.cpu_count() or 1
     return evaluate(base, points, reduce=reduce_features, **kw)
@@ -162,7 +162,7 @@ def main() -> None:
     workers = args.workers
     cpus = os.cpu_count() or 1
     # load the compiled code (and start the per-run pool) outside the timed fits
-    from frictionlab.sweep import evaluate, reduce_features
+    from frictionlab.studies.sweep import evaluate, reduce_features
 
     t0 = time.perf_counter()
     evaluate(build_config(), [{"friction.coulomb": 1.5}] * (2 * cpus), duration=2.0,

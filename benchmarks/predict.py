@@ -7,16 +7,16 @@ F_S 2.3 and F_S 1.9..2.7 at F_C 1.5; fast design with the zero-velocity band
 
 * the reference: a 300 s run of ``simulate`` with the features over its last
   200 s;
-* ``orbit``: :func:`frictionlab.periodic.periodic_orbit` (seed transient,
+* ``orbit``: :func:`frictionlab.model.periodic.periodic_orbit` (seed transient,
   Newton, Floquet multipliers, features) -- its wall time and its largest
   relative feature error against the reference;
-* ``sim D``: :func:`frictionlab.simulation.run_features` over D s with the
+* ``sim D``: :func:`frictionlab.model.simulation.run_features` over D s with the
   features over the last D/2 s (the unit of work of sweeps and
   identification; they use D = 30-40 s) for D in 5, 10, 20, 40 s -- wall time
   and error;
 * ``sim at orbit accuracy``: the shortest of those runs whose error is at most
   the orbit's (the orbit's accuracy matched by plain simulation);
-* ``df``: the describing function (:func:`frictionlab.predict.describing_function`).
+* ``df``: the describing function (:func:`frictionlab.studies.predict.describing_function`).
 
 Timings are the minimum over ``--repeats`` calls after a warm-up (numba
 compilation), thread pools pinned to one thread.  The last line is a JSON
@@ -42,10 +42,10 @@ import statistics
 import time
 
 from frictionlab.config import build_config
-from frictionlab.limit_cycles import FEATURES
-from frictionlab.periodic import periodic_orbit
-from frictionlab.predict import describing_function
-from frictionlab.simulation import run_features
+from frictionlab.model.limit_cycles import FEATURES
+from frictionlab.model.periodic import periodic_orbit
+from frictionlab.model.simulation import run_features
+from frictionlab.studies.predict import describing_function
 
 DURATIONS = (5.0, 10.0, 20.0, 40.0)
 

@@ -10,8 +10,8 @@ Measures:
 * ``seconds`` - the time the command itself reports (from parsing its
   arguments to the last file written), for the fastest run;
 * ``runs_s`` and ``report_s`` - in this process, after a warm-up:
-  :func:`frictionlab.reproduce.run` (every closed-loop run) and
-  :func:`frictionlab.reproduce.write_report` (report and figures), minimum over
+  :func:`frictionlab.studies.reproduce.run` (every closed-loop run) and
+  :func:`frictionlab.studies.reproduce.write_report` (report and figures), minimum over
   the repeats;
 * each of the above with ``--workers 2`` (the local pool) as well as the
   default (the engine's choice, in-process for a job this small).
@@ -61,7 +61,7 @@ def command_times(repeats: int, extra: list[str]) -> tuple[float, float, float]:
 
 def inprocess_times(repeats: int, workers: int | None) -> tuple[float, float]:
     """(min of run(), min of write_report()) after a warm-up, in this process."""
-    from frictionlab.reproduce import run, write_report
+    from frictionlab.studies.reproduce import run, write_report
 
     run(workers)  # warm-up: the numba cache, a pool's start-up
     runs, reports = [], []

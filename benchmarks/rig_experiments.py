@@ -30,10 +30,10 @@ import tempfile
 import time
 
 from frictionlab.config import build_config
-from frictionlab.identification.onrig import analyse_run, make_rig_experiment, run_on_rig
 from frictionlab.realtime import FakeClock
 from frictionlab.realtime.rigs import FramedRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
+from frictionlab.studies.identification.onrig import analyse_run, make_rig_experiment, run_on_rig
 
 TRUE = {"friction.stiction": 1.9, "friction.coulomb": 1.25, "plant.omega0": 6.25,
         "plant.input_gain": 0.82, "sim.initial_angle": math.pi, "sim.seed": 3,

@@ -3,7 +3,7 @@ r"""Simulator benchmark: compiled closed loop vs a plain scipy ``solve_ivp`` loo
 Measures, single-threaded and side by side in one process:
 
 * ``classical_ms`` - a 30 s closed-loop run of
-  :func:`frictionlab.simulation.simulate_config` with the fast design and the
+  :func:`frictionlab.model.simulation.simulate_config` with the fast design and the
   classical friction model eq. (17) at eq. (20)'s F_S = 2.3, F_C = 1.5, with
   the zero-velocity band 0.03 rad/s the thesis needed for stiction (Sec. 5.2);
 * ``lugre_ms`` - the same with the LuGre plant friction at its defaults,
@@ -12,16 +12,16 @@ Measures, single-threaded and side by side in one process:
 * ``lugre_k1_ms`` - the same with eq. (21)'s k = 1 acting in the plant
   (eq. 19, e = -theta), and ``lugre_k1_cost`` = ``lugre_k1_ms / lugre_ms``;
 * ``scipy_ms`` - the classical case with :func:`scipy_closed_loop` below: the
-  same controller (:func:`frictionlab.controller.controller_step`, the code
-  :meth:`Controller.step` runs), the same plant (:func:`frictionlab.plant.rhs`
-  with the friction of :mod:`frictionlab.friction` evaluated inside the
+  same controller (:func:`frictionlab.model.controller.controller_step`, the code
+  :meth:`Controller.step` runs), the same plant (:func:`frictionlab.model.plant.rhs`
+  with the friction of :mod:`frictionlab.model.friction` evaluated inside the
   right-hand side), u held over each sample, ``solve_ivp`` (RK45, rtol 1e-6,
   scipy's default atol 1e-6) restarted every sample, timed over the full 30 s
   by default (``--scipy-duration`` shortens the timed span; the time is then
   scaled linearly to 30 s, and the output says so);
 * ``speedup_vs_scipy`` - ``scipy_ms / classical_ms``;
 * ``feature_error_vs_fine`` - the largest relative difference of the seven
-  limit-cycle features (:data:`frictionlab.limit_cycles.FEATURES`) between a
+  limit-cycle features (:data:`frictionlab.model.limit_cycles.FEATURES`) between a
   run with the default integration steps (``sim.substeps`` and
   ``sim.pendulum_steps``) and one with 20 times as many of both, over both
   friction models and both designs, LuGre with sigma0 = 1000 (the stiff
@@ -62,11 +62,11 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from frictionlab.config import Config, build_config
-from frictionlab.controller import controller_step
-from frictionlab.friction import classical_force, lugre_dz, lugre_force
-from frictionlab.limit_cycles import FEATURES, features, trajectory_features
-from frictionlab.plant import rhs
-from frictionlab.simulation import make_controller, simulate_config
+from frictionlab.model.controller import controller_step
+from frictionlab.model.friction import classical_force, lugre_dz, lugre_force
+from frictionlab.model.limit_cycles import FEATURES, features, trajectory_features
+from frictionlab.model.plant import rhs
+from frictionlab.model.simulation import make_controller, simulate_config
 
 DURATION = 30.0
 #: Sec. 5.2: the band the thesis widened to 0.03 rad/s to see stiction.

@@ -5,12 +5,12 @@ The sweep: 1,000 parameter sets, a 40 x 25 grid of ``friction.coulomb``
 (20)'s F_C = 1.5, F_S = 2.3, each a 30 s closed-loop run with the fast design
 (eqs. 13-14) and the classical plant friction eq. (17) with the zero-velocity
 band 0.03 rad/s of Sec. 5.2, reduced to its limit-cycle features by
-:func:`frictionlab.sweep.evaluate` - the code ``frictionlab sweep`` runs.
+:func:`frictionlab.studies.sweep.evaluate` - the code ``frictionlab sweep`` runs.
 
 Figures (sets per second of wall time):
 
 * ``sets_per_s`` - the default backend, the compiled batch evaluator
-  (:mod:`frictionlab.batch`) on numba threads, one per core
+  (:mod:`frictionlab.studies.batch`) on numba threads, one per core
   (``workers=None``);
 * ``dask_sets_per_s`` - a Dask ``LocalCluster`` with one single-threaded
   worker process per core (``dask="local"``), each evaluating its chunks with
@@ -68,8 +68,8 @@ import time
 import psutil
 
 from frictionlab.config import Config, build_config
-from frictionlab.simulation import simulate_config
-from frictionlab.sweep import evaluate, make_points, parse_vary, reduce_features, shutdown
+from frictionlab.model.simulation import simulate_config
+from frictionlab.studies.sweep import evaluate, make_points, parse_vary, reduce_features, shutdown
 
 DURATION = 30.0
 N_SETS = 1000

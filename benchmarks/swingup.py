@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from frictionlab.config import build_config
-from frictionlab.swingup_sim import simulate_swingup, swingup_outcome
+from frictionlab.studies.swingup_sim import simulate_swingup, swingup_outcome
 
 #: The omega0 the plants' natural frequencies are drawn around (and the default design's).
 NOMINAL_OMEGA0 = 6.8

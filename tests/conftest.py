@@ -21,7 +21,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 @pytest.fixture(scope="session")
 def fast_design():
-    from frictionlab.design import design
+    from frictionlab.model.design import design
 
     return design("fast")
 

@@ -13,7 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from frictionlab.adaptive import (
+from frictionlab.config import ConfigValueError, build_config
+from frictionlab.model.adaptive import (
     A_ADAPTING,
     A_BAD,
     A_PRESLIDING,
@@ -23,14 +24,13 @@ from frictionlab.adaptive import (
     max_gain,
     regressor,
 )
-from frictionlab.config import ConfigValueError, build_config
-from frictionlab.controller import (
+from frictionlab.model.controller import (
     S_ADAPT,
     S_FC_HAT,
     S_FS_HAT,
     controller_step,
 )
-from frictionlab.friction import (
+from frictionlab.model.friction import (
     P_FC,
     P_FCN,
     P_FS,
@@ -40,7 +40,7 @@ from frictionlab.friction import (
     drifted_params,
     resolve_drift,
 )
-from frictionlab.simulation import SimulatedPlant, make_controller, simulate_config
+from frictionlab.model.simulation import SimulatedPlant, make_controller, simulate_config
 
 H = 0.005
 L1 = 0.21
@@ -298,7 +298,7 @@ def test_adaptation_follows_a_drifting_plant_in_closed_loop():
 def test_python_api_runs_the_same_law_as_the_controller():
     """make_compensator("adaptive"): init/step with explicit state, the same compiled
     law; its gains are checked for its own h."""
-    from frictionlab.compensation import AdaptiveCompensator, make_compensator
+    from frictionlab.studies.compensation import AdaptiveCompensator, make_compensator
 
     c = make_compensator("adaptive", coulomb=1.0, adaptation_distance=0.0)
     assert isinstance(c, AdaptiveCompensator)

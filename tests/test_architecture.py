@@ -143,7 +143,7 @@ def test_the_model_imports_only_numpy_scipy_numba_and_the_standard_library():
 
 def _unresolved(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
     """The frictionlab modules ``name`` imports that do not exist at their path
-    (a former path, say, which only the aliases of frictionlab._aliases serve)."""
+    (a former module path, say, that no longer exists)."""
     tree = ast.parse(path.read_text(), str(path))
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out: set[str] = set()

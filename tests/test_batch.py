@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from frictionlab import batch
 from frictionlab.config import build_config
-from frictionlab.limit_cycles import FEATURES, _pairwise_sum
-from frictionlab.simulation import run_features
+from frictionlab.model.limit_cycles import FEATURES, _pairwise_sum
+from frictionlab.model.simulation import run_features
+from frictionlab.studies import batch
 
 # (design, plant friction, compensation, sets): every plant friction model, both
 # designs, measurement noise on, a compensator, and a run that falls

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
-from frictionlab.simulation import simulate_config
+from frictionlab.model.simulation import simulate_config
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "simulate.py"
 
@@ -111,7 +111,7 @@ def test_baseline_rejects_what_it_does_not_model(bench):
 
 
 def test_feature_errors_relative_to_fine(bench):
-    from frictionlab.limit_cycles import FEATURES, LimitCycleFeatures
+    from frictionlab.model.limit_cycles import FEATURES, LimitCycleFeatures
 
     fine = LimitCycleFeatures("limit_cycle", *[2.0] * len(FEATURES))
     coarse = LimitCycleFeatures("limit_cycle", 2.01, *[2.0] * (len(FEATURES) - 2), None)

@@ -13,7 +13,7 @@ import pytest
 
 from frictionlab.cli import build_parser, main
 from frictionlab.config import build_config, valid_keys
-from frictionlab.design import preset
+from frictionlab.model.design import preset
 
 
 def _run(capsys, *argv):

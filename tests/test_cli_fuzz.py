@@ -81,21 +81,21 @@ def _fake_controller(cfg, backend="sim", *args, **kwargs):
 WORK = {
     ("design",): (),
     ("keys",): (),
-    ("simulate",): (("frictionlab.simulation", "simulate_config", _reach),),
-    ("sweep",): (("frictionlab.sweep", "iter_evaluate", _reach),
-                 ("frictionlab.sweep", "_get_dask", _reach)),
+    ("simulate",): (("frictionlab.model.simulation", "simulate_config", _reach),),
+    ("sweep",): (("frictionlab.studies.sweep", "iter_evaluate", _reach),
+                 ("frictionlab.studies.sweep", "_get_dask", _reach)),
     ("identify", "limit-cycle"): (
-        ("frictionlab.identification.limit_cycle", "fit_limit_cycle", _reach),),
+        ("frictionlab.studies.identification.limit_cycle", "fit_limit_cycle", _reach),),
     # the simulated rig is stubbed; a --log is analysed for real
     ("identify", "experiment"): (
-        ("frictionlab.identification.experiments", "_Recorder", _reach),),
-    ("compensate", "compare"): (("frictionlab.compensation", "compare", _reach),),
-    ("compensate", "tune"): (("frictionlab.compensation", "tune", _reach),),
+        ("frictionlab.studies.identification.experiments", "_Recorder", _reach),),
+    ("compensate", "compare"): (("frictionlab.studies.compensation", "compare", _reach),),
+    ("compensate", "tune"): (("frictionlab.studies.compensation", "tune", _reach),),
     ("run",): (("frictionlab.realtime", "RealtimeController", _fake_controller),),
     ("rig-sim",): (("frictionlab.realtime.rigsim", "run_rig_sim", _reach),),
-    ("reproduce",): (("frictionlab.reproduce", "run", _reach),
-                     ("frictionlab.sweep", "_get_dask", _reach)),
-    ("predict",): (("frictionlab.predict", "predict", _reach),),
+    ("reproduce",): (("frictionlab.studies.reproduce", "run", _reach),
+                     ("frictionlab.studies.sweep", "_get_dask", _reach)),
+    ("predict",): (("frictionlab.studies.predict", "predict", _reach),),
     # the log's features are computed for real (a generated log is small)
     ("features",): (),
 }
@@ -126,7 +126,7 @@ def stubbed():
     libraries the checks may load are imported first, so that an example's traced
     memory is its own, not a first import's."""
     for name in ("scipy.signal", "scipy.optimize", "scipy.ndimage", "scipy.linalg",
-                 "matplotlib.pyplot", "frictionlab.identification.plots"):
+                 "matplotlib.pyplot", "frictionlab.studies.identification.plots"):
         importlib.import_module(name)
     with pytest.MonkeyPatch.context() as mp:
         for entries in WORK.values():

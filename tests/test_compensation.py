@@ -12,9 +12,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from frictionlab import compensation as comp
 from frictionlab.cli import main
-from frictionlab.compensation import (
+from frictionlab.config import PLANT_FRICTION_KINDS, ConfigError, build_config
+from frictionlab.model.controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
+from frictionlab.model.design import design as make_design
+from frictionlab.model.friction import FrictionParams, stribeck_curve, stribeck_level
+from frictionlab.model.limit_cycles import FEATURES
+from frictionlab.model.simulation import simulate_config
+from frictionlab.studies import compensation as comp
+from frictionlab.studies.compensation import (
     ClassicalCompensator,
     CoulombCompensator,
     LuGreCompensator,
@@ -24,12 +30,6 @@ from frictionlab.compensation import (
     reversals,
     tune,
 )
-from frictionlab.config import PLANT_FRICTION_KINDS, ConfigError, build_config
-from frictionlab.controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
-from frictionlab.design import design as make_design
-from frictionlab.friction import FrictionParams, stribeck_curve, stribeck_level
-from frictionlab.limit_cycles import FEATURES
-from frictionlab.simulation import simulate_config
 
 DUR, WIN = 30.0, 15.0
 NOISE = "sim.noise=0.002"
@@ -345,8 +345,8 @@ def test_cli_rejects_singular_lugre_compensator_before_running(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("a simulation started")
 
-    monkeypatch.setattr("frictionlab.simulation.simulate_config", boom)
-    monkeypatch.setattr("frictionlab.sweep.evaluate", boom)
+    monkeypatch.setattr("frictionlab.model.simulation.simulate_config", boom)
+    monkeypatch.setattr("frictionlab.studies.sweep.evaluate", boom)
     zero = ["--set", "compensation.stiction=0", "--set", "compensation.coulomb=0"]
     rc, out, err = run_cli("compensate", "compare", "--compensation", "lugre", *zero, "--json")
     assert rc == 2 and out == ""
@@ -378,8 +378,8 @@ def test_cli_rejects_bad_compensator_before_running(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("a simulation started")
 
-    monkeypatch.setattr("frictionlab.simulation.simulate_config", boom)
-    monkeypatch.setattr("frictionlab.sweep.evaluate", boom)
+    monkeypatch.setattr("frictionlab.model.simulation.simulate_config", boom)
+    monkeypatch.setattr("frictionlab.studies.sweep.evaluate", boom)
     rc, out, err = run_cli("simulate", "--compensation", "lugre", "--set",
                            "compensation.sigma0=-5", "--json")
     assert rc == 2 and out == "" and "compensation.sigma0" in err
@@ -397,7 +397,7 @@ def test_cli_rejects_bad_compensator_before_running(monkeypatch):
 
 def test_tune_validates_before_evaluating(monkeypatch):
     called = []
-    monkeypatch.setattr("frictionlab.sweep.evaluate", lambda *a, **k: called.append(1))
+    monkeypatch.setattr("frictionlab.studies.sweep.evaluate", lambda *a, **k: called.append(1))
     cfg = lugre_cfg()
     with pytest.raises(ConfigError, match="sigma1"):
         tune(cfg, [("compensation.sigma1", [5.0, -1.0])])
@@ -447,7 +447,7 @@ def test_tune_matches_an_independent_computation():
     """Every grid point and the baseline computed here with simulate_config and
     chatter (what tune re-ran in-process before the engine carried chatter):
     tune's result is the same, exactly."""
-    from frictionlab.limit_cycles import trajectory_features
+    from frictionlab.model.limit_cycles import trajectory_features
 
     cfg = build_config("fast", "classical", "coulomb", sets=[NOISE])
     grid = [("compensation.hysteresis", [0.0, 0.02, 0.05]), ("compensation.coulomb", [1.3, 1.7])]
@@ -484,14 +484,14 @@ def test_tune_matches_an_independent_computation():
 
 
 def test_tune_ranks_the_grid_and_the_baseline_from_the_engine_rows(monkeypatch):
-    """Two calls of frictionlab.sweep.evaluate (the grid, then the loop without
+    """Two calls of frictionlab.studies.sweep.evaluate (the grid, then the loop without
     compensation), both with the caller's workers/dask and reduced by
     features_and_chatter; the ranking, the chatter and the baseline come from
     their rows (here doctored) and nothing is simulated outside them."""
-    import frictionlab.simulation
-    import frictionlab.sweep as sweep
+    import frictionlab.model.simulation
+    from frictionlab.studies import sweep
 
-    real_eval, real_sim = sweep.evaluate, frictionlab.simulation.simulate_config
+    real_eval, real_sim = sweep.evaluate, frictionlab.model.simulation.simulate_config
     calls, outside = [], []
     inside = [False]
 
@@ -517,7 +517,7 @@ def test_tune_ranks_the_grid_and_the_baseline_from_the_engine_rows(monkeypatch):
         return real_sim(*a, **k)
 
     monkeypatch.setattr(sweep, "evaluate", spy)
-    monkeypatch.setattr(frictionlab.simulation, "simulate_config", counting_simulate)
+    monkeypatch.setattr(frictionlab.model.simulation, "simulate_config", counting_simulate)
     cfg = build_config("fast", "classical", "coulomb", sets=[NOISE])
     progress = []
     res = tune(cfg, [("compensation.hysteresis", [0.0, 0.05])], duration=20.0, workers=1,
@@ -554,7 +554,7 @@ def test_tune_returns_the_winners_and_the_baselines_runs(small_tune):
 
 
 def test_features_and_chatter_is_the_default_row_plus_chatter():
-    from frictionlab.sweep import reduce_features
+    from frictionlab.studies.sweep import reduce_features
 
     cfg = build_config("fast", "lugre", "lugre", sets=[NOISE])
     row = comp.features_and_chatter(cfg, 10.0, None)

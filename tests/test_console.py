@@ -59,8 +59,8 @@ from frictionlab.console.stream import (
     decimate,
     frame_json,
 )
-from frictionlab.design import PRESETS, DesignSpec, design
-from frictionlab.friction import FrictionParams
+from frictionlab.model.design import PRESETS, DesignSpec, design
+from frictionlab.model.friction import FrictionParams
 from frictionlab.realtime import FakeClock, RealtimeController, Sample
 
 # --- request validation -----------------------------------------------------------------

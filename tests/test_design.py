@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from inprocess import run_cli_in_process
 
-from frictionlab.design import design, observer_gains, preset
-from frictionlab.reference import APPENDIX_D
+from frictionlab.model.design import design, observer_gains, preset
+from frictionlab.studies.reference import APPENDIX_D
 
 APP_D = APPENDIX_D
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from frictionlab.friction import (
+from frictionlab.model.friction import (
     KINDS,
     FrictionParams,
     lugre_dz,

@@ -11,8 +11,8 @@ from gymnasium.utils.env_checker import check_env
 import frictionlab.gym as fgym
 from frictionlab.config import build_config
 from frictionlab.gym import DEFAULT_RANDOMIZATION, ENV_ID, FurutaEnv, FurutaVectorEnv
-from frictionlab.rig import RigScaling
-from frictionlab.simulation import make_controller, simulate_config
+from frictionlab.model.rig import RigScaling
+from frictionlab.model.simulation import make_controller, simulate_config
 
 NORMALISE_HINT = "symmetric and normalized space"
 
@@ -281,7 +281,7 @@ def test_swing_up_variant_passes_the_env_checker(kwargs):
 
 
 def test_swing_up_episode_starts_hanging_and_the_energy_controller_brings_it_up():
-    from frictionlab.swingup import SwingUp
+    from frictionlab.model.swingup import SwingUp
 
     env = gymnasium.make(fgym.SWINGUP_ENV_ID, sets=["sim.noise=0.002"])
     obs, info = env.reset(seed=4)

@@ -9,7 +9,7 @@ import pytest
 
 from frictionlab.cli import main
 from frictionlab.config import build_config
-from frictionlab.simulation import run_features
+from frictionlab.model.simulation import run_features
 
 DURATION, WINDOW = 16.0, 10.0
 
@@ -63,7 +63,7 @@ def test_limit_cycle_json_plot_and_report(capsys, tmp_path, measured):
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_limit_cycle_on_a_dask_localcluster_gives_the_pool_estimate(capsys, measured):
-    from frictionlab.sweep import shutdown
+    from frictionlab.studies.sweep import shutdown
 
     argv = ["identify", "limit-cycle", "--measured", str(measured), "--fit", "friction.coulomb",
             "--bounds", "friction.coulomb=1.2:1.6", "--duration", str(DURATION), "--window",

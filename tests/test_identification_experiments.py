@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from frictionlab.config import build_config
-from frictionlab.identification import experiments as ex
-from frictionlab.identification.experiments import IdentificationError
-from frictionlab.identification.logs import log_warnings, read_log
+from frictionlab.io.logs import log_warnings, read_log
+from frictionlab.studies.identification import experiments as ex
+from frictionlab.studies.identification.experiments import IdentificationError
 
 # a plant whose parameters all differ from the thesis defaults
 TRUE = {"friction.stiction": 2.1, "friction.coulomb": 1.35, "friction.viscous": 0.05,
@@ -216,7 +216,7 @@ def test_read_log_rejects(tmp_path, text, match):
 
 @pytest.mark.slow
 def test_plots(tmp_path, stiction_log, stribeck_log, oscillation_log, scaling_log):
-    from frictionlab.identification import plots
+    from frictionlab.studies.identification import plots
 
     cases = [
         (plots.plot_stiction, stiction_log, ex.analyse_stiction(stiction_log)),

@@ -10,9 +10,10 @@ import os
 import numpy as np
 import pytest
 
-import frictionlab.sweep as sweep
 from frictionlab.config import ConfigError, build_config
-from frictionlab.identification.limit_cycle import (
+from frictionlab.model.simulation import run_features
+from frictionlab.studies import sweep
+from frictionlab.studies.identification.limit_cycle import (
     DEFAULT_BOUNDS,
     LimitCycleProblem,
     _covariance,
@@ -20,7 +21,6 @@ from frictionlab.identification.limit_cycle import (
     identifiability,
     parse_experiments,
 )
-from frictionlab.simulation import run_features
 
 TRUTH = {"friction.coulomb": 1.35, "friction.stiction": 2.1, "plant.omega0": 7.1}
 # the command's defaults: 30 s runs, features over the last 20 s, default
@@ -136,7 +136,7 @@ def test_json_fields(clean_fit):
 
 @pytest.mark.slow
 def test_evaluates_generations_through_the_sweep_engine(monkeypatch):
-    """Every evaluation goes through frictionlab.sweep.evaluate, one call per
+    """Every evaluation goes through frictionlab.studies.sweep.evaluate, one call per
     generation (population x experiments points), and a parameter with no
     effect on the features is reported as not identifiable."""
     calls = []
@@ -410,7 +410,7 @@ def test_short_search_runs_reach_the_optimum_of_the_full_search():
 
 
 def test_search_settings_default_and_validation():
-    from frictionlab.identification.limit_cycle import search_settings
+    from frictionlab.studies.identification.limit_cycle import search_settings
 
     assert search_settings(30.0, 20.0, None, None) == (30.0, 20.0)
     assert search_settings(30.0, 20.0, 15.0, None) == (15.0, 10.0)

@@ -13,9 +13,9 @@ from scipy.integrate import solve_ivp
 
 import frictionlab as fl
 from frictionlab.config import build_config
-from frictionlab.friction import make_model
-from frictionlab.plant import linearized_model, zoh
-from frictionlab.simulation import simulate_config
+from frictionlab.model.friction import make_model
+from frictionlab.model.plant import linearized_model, zoh
+from frictionlab.model.simulation import simulate_config
 
 CLI = [sys.executable, "-m", "frictionlab"]
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import find_peaks
 
-from frictionlab.limit_cycles import _segment_peaks, features
+from frictionlab.model.limit_cycles import _segment_peaks, features
 
 
 def half_cycles(shapes, n=400):

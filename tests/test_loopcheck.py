@@ -1,5 +1,5 @@
-"""The model's check of controller settings (frictionlab.loopcheck) and the refusals built on it
-(frictionlab.realtime.params): against hand-derived matrices, the simulator, and the
+"""The model's check of controller settings (frictionlab.model.loopcheck) and
+the refusals built on it (frictionlab.realtime.params): against hand-derived matrices, the simulator, and the
 compensation study's evidence."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
-from frictionlab.controller import Controller
-from frictionlab.design import PRESETS, design
-from frictionlab.friction import FrictionParams
-from frictionlab.loopcheck import check_loop, loop_matrices
-from frictionlab.plant import PlantParams, zoh_closed_form
+from frictionlab.model.controller import Controller
+from frictionlab.model.design import PRESETS, design
+from frictionlab.model.friction import FrictionParams
+from frictionlab.model.loopcheck import check_loop, loop_matrices
+from frictionlab.model.plant import PlantParams, zoh_closed_form
+from frictionlab.model.simulation import make_controller, simulate_config
 from frictionlab.realtime.params import ChangeError, ControlParams, UnsafeChange
-from frictionlab.simulation import make_controller, simulate_config
 
 FAST, SLOW = PRESETS["fast"], PRESETS["slow"]
 U_MAX = 1.0 / 0.022

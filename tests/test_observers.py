@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from frictionlab.design import design
-from frictionlab.observers import (
+from frictionlab.model.design import design
+from frictionlab.model.observers import (
     ArmObserver,
     PendulumObserver,
     arm_observer_step,
     pendulum_observer_step,
 )
-from frictionlab.plant import PlantParams, rhs
+from frictionlab.model.plant import PlantParams, rhs
 
 
 def test_pendulum_observer_model_matches_plant_rhs():

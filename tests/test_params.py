@@ -5,7 +5,6 @@ import math
 
 import pytest
 
-from frictionlab._validation import ParamError
 from frictionlab.config import (
     ConfigError,
     ConfigValueError,
@@ -14,9 +13,10 @@ from frictionlab.config import (
     build_config,
     valid_keys,
 )
-from frictionlab.design import DesignSpec
-from frictionlab.friction import FrictionParams
-from frictionlab.plant import PlantParams
+from frictionlab.model.design import DesignSpec
+from frictionlab.model.friction import FrictionParams
+from frictionlab.model.params import ParamError
+from frictionlab.model.plant import PlantParams
 
 
 @pytest.mark.parametrize(

@@ -10,23 +10,23 @@ from scipy.optimize import brentq
 
 from frictionlab.cli import main
 from frictionlab.config import build_config
-from frictionlab.design import design as make_design
-from frictionlab.limit_cycles import FEATURES, _crossings
-from frictionlab.periodic import (
+from frictionlab.model.design import design as make_design
+from frictionlab.model.limit_cycles import FEATURES, _crossings
+from frictionlab.model.periodic import (
     I_S,
     LinearLoop,
     linear_loop,
     orbit_trajectory,
     periodic_orbit,
 )
-from frictionlab.plant import linearized_model, zoh
-from frictionlab.predict import (
+from frictionlab.model.plant import linearized_model, zoh
+from frictionlab.model.simulation import run_features, simulate_config
+from frictionlab.studies.predict import (
     StaticFrictionNonlinearity,
     describing_function,
     discrete_describing_function_response,
     predict,
 )
-from frictionlab.simulation import run_features, simulate_config
 
 BAND = "friction.zero_velocity_band=0.03"
 #: The zero-velocity band of each design's Tables (2-3 fast, 4-5 slow), as

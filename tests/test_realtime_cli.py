@@ -21,7 +21,7 @@ import pytest
 
 from frictionlab.cli import main
 from frictionlab.config import build_config
-from frictionlab.limit_cycles import FEATURES, features
+from frictionlab.model.limit_cycles import FEATURES, features
 from frictionlab.realtime.datalog import read_csv_log, read_sidecar
 from frictionlab.realtime.rigsim import send_control
 from frictionlab.realtime.samples import MISSED, STOP
@@ -284,7 +284,7 @@ def test_unreachable_rig_exits_1(tmp_path, capsys):
 
 
 def test_run_without_headless_hands_over_to_the_console(monkeypatch, tmp_path):
-    from frictionlab import realtime_cli
+    from frictionlab.cli import run as realtime_cli
 
     served = {}
 
@@ -458,9 +458,9 @@ def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
 
 
 def test_run_s_signal_handling_before_and_after_the_run(tmp_path):
+    from frictionlab.cli.run import _RunSignals
     from frictionlab.realtime import FakeClock, RealtimeController
     from frictionlab.realtime.osrt import STOP_SIGNALS
-    from frictionlab.realtime_cli import _RunSignals
 
     before = {sig: signal.getsignal(sig) for sig in (*STOP_SIGNALS, signal.SIGXFSZ)}
     with _RunSignals() as sigs:

@@ -5,7 +5,7 @@
 (:class:`~frictionlab.realtime.rigs.SimRig`, one plant step per executed
 tick) with the LuGre plant friction of eq. (21).  The loop runs the
 simulator's compiled controller step, compensator included, so without noise
-its log must be :func:`frictionlab.simulation.simulate_config`'s run tick by
+its log must be :func:`frictionlab.model.simulation.simulate_config`'s run tick by
 tick; with noise (the rig backend draws its own) it must show the same
 reduction of the limit cycle.  No test sleeps: :class:`FakeClock` jumps to
 each deadline.
@@ -14,13 +14,13 @@ each deadline.
 import numpy as np
 import pytest
 
-from frictionlab.compensation import COMPENSATORS
 from frictionlab.config import build_config
-from frictionlab.limit_cycles import features
+from frictionlab.model.limit_cycles import features
+from frictionlab.model.simulation import simulate_config
 from frictionlab.realtime import FakeClock, RealtimeController
 from frictionlab.realtime.datalog import read_csv_log
 from frictionlab.realtime.samples import CHANGED, STOP
-from frictionlab.simulation import simulate_config
+from frictionlab.studies.compensation import COMPENSATORS
 
 NOISE = 0.002
 H = 0.005
@@ -160,8 +160,8 @@ def test_a_glitched_velocity_reading_does_not_move_the_adapted_levels(tmp_path):
     adapts (inside the ADC's range, so the loop runs on).  The law freezes on it and
     on the sample that starts at it: the adapted levels do not move, and the run goes
     on to its end."""
-    from frictionlab.adaptive import A_ADAPTING, A_BAD, A_PRESLIDING, A_STUCK
-    from frictionlab.controller import S_ADAPT, S_FC_HAT, S_FS_HAT
+    from frictionlab.model.adaptive import A_ADAPTING, A_BAD, A_PRESLIDING, A_STUCK
+    from frictionlab.model.controller import S_ADAPT, S_FC_HAT, S_FS_HAT
     from frictionlab.realtime.rigs import SimRig
 
     cfg = build_config("fast", "lugre", "adaptive",

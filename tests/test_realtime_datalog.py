@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
+from frictionlab.model.simulation import LOGGED
 from frictionlab.realtime.datalog import CSV_HEADER, LogWriter, read_csv_log
 from frictionlab.realtime.samples import NO_READING, SAMPLE_FIELDS, Sample
-from frictionlab.simulation import LOGGED
 
 
 def sample(k, flags=0):
@@ -149,7 +149,7 @@ def test_unknown_log_format_is_refused(tmp_path):
 
 
 def test_cli_log_format_choices_match_the_writer():
+    from frictionlab.cli.run import LOG_FORMATS
     from frictionlab.realtime import datalog
-    from frictionlab.realtime_cli import LOG_FORMATS
 
     assert LOG_FORMATS == datalog.LOG_FORMATS

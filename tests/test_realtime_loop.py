@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from frictionlab.config import ConfigError, build_config
-from frictionlab.controller import S_RELAY, S_ZHAT, controller_step
+from frictionlab.model.controller import S_RELAY, S_ZHAT, controller_step
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime import loop as loop_mod
 from frictionlab.realtime.loop import Loop

@@ -12,11 +12,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from frictionlab.config import build_config
+from frictionlab.model.rig import RigScaling
 from frictionlab.realtime import FakeClock, RigError, open_rig
 from frictionlab.realtime import protocol as P
 from frictionlab.realtime.rigs import ARM_START, AdcModel, BadReading, FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator, serve_stream, serve_udp
-from frictionlab.rig import RigScaling
 
 Q = 2.0 / 4096
 

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from frictionlab import reproduce as rp
 from frictionlab.cli import main
-from frictionlab.reference import TABLE2, TABLE3, TABLE_COLUMNS
+from frictionlab.studies import reproduce as rp
+from frictionlab.studies.reference import TABLE2, TABLE3, TABLE_COLUMNS
 
 FEATURE_COLS = set(TABLE_COLUMNS)
 THESIS = {"2": ("friction.coulomb", TABLE2), "3": ("friction.stiction", TABLE3)}
@@ -137,9 +137,8 @@ def test_rows_match_simulate(report):
 
 @pytest.mark.slow
 def test_every_run_goes_through_the_sweep_engine(monkeypatch):
-    import frictionlab.batch as batch
-    import frictionlab.simulation as simulation
-    import frictionlab.sweep as sweep
+    from frictionlab.model import simulation
+    from frictionlab.studies import batch, sweep
 
     points, sims = [], []
     evaluate, run_batch = sweep.evaluate, batch.run

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from frictionlab.rig import RigScaling, quantize, unwrap_raw, wrap_raw
+from frictionlab.model.rig import RigScaling, quantize, unwrap_raw, wrap_raw
 
 
 def test_appendix_b_factors():

@@ -14,13 +14,13 @@ import math
 import pytest
 
 from frictionlab.config import build_config
-from frictionlab.identification.onrig import analyse_run, make_rig_experiment, run_on_rig
+from frictionlab.model.rig import RigScaling
 from frictionlab.realtime import FakeClock
 from frictionlab.realtime import protocol as P
 from frictionlab.realtime.experiment import Limits
 from frictionlab.realtime.rigs import FramedRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
-from frictionlab.rig import RigScaling
+from frictionlab.studies.identification.onrig import analyse_run, make_rig_experiment, run_on_rig
 
 #: The rig's hidden true values (all differ from the defaults).
 TRUE = {"friction.stiction": 1.9, "friction.coulomb": 1.25, "plant.omega0": 6.25,

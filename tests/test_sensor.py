@@ -5,15 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from frictionlab import sensor as S
 from frictionlab.config import build_config
+from frictionlab.model import sensor as S
+from frictionlab.model.rig import RigScaling
+from frictionlab.model.simulation import make_sensor, simulate_config
 from frictionlab.realtime import FakeClock, Safety
 from frictionlab.realtime.loop import Loop
 from frictionlab.realtime.params import ControlParams
 from frictionlab.realtime.rigs import AdcModel, FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
-from frictionlab.rig import RigScaling
-from frictionlab.simulation import make_sensor, simulate_config
 
 NOISY = ["sim.quantization=1", "sim.noise=0.002", "sim.seed=11", "sim.initial_angle=0.05"]
 

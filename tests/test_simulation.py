@@ -12,15 +12,15 @@ from hypothesis import strategies as st
 
 from frictionlab.cli import main
 from frictionlab.config import build_config
-from frictionlab.limit_cycles import FEATURES
-from frictionlab.reference import TABLE1, TABLE2, TABLE3, TABLE_COLUMNS
-from frictionlab.simulation import (
+from frictionlab.model.limit_cycles import FEATURES
+from frictionlab.model.simulation import (
     COLUMNS,
     PlantState,
     SimulatedPlant,
     run_features,
     simulate_config,
 )
+from frictionlab.studies.reference import TABLE1, TABLE2, TABLE3, TABLE_COLUMNS
 
 TABLE_COLS = TABLE_COLUMNS
 ROWS = [("friction.coulomb", v, r) for v, r in TABLE2.items()] + [
@@ -224,7 +224,7 @@ def test_noise_and_quantization_enter_only_measurements():
     assert 0.007 < np.std(err) < 0.013
     q = simulate_config(build_config("fast", "classical", sets=["sim.quantization=1"]), 2.0)
     step = np.pi * 2 / 4096
-    # the rig's grid is in raw units, bias included (frictionlab.sensor): y = theta/pi - 0.503
+    # the rig's grid is in raw units, bias included (frictionlab.model.sensor): y = theta/pi - 0.503
     ratio = (q["theta_m"] / np.pi - 0.503) / (2 / 4096)
     assert np.allclose(ratio, np.round(ratio), atol=1e-6)
     assert np.all(np.abs(q["theta_m"] - q["theta"]) <= step / 2 + 1e-12)

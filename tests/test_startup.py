@@ -60,7 +60,7 @@ def test_light_commands_load_no_heavy_module(argv):
 @pytest.mark.slow
 def test_design_json_is_the_closed_form_design():
     obj = json.loads(_probe(["design", "--json"])["stdout"])
-    from frictionlab.design import design
+    from frictionlab.model.design import design
 
     d = design("fast")
     assert obj["L"] == pytest.approx(list(d.L), rel=1e-12)
@@ -73,7 +73,7 @@ def test_a_kernel_compiles_on_first_use_and_calls_its_callees():
     function's."""
     import numpy as np
 
-    from frictionlab import plant
+    from frictionlab.model import plant
 
     args = (0.1, 0.2, 0.3, 1.0, 6.8, 0.04, 9.82, 0.21)
     compiled = plant.accelerations(*args)  # calls accelerations_sc inside nopython code

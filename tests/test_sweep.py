@@ -18,13 +18,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import frictionlab.sweep as sweep_module
 from frictionlab.cli import main
+from frictionlab.cli.sweep import UNDEFINED_MARKERS, markdown_table, plot_sweep
 from frictionlab.config import ConfigError, build_config
-from frictionlab.limit_cycles import FEATURES, trajectory_features
-from frictionlab.reference import TABLE2
-from frictionlab.simulation import run_features, simulate_config
-from frictionlab.sweep import (
+from frictionlab.model.limit_cycles import FEATURES, trajectory_features
+from frictionlab.model.simulation import run_features, simulate_config
+from frictionlab.studies import sweep as sweep_module
+from frictionlab.studies.reference import TABLE2
+from frictionlab.studies.sweep import (
     MAX_CHUNK,
     MIN_TAIL_CHUNK,
     SweepFile,
@@ -37,7 +38,6 @@ from frictionlab.sweep import (
     reduce_features,
     shutdown,
 )
-from frictionlab.sweep_cli import UNDEFINED_MARKERS, markdown_table, plot_sweep
 
 BAND = "friction.zero_velocity_band=0.03"
 TABLE2_FC = tuple(TABLE2)  # 1.1, 1.3, 1.5, 1.7, 1.9
@@ -619,12 +619,12 @@ def test_plot_file(tmp_path):
 
 
 #: What the engine must not import: the command line, plotting, terminal output.
-EDGE_MODULES = ("frictionlab.cli", "frictionlab.sweep_cli", "matplotlib", "rich")
+EDGE_MODULES = ("frictionlab.cli", "frictionlab.cli.sweep", "matplotlib", "rich")
 
 
 @pytest.mark.slow
 def test_engine_imports_no_cli_plotting_or_terminal_code():
-    """frictionlab.sweep is numerics and files: no import of the CLI, matplotlib or
+    """frictionlab.studies.sweep is numerics and files: no import of the CLI, matplotlib or
     rich anywhere in its source (also inside functions), and none at run time."""
     import ast
 
@@ -640,7 +640,7 @@ def test_engine_imports_no_cli_plotting_or_terminal_code():
     bad = {m for m in imported for edge in EDGE_MODULES
            if m == edge or m.startswith(edge + ".")}
     assert not bad, bad
-    code = ("import sys, frictionlab.sweep as s\n"
+    code = ("import sys, frictionlab.studies.sweep as s\n"
             "from frictionlab.config import build_config\n"
             "s.evaluate(build_config(), [{'friction.coulomb': 1.3}], duration=2, workers=1)\n"
             f"print([m for m in {EDGE_MODULES!r} if m in sys.modules])")

@@ -11,9 +11,9 @@ import pytest
 
 from frictionlab.cli import main
 from frictionlab.config import ConfigError, build_config
-from frictionlab.controller import S_ARM, S_X1, S_X2
-from frictionlab.plant import accelerations
-from frictionlab.swingup import (
+from frictionlab.model.controller import S_ARM, S_X1, S_X2
+from frictionlab.model.plant import accelerations
+from frictionlab.model.swingup import (
     BALANCING,
     SwingUp,
     SwingUpParams,
@@ -22,7 +22,7 @@ from frictionlab.swingup import (
     swingup_step,
     wrap_angle,
 )
-from frictionlab.swingup_sim import simulate_swingup, swingup_outcome
+from frictionlab.studies.swingup_sim import simulate_swingup, swingup_outcome
 
 W0, G, L1 = 6.8, 9.82, 0.21
 HANGING = ("sim.initial_angle", math.pi)
@@ -129,7 +129,7 @@ def test_arm_speed_limit_stops():
 
 def test_handover_initialises_the_observers_from_the_measurement():
     cfg = build_config("fast", "classical")
-    from frictionlab.simulation import make_controller
+    from frictionlab.model.simulation import make_controller
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
     w, s = sw.init(0.5)
@@ -149,7 +149,7 @@ def test_handover_initialises_the_observers_from_the_measurement():
 def test_swingup_step_compiled_equals_the_step_method():
     cfg = build_config("fast", "classical", sets=[HANGING])
     res = simulate_swingup(cfg, 3.0)
-    from frictionlab.simulation import make_controller
+    from frictionlab.model.simulation import make_controller
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
     state = sw.init(math.pi)
@@ -251,7 +251,7 @@ def test_loop_without_swing_up_still_refuses_a_hanging_start(tmp_path):
 
 def test_swingup_step_is_the_same_function_in_both_runners():
     import frictionlab.realtime.loop as loop
-    import frictionlab.swingup_sim as sim
+    from frictionlab.studies import swingup_sim as sim
 
     assert loop.swingup_step is swingup_step is sim.swingup_step
 

@@ -22,9 +22,7 @@ Inverted Pendulum" (Lund, 1996).  The public API:
 The package is layered (docs/architecture.md): :mod:`frictionlab.model`
 (numpy, scipy and numba only), :mod:`frictionlab.config`, :mod:`frictionlab.io`,
 :mod:`frictionlab.studies`, :mod:`frictionlab.realtime`,
-:mod:`frictionlab.console` and :mod:`frictionlab.cli`.  The modules' former
-paths (``frictionlab.simulation``, ``frictionlab.sweep``...) still import, as
-the same module objects (:mod:`frictionlab._aliases`).
+:mod:`frictionlab.console` and :mod:`frictionlab.cli`.
 
 The larger capabilities are subpackages with their own curated ``__all__``,
 imported on demand so that ``import frictionlab`` stays light:
@@ -45,7 +43,6 @@ imported on demand so that ``import frictionlab`` stays light:
   (registered on import; needs the ``gym`` extra)
 """
 
-from ._aliases import install as _install_aliases
 from .config import Config, ConfigError, SimParams, build_config, simulate
 from .model.controller import Controller
 from .model.design import Design, DesignSpec, design, preset
@@ -57,8 +54,6 @@ from .model.rig import RigScaling
 from .model.simulation import Trajectory, simulate_config
 
 __version__ = "0.1.0"
-
-_install_aliases()
 
 __all__ = [
     "ArmObserver",

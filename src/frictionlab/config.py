@@ -9,7 +9,7 @@ preset (``fast``/``slow``), the per-model friction defaults, a TOML file, and
 Unknown keys and bad values raise :class:`ConfigError` (a ``ValueError``)
 naming the key and what is allowed (an unknown key: :class:`UnknownKeyError`,
 with the nearest valid keys); a value out of its range raises the parameter
-class's :class:`~frictionlab._validation.ParamError`.
+class's :class:`~frictionlab.model.params.ParamError`.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ class ConfigError(ValueError):
 
 class ConfigValueError(ConfigError, ParamError):
     """A key's value of the wrong type or out of its range: a :class:`ConfigError`
-    with the :class:`~frictionlab._validation.ParamError` attributes ``field``
+    with the :class:`~frictionlab.model.params.ParamError` attributes ``field``
     (the key), ``value`` and ``allowed``."""
 
 
@@ -154,7 +154,7 @@ class SimParams(Validated):
                       integer=True)
     quantization: float = param(0.0, "1 = measure through the rig's 12-bit converters "
                                 "(the grid in raw units with the rig.* factors, wrap and "
-                                "range; frictionlab.sensor), 0 = ideal", "1", lo=0.0, hi=1.0)
+                                "range; frictionlab.model.sensor), 0 = ideal", "1", lo=0.0, hi=1.0)
     fall_angle: float = param(math.pi / 2, "|theta| beyond which the pendulum has fallen",
                               "rad", lo=0.0, hi=math.pi, lo_open=True)
     duration: float = param(40.0, "simulated time", "s", lo=0.0, hi=1e5, lo_open=True)

@@ -5,8 +5,8 @@ r"""Gymnasium environment ``frictionlab/Furuta-v0``: the sampled loop at h = 5 m
 An outer layer: this module imports gymnasium, the model does not.
 
 One step is one sampling period ``design.h`` (5 ms) of the simulator's own
-plant (:func:`frictionlab.simulation.plant_tick`, the compiled integrator of
-``frictionlab simulate`` and of :class:`~frictionlab.simulation.SimulatedPlant`,
+plant (:func:`frictionlab.model.simulation.plant_tick`, the compiled integrator of
+``frictionlab simulate`` and of :class:`~frictionlab.model.simulation.SimulatedPlant`,
 with the configured arm friction, any model), with the action held
 (zero-order hold), exactly as the simulator's controller tick drives it.
 The observation is what the rig measures at the start of the next tick.
@@ -23,11 +23,11 @@ Observation (``observation="si"``, the default)
     noise of standard deviation ``sim.noise`` in each signal's SI unit (drawn
     from the environment's generator, seeded by ``reset(seed=...)``), then the
     rig's 12-bit converter of App. B when ``sim.quantization`` is 1
-    (:mod:`frictionlab.sensor`: the grid in raw units, biases included; the
+    (:mod:`frictionlab.model.sensor`: the grid in raw units, biases included; the
     arm relative to its first reading).
 ``observation="raw"``
     The same measurements as the rig's raw ADC values ``[y, x, v]`` in
-    [-1, 1] (App. B.5 scaling, :class:`frictionlab.rig.RigScaling`; the
+    [-1, 1] (App. B.5 scaling, :class:`frictionlab.model.rig.RigScaling`; the
     angle channels wrap, the velocity channel saturates).
 Action (``action="u"``, the default)
     The control signal u in m/s^2, in [-u_max, u_max] with u_max = 1/0.022
@@ -77,7 +77,7 @@ Swing-up variant (``frictionlab/FurutaSwingUp-v0``, or ``task="swing_up"``)
     *Terminated* when the arm leaves the swing-up's safety limits
     (``|Omega| > swingup.arm_limit``, ``|Omega'| > swingup.arm_speed_limit``)
     or the state is not finite; *truncated* after 2000 steps (10 s).  The
-    energy-control swing-up of :mod:`frictionlab.swingup` is a baseline
+    energy-control swing-up of :mod:`frictionlab.model.swingup` is a baseline
     policy (docs/swingup.md).
 
 Examples
@@ -146,7 +146,7 @@ def _step_plants(mask, xs, us, mems, friction, substeps, ratios, h, pps, fkinds,
 
 @jit
 def _sense(xs, draws, sp, steps, x0s, out):
-    """The simulator's sensor (:func:`frictionlab.sensor.reading`): each signal
+    """The simulator's sensor (:func:`frictionlab.model.sensor.reading`): each signal
     (theta, Omega, Omega_dot) plus its noise draw, through the rig's converter;
     plant i's arm zero ``x0s[i]`` is taken at its first step."""
     for i in range(xs.shape[0]):

@@ -25,8 +25,8 @@ output     ``arm_dot``    measured arm velocity                           rad/s
 
 The outputs are the three signals the rig measures (the C of eq. 7), without
 the sensor's noise and quantisation.  The state derivative is
-:func:`frictionlab.plant.rhs` (eq. 6, with ``plant.input_gain``) driven by the
-friction law of :mod:`frictionlab.friction` that the simulator uses, evaluated
+:func:`frictionlab.model.plant.rhs` (eq. 6, with ``plant.input_gain``) driven by the
+friction law of :mod:`frictionlab.model.friction` that the simulator uses, evaluated
 at the current state: viscous, the ideal Coulomb relay, stiction + Coulomb
 with the zero-velocity band (the applied force is ``input_gain * u``), its
 Stribeck form, and LuGre (eq. 18, its bristle state ``z`` as a fifth state,

@@ -61,7 +61,7 @@ TRACES: dict[str, dict[str, Any]] = {
 _SERIES_LS = ("-", "--", "-.", ":")
 _SERIES_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
-#: Units of the limit-cycle features (:data:`frictionlab.limit_cycles.FEATURES`).
+#: Units of the limit-cycle features (:data:`frictionlab.model.limit_cycles.FEATURES`).
 FEATURE_UNITS = {"peak1": "rad", "peak2": "rad", "valley": "rad", "period": "s",
                  "max_u": "m/s$^2$", "max_arm_velocity": "rad/s", "peak_to_peak": "rad"}
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import expect
 
-from frictionlab.design import PRESETS, design
+from frictionlab.model.design import PRESETS, design
 
 from .conftest import ConsoleProcess, wait_until
 

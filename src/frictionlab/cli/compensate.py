@@ -1,8 +1,8 @@
 """``frictionlab compensate tune|compare``: friction compensation on the command line (Sec. 6).
 
-``tune`` searches compensator parameters (:func:`frictionlab.compensation.tune`,
+``tune`` searches compensator parameters (:func:`frictionlab.studies.compensation.tune`,
 through the sweep engine); ``compare`` runs one configuration with and
-without its compensator (:func:`frictionlab.compensation.compare`).  This
+without its compensator (:func:`frictionlab.studies.compensation.compare`).  This
 module parses the command line, prints the results and draws the
 before/after figure (cf. the thesis's Figs. 25-30).
 """

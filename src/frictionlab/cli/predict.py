@@ -1,7 +1,7 @@
 """``frictionlab predict``: the friction limit cycle without a long run.
 
 Registration only; python-control and the numerics are imported when the
-command runs (:mod:`frictionlab.predict`).
+command runs (:mod:`frictionlab.studies.predict`).
 """
 
 from __future__ import annotations

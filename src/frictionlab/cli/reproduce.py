@@ -1,6 +1,6 @@
 """``frictionlab reproduce``: every simulation study of the thesis, one report folder.
 
-The studies, their settings and the report are :mod:`frictionlab.reproduce`;
+The studies, their settings and the report are :mod:`frictionlab.studies.reproduce`;
 this module parses the command line, checks it before any work, shows
 progress on stderr and prints the result (``--json``: the tables as data).
 """

@@ -1,7 +1,7 @@
 """``frictionlab sweep``: parameter sweeps on the command line.
 
 The sweep engine (points, backends, the crash-safe output file) is
-:mod:`frictionlab.sweep`; this module parses the command line, checks
+:mod:`frictionlab.studies.sweep`; this module parses the command line, checks
 everything before any work, drives the engine with a progress bar on stderr,
 resumes interrupted sweeps, and presents the rows: ``--table`` (markdown
 shaped like the thesis's Tables 2-7, :func:`markdown_table`) and ``--plot``
@@ -112,9 +112,9 @@ def markdown_table(rows: Sequence[Mapping[str, Any]],
     Parameters
     ----------
     rows : sequence of mappings
-        Rows of :func:`frictionlab.sweep.evaluate`, in sweep order.
+        Rows of :func:`frictionlab.studies.sweep.evaluate`, in sweep order.
     varies : sequence of (key, values)
-        The sweep's keys and values (:func:`frictionlab.sweep.parse_vary`).
+        The sweep's keys and values (:func:`frictionlab.studies.sweep.parse_vary`).
     mode : {"grid", "oat"}
         The sweep's mode.
     base_vals : mapping, optional

@@ -4,8 +4,8 @@ Every number the page sends is checked twice: by the page itself (with the
 ranges :func:`schema` publishes) and here, whatever the page sent.  The
 ranges are not repeated: each field is checked by constructing the
 project's own validated parameter dataclass with that one value
-(:class:`~frictionlab.design.DesignSpec` for the State Feedback and Kalman
-Filter panels, :class:`~frictionlab.friction.FrictionParams` for the
+(:class:`~frictionlab.model.design.DesignSpec` for the State Feedback and Kalman
+Filter panels, :class:`~frictionlab.model.friction.FrictionParams` for the
 Friction Model panel), whose ``ValueError`` names the field and its allowed
 range.  :func:`field_errors` turns any validation failure into the
 console's error list ``[{"field": ..., "message": ...}]`` so that the page

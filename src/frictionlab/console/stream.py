@@ -9,7 +9,7 @@ full subscription drops samples and counts them), keeps the last
 ``history`` seconds in a ring buffer, and returns the block of new samples;
 :func:`frame_json` makes a page's *frame* of a block (:func:`decimate`: at
 most so many points, evenly spaced).  :meth:`SampleStream.figures` gives the running
-limit-cycle figures (:func:`frictionlab.limit_cycles.features` of the
+limit-cycle figures (:func:`frictionlab.model.limit_cycles.features` of the
 measured angle over the last seconds) that the status line shows, computed
 here, off the tick thread.
 """
@@ -176,7 +176,7 @@ class SampleStream:
         """Load the feature kernels now: :func:`features` of a synthetic limit cycle.
 
         The first :meth:`figures` of a process loads
-        :func:`~frictionlab.limit_cycles.features`' compiled kernels from
+        :func:`~frictionlab.model.limit_cycles.features`' compiled kernels from
         numba's cache, about 0.3 s holding the GIL; on the server's thread
         while the loop runs, that stalled the loop for 5-9 ms.  The synthetic
         signals have the layout :meth:`figures` passes (contiguous float64),

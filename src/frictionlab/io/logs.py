@@ -1,12 +1,12 @@
 """Reading recorded logs for the identification experiments (file I/O).
 
-Two formats, both written by :meth:`frictionlab.simulation.Trajectory.save`:
+Two formats, both written by :meth:`frictionlab.model.simulation.Trajectory.save`:
 
 * ``.csv``: a header line naming the columns (``t`` first, then any of
-  :data:`frictionlab.simulation.COLUMNS`), comma separated.  Extra or
+  :data:`frictionlab.model.simulation.COLUMNS`), comma separated.  Extra or
   missing columns are allowed; an analysis names the signal it lacks.
 * ``.dat``: the thesis's ten logged signals (Sec. 7.1) as whitespace
-  separated columns in the order of :data:`frictionlab.simulation.LOGGED`,
+  separated columns in the order of :data:`frictionlab.model.simulation.LOGGED`,
   without time; sample k is at ``t = k h``.  A real-time run's ``.dat``
   has no line for a missed tick, so its time axis is then wrong:
   :func:`log_warnings` reads the run's sidecar (``<run_id>.json``) to say so.

@@ -4,7 +4,7 @@ A ``frictionlab run`` leaves ``<run_id>.csv`` (``t`` and every signal by
 name), ``<run_id>.dat`` (the ten signals of Sec. 7.1, no time) and the
 sidecar ``<run_id>.json`` (configuration, design, stop reason).  The
 features are those ``frictionlab simulate`` reports (Sec. 5;
-:func:`frictionlab.limit_cycles.features`): measured on the logged pendulum
+:func:`frictionlab.model.limit_cycles.features`): measured on the logged pendulum
 angle ``theta_m`` over the last ``window`` seconds (default: the last half of
 the log), with ``max_u`` from ``u`` and ``max_arm_velocity`` from
 ``arm_dot_m``.  Ticks without a reading (``NaN`` rows) are left out.

@@ -1,7 +1,7 @@
 """The one numba decorator of the package's compiled kernels.
 
 ``@jit`` compiles in nopython mode with numba's on-disk cache (its directory
-is set by :mod:`frictionlab._numba_cache`, imported here just before numba)
+is set by :mod:`frictionlab.model._numba_cache`, imported here just before numba)
 and numpy's error model: a division by zero gives inf/nan as in numpy
 instead of raising, so no divisor is tested for zero on the hot path (the
 kernels guard their divisors themselves, and a non-finite state ends a run
@@ -32,7 +32,7 @@ def _njit(parallel: bool = False):
     from numba import njit
 
     if parallel:
-        # a batch driver (frictionlab.batch): prange over threads, GIL released
+        # a batch driver (frictionlab.studies.batch): prange over threads, GIL released
         return njit(cache=True, error_model="numpy", parallel=True, nogil=True)
     return njit(cache=True, error_model="numpy")
 

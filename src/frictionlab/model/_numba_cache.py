@@ -4,7 +4,7 @@ numba invalidates a cached function when *its own* file changes, but not when
 a function it calls (and inlined) changes in another file, so an edited or
 upgraded package could run stale machine code.  Keying the cache directory on
 a hash of all package sources rules that out.  A user-set
-``NUMBA_CACHE_DIR`` is respected.  Imported by :mod:`frictionlab._jit` just before
+``NUMBA_CACHE_DIR`` is respected.  Imported by :mod:`frictionlab.model._jit` just before
 numba itself (on the first use of a compiled kernel).
 """
 

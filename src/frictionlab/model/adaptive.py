@@ -4,7 +4,7 @@ The thesis closes by proposing an adaptive friction estimator, because the
 friction of the arm bearing changes with the operating conditions (App. E.1:
 it falls as the rig runs and the lubricant warms up).  This module holds the
 adaptation law of ``--compensation adaptive``; the compensation itself is the
-LuGre observer of eq. (19) (:func:`frictionlab.friction.lugre_step_exact`),
+LuGre observer of eq. (19) (:func:`frictionlab.model.friction.lugre_step_exact`),
 run with the *adapted* Coulomb and stiction levels :math:`\hat F_C, \hat F_S`
 in place of the fixed ``compensation.coulomb`` / ``compensation.stiction``
 (which are the starting values).
@@ -96,8 +96,8 @@ Safety
 
 The law's state lives in the controller's state vector (entries ``S_VHAT``,
 ``S_VPREV``, ``S_FC_HAT``, ``S_FS_HAT``, ``S_ADAPT`` of
-:mod:`frictionlab.controller`), so the simulator and the 200 Hz loop run it
-as part of the same compiled :func:`~frictionlab.controller.controller_step`.
+:mod:`frictionlab.model.controller`), so the simulator and the 200 Hz loop run it
+as part of the same compiled :func:`~frictionlab.model.controller.controller_step`.
 """
 
 from __future__ import annotations

@@ -33,13 +33,13 @@ idx   name           meaning
 9     ``S_VPREV``    adaptive law: last measured arm velocity (rad/s)
 10    ``S_FC_HAT``   adaptive law: estimated Coulomb level (m/s^2)
 11    ``S_FS_HAT``   adaptive law: estimated stiction level (m/s^2)
-12    ``S_ADAPT``    adaptive law: status (:data:`frictionlab.adaptive.ADAPT_STATES`;
+12    ``S_ADAPT``    adaptive law: status (:data:`frictionlab.model.adaptive.ADAPT_STATES`;
                      0 = not started: the next tick starts it)
 13    ``S_SLIDE``    adaptive law: distance slid since the arm last stopped (rad)
 ====  =============  ==================================================
 
 Compensator ``adaptive``: the LuGre observer run with the levels that the
-law of :mod:`frictionlab.adaptive` estimates from the applied u and the
+law of :mod:`frictionlab.model.adaptive` estimates from the applied u and the
 measured arm velocity (one tick of the law, then the observer, in the same
 compiled step).  Zeroing entries 4 and 5 and 8-13 (:func:`reset_compensator`) restarts a
 compensator from its parameters.
@@ -184,7 +184,7 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
 def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     """The ``adaptive`` compensator's estimate for the coming sample.
 
-    One tick of :func:`frictionlab.adaptive.adaptation_step` (its state in
+    One tick of :func:`frictionlab.model.adaptive.adaptation_step` (its state in
     ``s``, with the last applied u in ``S_U``), then the LuGre observer of
     eq. (19) with the adapted levels (both directions) in place of the
     compensator's ``coulomb``/``stiction``.  Updates ``s`` in place.
@@ -304,11 +304,11 @@ class Controller:
     Parameters
     ----------
     design : Design
-        Gains from :func:`frictionlab.design.design`.
+        Gains from :func:`frictionlab.model.design.design`.
     compensation : str
         ``none``, ``coulomb``, ``classical`` (Sec. 6.2's implementation form),
         ``lugre`` (the observer eq. 19) or ``adaptive`` (eq. 19 with levels
-        adapted online, :mod:`frictionlab.adaptive`).
+        adapted online, :mod:`frictionlab.model.adaptive`).
     compensation_params : FrictionParams
         The compensator's own friction model.
     error_signal : str

@@ -2,8 +2,8 @@ r"""Discrete pole-placement state feedback and observer gains (Sec. 2.2-2.4, App
 
 The controller is designed on the frictionless, undamped linearisation
 eq. (7) sampled with zero-order hold at ``h``: Sec. 2.2's closed form
-(:func:`frictionlab.plant.zoh_closed_form`, equal to the matrix exponential of
-:func:`frictionlab.plant.zoh` to rounding, tested; it needs no scipy, so a
+(:func:`frictionlab.model.plant.zoh_closed_form`, equal to the matrix exponential of
+:func:`frictionlab.model.plant.zoh` to rounding, tested; it needs no scipy, so a
 design loads in milliseconds).
 Continuous specifications :math:`(\omega_i, \zeta_i)` map to the discrete
 characteristic polynomial eq. (8)

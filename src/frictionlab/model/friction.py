@@ -48,7 +48,7 @@ Models
     how the thesis's Sec. 5.3 / App. F simulations used k (docs/model.md,
     "The observer gain k in the plant").  In the compensator e is an
     estimation error that the controller feeds (see
-    :mod:`frictionlab.controller`).  Optional
+    :mod:`frictionlab.model.controller`).  Optional
     variants: direction-dependent :math:`F_S, F_C, F_v` (``*_negative``
     fields, used for :math:`v < 0`) and the velocity-dependent damping
     :math:`\sigma_1(v) = \sigma_1 e^{-(v/v_d)^2}` of Sec. 3.3 (``sigma1_velocity``
@@ -61,7 +61,7 @@ F_S, F_C, F_v (both directions) change linearly in time, or in a step, over a
 run (App. E.1: the friction changes as the rig warms up):
 :func:`drift_factor`, applied by the simulator through
 :func:`drifted_params`.  The ``adaptation_*`` fields belong to the adaptive
-compensator (:mod:`frictionlab.adaptive`).
+compensator (:mod:`frictionlab.model.adaptive`).
 
 The pure force laws are numba-compiled functions over a packed parameter
 vector (:meth:`FrictionParams.pack`) so that the simulator, the observers and
@@ -122,7 +122,7 @@ _TINY = 1e-12  # floor of the Stribeck level in divisions (F_S = F_C = 0: no fri
 P_FS, P_FC, P_FV, P_VS, P_S0, P_S1, P_K, P_BAND, P_EPS, P_FSN, P_FCN, P_FVN, P_VD = range(13)
 # drift of the plant's levels (NaN drift time: the run's duration, filled in by the runner)
 P_DRIFT, P_DRIFT_START, P_DRIFT_TIME = 13, 14, 15
-# the adaptive compensator's law (:mod:`frictionlab.adaptive`)
+# the adaptive compensator's law (:mod:`frictionlab.model.adaptive`)
 P_AGAIN, P_ABW, P_ADEAD, P_AINNOV, P_AMIN, P_AMAX, P_ADIST = range(16, 23)
 NP = 23
 

@@ -439,7 +439,7 @@ def features(
 
 
 def trajectory_features(traj, window: float | None = None) -> LimitCycleFeatures:
-    """:func:`features` of a :class:`frictionlab.simulation.Trajectory`."""
+    """:func:`features` of a :class:`frictionlab.model.simulation.Trajectory`."""
     cfg = traj.config
     noise = cfg.sim.noise if cfg is not None else 0.0
     if len(traj) < 3:

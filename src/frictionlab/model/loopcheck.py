@@ -1,8 +1,8 @@
 r"""Will the sampled loop hold?  Controller settings checked against the model before use.
 
-:func:`check_loop` takes a :class:`~frictionlab.controller.Controller` (gains
+:func:`check_loop` takes a :class:`~frictionlab.model.controller.Controller` (gains
 of Sec. 2.2-2.3, compensator of Sec. 6) and the plant it will drive
-(:class:`~frictionlab.plant.PlantParams`) and answers, from linear models of
+(:class:`~frictionlab.model.plant.PlantParams`) and answers, from linear models of
 the sampled loop, whether applying it would hurt the motor.  The answer is a
 frozen :class:`LoopCheck` with its diagnostics, in the spirit of
 :func:`scipy.signal.place_poles`'s result object.
@@ -10,10 +10,10 @@ frozen :class:`LoopCheck` with its diagnostics, in the spirit of
 What is checked
 ---------------
 1. **The sampled closed loop at rest** (plant, observers, state feedback).
-   The plant of eq. (6) linearised upright (:func:`frictionlab.plant.linearize`,
+   The plant of eq. (6) linearised upright (:func:`frictionlab.model.plant.linearize`,
    with the plant's own :math:`\omega_0`, damping and input gain, which may
    differ from the design's) and sampled with zero-order hold at h; the
-   controller is the compiled :func:`~frictionlab.controller.controller_step`
+   controller is the compiled :func:`~frictionlab.model.controller.controller_step`
    itself, linearised by central differences (no second copy of the observer
    equations), without saturation.  State: the plant's four states and the
    controller's four estimates, u from the predicted estimates as in the
@@ -50,7 +50,7 @@ What is checked
 
 The ``adaptive`` compensator is checked as the LuGre observer at its
 starting levels with the adaptation frozen (its own law is stable by the
-conditions :func:`frictionlab.adaptive.check_gains` enforces, and it moves
+conditions :func:`frictionlab.model.adaptive.check_gains` enforces, and it moves
 the levels slowly), its largest level being the estimates' bound
 ``adaptation_max``.
 

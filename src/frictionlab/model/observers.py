@@ -24,11 +24,11 @@ Both are inconsistent with eq. (3); this module follows the derivation:
     \dot{\hat x}_2 &= \ddot\theta_{\rm model}(\hat x_1, \omega_0\hat x_2,
         \hat{\dot\Omega}, u)/\omega_0 + k_2(\theta_m - \hat x_1)
 
-where :math:`\ddot\theta_{\rm model}` is :func:`frictionlab.plant.accelerations`
+where :math:`\ddot\theta_{\rm model}` is :func:`frictionlab.model.plant.accelerations`
 (the plant's own equation, with :math:`\zeta = 0` and no friction, as the
 thesis's design model), :math:`\hat{\dot\Omega}` is the arm observer's
 velocity estimate, and :math:`\omega_0` is the *design* value.  The gains
-:math:`k_1, k_2` (:func:`frictionlab.design.observer_gains`) place the
+:math:`k_1, k_2` (:func:`frictionlab.model.design.observer_gains`) place the
 linearisation's poles; the wrong printed signs would leave the linearisation
 unchanged (they only flip the nonlinear terms), which is why the error is
 invisible in the gain formulas.  The filter is implemented, as in the

@@ -5,13 +5,13 @@ The closed loop of Sec. 5 advances, once per sampling period h, the state
 ====  ============  ====================================================
 idx   name          meaning
 ====  ============  ====================================================
-0-4   plant         ``[theta, theta_dot, arm, arm_dot, z]`` (:mod:`frictionlab.plant`)
-5-12  controller    the controller state (:mod:`frictionlab.controller`)
-13    memory        the friction model's memory (:func:`~frictionlab.simulation.plant_tick`)
+0-4   plant         ``[theta, theta_dot, arm, arm_dot, z]`` (:mod:`frictionlab.model.plant`)
+5-12  controller    the controller state (:mod:`frictionlab.model.controller`)
+13    memory        the friction model's memory (:func:`~frictionlab.model.simulation.plant_tick`)
 ====  ============  ====================================================
 
-by one *tick*: measure, :func:`~frictionlab.controller.controller_step`,
-:func:`~frictionlab.simulation.plant_tick` -- the simulator's own compiled
+by one *tick*: measure, :func:`~frictionlab.model.controller.controller_step`,
+:func:`~frictionlab.model.simulation.plant_tick` -- the simulator's own compiled
 functions, called here through :func:`_plant_step` and :func:`loop_tick`
 (no dynamics are re-implemented).  Measurement noise is left out: the map is
 the deterministic loop; quantisation (``sim.quantization``) is kept.
@@ -25,7 +25,7 @@ rounding) and returns the closed loop seen from an extra arm acceleration
 ``w`` that enters beside the control signal, ``a = k_u u + w``, held over
 the sample like u.  Friction is ``w = -F``, so the loop with friction is this
 linear loop in negative feedback with the friction law -- the block diagram
-of the describing-function method (:mod:`frictionlab.predict`).
+of the describing-function method (:mod:`frictionlab.studies.predict`).
 
 Period map and its fixed point
 ------------------------------
@@ -137,7 +137,7 @@ def loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp):
 
     Measure (the simulator's sensor ``sp`` without noise, the arm's zero
     ``x0``), run the controller, then the plant over the sample, exactly as
-    :func:`frictionlab.simulation.simulate_config` does.
+    :func:`frictionlab.model.simulation.simulate_config` does.
     """
     x = X[:NX_PLANT]
     s = X[I_S:I_MEM]
@@ -272,7 +272,7 @@ class LinearLoop:
 
     ``X[k+1] = Phi X[k] + Gamma w[k]``, ``Y[k] = C X[k] + D w[k]`` with the
     state ``X = [theta, theta_dot, arm, arm_dot, x1_hat, x2_hat, arm_hat,
-    arm_dot_hat]`` (plant, then observers; :mod:`frictionlab.controller`'s
+    arm_dot_hat]`` (plant, then observers; :mod:`frictionlab.model.controller`'s
     scaled ``x2_hat``), the input ``w`` an extra arm acceleration (m/s^2)
     beside ``k_u u``, held over the sample, and the outputs :attr:`outputs`.
 
@@ -379,7 +379,7 @@ class PeriodicOrbit:
     stable : bool or None
         All Floquet multipliers inside the unit circle (None when not found).
     features : LimitCycleFeatures or None
-        The features of :func:`frictionlab.limit_cycles.features` on the
+        The features of :func:`frictionlab.model.limit_cycles.features` on the
         measured signals of a run of the simulator from the orbit's state,
         over two whole periods (None when not found); ``period`` is the
         orbit's period per upward zero crossing.
@@ -733,7 +733,7 @@ def _perturbed_runs(loop: _Loop, X: np.ndarray, free: np.ndarray, scale: np.ndar
 def orbit_trajectory(cfg: Config, state: np.ndarray, duration: float) -> Trajectory:
     """The simulator's run from the loop state ``state`` over ``duration`` seconds.
 
-    The same compiled loop as :func:`frictionlab.simulation.simulate_config`
+    The same compiled loop as :func:`frictionlab.model.simulation.simulate_config`
     (without noise), started from a loop state in this module's layout
     instead of the initial angle: run it from :attr:`PeriodicOrbit.state`
     to see the cycle.

@@ -132,7 +132,7 @@ def rhs(t: float, x, u, params: PlantParams) -> np.ndarray:
     x : array_like, shape (4,) or (5,)
         State, see the module table.  A 5th entry (LuGre ``z``) is carried
         through with zero derivative: the bristle dynamics live in
-        :mod:`frictionlab.friction`.
+        :mod:`frictionlab.model.friction`.
     u : float or array_like of length 2
         Control signal u in m/s^2, or ``(u, F)`` with the arm friction F in
         units of u (m/s^2).

@@ -91,7 +91,7 @@ class RigScaling(Validated):
         b = check_range("arm_bias", self.arm_bias, -1.0, 1.0)
         object.__setattr__(self, "arm_bias", b)
 
-    # --- raw -> SI (the laws of frictionlab.sensor, element-wise) ------------
+    # --- raw -> SI (the laws of frictionlab.model.sensor, element-wise) ------------
     def theta(self, y):
         """Pendulum angle (rad) from the raw reading y."""
         return _S.theta_from_raw.py_func(np.asarray(y, dtype=float), self.theta_scale,
@@ -145,11 +145,11 @@ class RigScaling(Validated):
 
 def wrap_raw(r):
     """Wrap raw values into [-1, 1) like the pendulum and arm channels
-    (:func:`frictionlab.sensor.wrap`)."""
+    (:func:`frictionlab.model.sensor.wrap`)."""
     return _S.wrap.py_func(np.asarray(r, dtype=float))
 
 
 def unwrap_raw(previous: float, current: float) -> float:
     """Undo a wrap between two consecutive raw samples (jumps of more than 1;
-    :func:`frictionlab.sensor.unwrap`)."""
+    :func:`frictionlab.model.sensor.unwrap`)."""
     return current + 2.0 * _S.unwrap.py_func(previous, current, 0)

@@ -42,9 +42,9 @@ a fixed function of the three (SplitMix64 hashing, Box-Muller), so it needs
 no generator state, is the same in compiled and plain Python code, and a
 simulation split into chunks draws exactly what an unsplit one does.
 
-Each function is a compiled kernel (:func:`frictionlab._jit.jit`);
+Each function is a compiled kernel (:func:`frictionlab.model._jit.jit`);
 ``f.py_func`` is the same law as plain Python, which also works element-wise
-on numpy arrays for the conversions (used by :class:`~frictionlab.rig.RigScaling`
+on numpy arrays for the conversions (used by :class:`~frictionlab.model.rig.RigScaling`
 and by the real-time loop, where calling it costs less than a dispatch).
 """
 
@@ -93,7 +93,7 @@ class SensorParams(NamedTuple):
     Attributes
     ----------
     theta_scale, theta_bias, arm_scale, velocity_scale, velocity_bias : float
-        App. B.5 factors (``rig.*``; see :mod:`frictionlab.rig` for the signs).
+        App. B.5 factors (``rig.*``; see :mod:`frictionlab.model.rig` for the signs).
     arm_offset : float
         Raw arm reading at Omega = 0 (the rig's side; :data:`ARM_START`).
     step : float
@@ -118,7 +118,7 @@ class SensorParams(NamedTuple):
 
 def sensor_params(rig, quantization: float = 1.0, noise: float = 0.0, seed: int = 0,
                   arm_offset: float = ARM_START) -> SensorParams:
-    """The :class:`SensorParams` of a rig (``rig`` a :class:`~frictionlab.rig.RigScaling`),
+    """The :class:`SensorParams` of a rig (``rig`` a :class:`~frictionlab.model.rig.RigScaling`),
     ``quantization`` 1 (12-bit grid) or 0 (ideal), ``sim.noise`` and ``sim.seed``."""
     return SensorParams(float(rig.theta_scale), float(rig.theta_bias), float(rig.arm_scale),
                         float(rig.velocity_scale), float(rig.velocity_bias),

@@ -1,7 +1,7 @@
 r"""Sampled-data closed-loop simulation (Sec. 5).
 
 The continuous plant eq. (6) with arm friction is integrated between samples;
-the controller (:func:`frictionlab.controller.controller_step`: observers,
+the controller (:func:`frictionlab.model.controller.controller_step`: observers,
 state feedback, compensator) runs every h with zero-order hold on u.  Time is
 the integer tick k, t = k h.
 
@@ -15,7 +15,7 @@ the friction force is evaluated once and held (friction is discontinuous, so
 a higher-order integration *through* it gains nothing) and the arm moves
 with the resulting constant acceleration (exact).
 The LuGre bristle state is advanced with the exact exponential update for
-frozen velocity (:func:`frictionlab.friction.lugre_step_exact`), so a stiff
+frozen velocity (:func:`frictionlab.model.friction.lugre_step_exact`), so a stiff
 bristle (``sigma0`` = 1000) stays stable at any substep count; the velocity
 it sees is the substep's midpoint velocity predicted with the last friction,
 which makes the smooth LuGre model second order in the substep (first order
@@ -243,13 +243,13 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
 
     ``x`` (plant state) and ``s`` (controller state) are advanced in place;
     ``mem`` is the friction model's memory (:func:`plant_tick`) at the start,
-    returned at the end.  The measurements are :func:`frictionlab.sensor.measure`
+    returned at the end.  The measurements are :func:`frictionlab.model.sensor.measure`
     with the sensor ``sp`` at sample numbers ``n0, n0 + 1, ...``; ``x0`` is its
     arm zero (taken at sample 0, returned for a continuation chunk).
     Row k of ``out`` receives the signals of tick k when ``record`` is true.
     ``n0`` is also the run's tick at the first of these ticks: the plant's
     friction levels drift with the time ``(n0 + k) h`` when ``fp`` has a
-    drift with a resolved drift time (:func:`frictionlab.friction.resolve_drift`;
+    drift with a resolved drift time (:func:`frictionlab.model.friction.resolve_drift`;
     an unresolved one, NaN, is ignored).
     """
     h = gp[11]
@@ -446,7 +446,7 @@ def _pack_plant(cfg: Config) -> np.ndarray:
 
 def make_sensor(cfg: Config) -> SensorParams:
     """The sensor a configuration describes (``rig.*``, ``sim.quantization``,
-    ``sim.noise``, ``sim.seed``; the arm's raw zero :data:`~frictionlab.sensor.ARM_START`)."""
+    ``sim.noise``, ``sim.seed``; the arm's raw zero :data:`~frictionlab.model.sensor.ARM_START`)."""
     return sensor_params(cfg.rig, cfg.sim.quantization, cfg.sim.noise, cfg.sim.seed)
 
 

@@ -3,7 +3,7 @@ r"""Swing-up: from hanging to balancing by energy control, then the balancing co
 The thesis's rig had to be balanced by hand before the controller started
 (Sec. 8 names a swing-up as the natural extension).  This module adds one,
 in the same explicit-state form as the balancing controller
-(:mod:`frictionlab.controller`): the compiled :func:`swingup_step` runs in
+(:mod:`frictionlab.model.controller`): the compiled :func:`swingup_step` runs in
 the simulator (:func:`simulate_swingup`) and in the 200 Hz loop alike.
 
 Energy control (Astrom and Furuta 2000) with this plant's input
@@ -225,7 +225,7 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     w : ndarray (NW,)
         Swing-up state (module table).
     s : ndarray (NS,)
-        The balancing controller's state (:mod:`frictionlab.controller`),
+        The balancing controller's state (:mod:`frictionlab.model.controller`),
         initialised here at a catch.
     gp, cp : ndarray
         The balancing controller's packed gains and compensator parameters.
@@ -236,7 +236,7 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
 
     Returns
     -------
-    (u, u_fb, F_hat) as :func:`~frictionlab.controller.controller_step`.
+    (u, u_fb, F_hat) as :func:`~frictionlab.model.controller.controller_step`.
     """
     h = sp[P_H]
     w0 = sp[P_W0]

@@ -59,7 +59,7 @@ Everything the operator console (or a script) needs is one object,
     then applies to the next run).  ``submit(changes, confirm=False)``
     also refuses a change that the model predicts unstable or saturating
     (``UnsafeChange``, with ``check`` and ``safe``; see :mod:`.params` and
-    :mod:`frictionlab.loopcheck`) unless ``confirm=True``; ``status()``
+    :mod:`frictionlab.model.loopcheck`) unless ``confirm=True``; ``status()``
     carries the applied settings' verdict as ``loop_check``.
 ``push(kick)``
     Add ``kick`` rad/s to the pendulum's velocity (emulated rigs: ``sim``,
@@ -78,7 +78,7 @@ own work, ``rig_us`` the rig read it excludes); flag bits in :mod:`.samples`.
 New fields are only ever appended: read them by name.
 
 ``frictionlab run`` without ``--headless`` builds the controller and calls
-:func:`frictionlab.realtime_cli.start_console` ``(ctl, host, port, token)``,
+:func:`frictionlab.cli.run.start_console` ``(ctl, host, port, token)``,
 which calls ``frictionlab.console.serve(ctl, host, port, token)`` and closes
 the controller when it returns.
 

@@ -69,7 +69,7 @@ class RealtimeController:
         :class:`~.rigs.SimRig`).
     swing_up : bool
         Runs start with the swing-up (``swingup.*`` of ``cfg``,
-        :mod:`frictionlab.swingup`); may be changed between runs (the
+        :mod:`frictionlab.model.swingup`); may be changed between runs (the
         console's Swing up button sets it for the run it starts).
     experiment : object, optional
         Run an identification experiment (:mod:`.experiment`) in place of
@@ -508,7 +508,7 @@ class RealtimeController:
         ``coulomb``/``stiction``: the adapted levels F_C, F_S (m/s^2) the
         compensator uses; ``start``: the values it started from (its
         ``compensation.*`` parameters); ``status``: what the law did at the
-        last tick (:data:`frictionlab.adaptive.ADAPT_STATES`: ``adapting``,
+        last tick (:data:`frictionlab.model.adaptive.ADAPT_STATES`: ``adapting``,
         or frozen: ``stuck``, ``presliding``, ``bad_signal``, ``saturated``;
         ``off``: not started yet).
         """

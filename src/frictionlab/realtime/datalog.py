@@ -15,7 +15,7 @@ Files of a run ``<run_id>`` in the log directory:
 
 ``<run_id>.dat``
     The ten signals of Sec. 7.1 in the thesis's order
-    (:data:`frictionlab.simulation.LOGGED`), ASCII columns, one tick a line.
+    (:data:`frictionlab.model.simulation.LOGGED`), ASCII columns, one tick a line.
 ``<run_id>.csv``
     Header ``t,tick,flags,<the ten signals>,y,x,v,u_da,jitter_us,compute_us,rig_us``;
     ``flags`` as in :mod:`frictionlab.realtime.samples`.

@@ -443,7 +443,7 @@ class AngleScales(RigExperiment):
     more than ``min_change`` of a lap and come to rest again (its range over
     ``settle`` s below ``rest_band``), at most ``wait`` s; the readings at
     rest before and after are marked for the analysis
-    (:func:`frictionlab.identification.experiments.analyse_angle_scales`).
+    (:func:`frictionlab.studies.identification.experiments.analyse_angle_scales`).
 
     Parameters
     ----------

@@ -8,12 +8,12 @@ nanoseconds on the monotonic clock, so there is no drift):
    latest deadline that has passed (never a burst of catch-up ticks),
    count the skipped ones as *missed* and record the stall;
 3. read the rig's raw (y, x, v), check them (finite, inside [-1, 1]),
-   convert them to SI with App. B (the laws of :mod:`frictionlab.sensor`
+   convert them to SI with App. B (the laws of :mod:`frictionlab.model.sensor`
    with the ``rig.*`` factors; the arm channel is unwrapped and its bias
    x_0 captured at the first tick, so Omega = 0 at the start), check the
    angle limit;
 4. run the compiled controller step - the simulator's own code
-   (:func:`frictionlab.controller.controller_step`: u from the predicted
+   (:func:`frictionlab.model.controller.controller_step`: u from the predicted
    estimates, saturation, observer update);
 5. write u_DA = k_u u (``rig.u_scale``, saturated to [-1, 1]); *compute* = u written -
    wake-up, less the time spent reading the rig (*rig*: request to reply
@@ -239,8 +239,8 @@ class Loop:
         or swings freely); every other check, the timing and the logging are
         those of a balancing run.
     swingup : SwingUpParams, optional
-        Start hanging (or anywhere) and swing up (:mod:`frictionlab.swingup`,
-        the simulator's compiled :func:`~frictionlab.swingup.swingup_step`):
+        Start hanging (or anywhere) and swing up (:mod:`frictionlab.model.swingup`,
+        the simulator's compiled :func:`~frictionlab.model.swingup.swingup_step`):
         no ``not_upright`` check at the start, the angle limit only once the
         phase is ``balancing``, and the swing-up's own stops ``not_caught``
         (its time limit, counted in executed ticks), ``arm_travel`` and
@@ -305,7 +305,7 @@ class Loop:
         self.sched_fifo = False
         self.x0: float | None = None
         self.traceback: str | None = None
-        #: The controller state (:mod:`frictionlab.controller`'s table) from the first
+        #: The controller state (:mod:`frictionlab.model.controller`'s table) from the first
         #: reading on, updated in place by each tick (for the sidecar's adapted levels).
         self.state = None
         self.swingup = swingup

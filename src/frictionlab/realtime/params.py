@@ -10,13 +10,13 @@ snapshot in between two ticks, so a tick never sees half a change.
 Change requests are dicts (the console's and the mailbox's format):
 
 ``"design"``
-    ``"fast"`` / ``"slow"`` (preset), a :class:`~frictionlab.design.DesignSpec`,
+    ``"fast"`` / ``"slow"`` (preset), a :class:`~frictionlab.model.design.DesignSpec`,
     or a dict of ``design.*`` fields (``{"omega1": 5.0}``) applied to the
     current spec.  ``h`` cannot change while the loop exists.
 ``"compensation"``
     ``"none"`` (off) or ``"coulomb"``/``"classical"``/``"lugre"``/``"adaptive"``
     (selects the model and turns compensation on; ``adaptive`` is the LuGre
-    observer with levels adapted online, :mod:`frictionlab.adaptive`).
+    observer with levels adapted online, :mod:`frictionlab.model.adaptive`).
 ``"compensation_enabled"``
     ``True``/``False``: the thesis's Compensation button (keeps the model).
 ``"compensation_params"``
@@ -26,7 +26,7 @@ Change requests are dicts (the console's and the mailbox's format):
 ``"set"``
     Dict of ``design.*`` / ``compensation.*`` keys as for ``--set``.
 ``"error_signal"``
-    The LuGre observer's error signal (:data:`frictionlab.controller.ERROR_SIGNALS`).
+    The LuGre observer's error signal (:data:`frictionlab.model.controller.ERROR_SIGNALS`).
 
 A refused change raises :class:`ChangeError` (a
 :class:`~frictionlab.config.ConfigError`) whose ``keys`` name what was
@@ -34,7 +34,7 @@ refused, as ``design.<field>``, ``compensation.<field>``, ``compensation``
 (the model), ``compensation_enabled`` or ``error_signal``, so that a caller
 can point at the fields without reading the message.  Every snapshot
 carries :attr:`ControlParams.loop_check`, the model's verdict on it
-(:func:`frictionlab.loopcheck.check_loop`: stability of the sampled loop,
+(:func:`frictionlab.model.loopcheck.check_loop`: stability of the sampled loop,
 of the compensator, predicted peak of u); :meth:`ControlParams.refusal`
 turns a failing verdict into an :class:`UnsafeChange` that also says what
 would be safe.
@@ -257,10 +257,10 @@ class ControlParams:
 
     @functools.cached_property
     def loop_check(self) -> LoopCheck:
-        """The model's verdict on these settings (:func:`~frictionlab.loopcheck.check_loop`).
+        """The model's verdict on these settings (:func:`~frictionlab.model.loopcheck.check_loop`).
 
         Against the run's plant model (``cfg.plant``); measurement noise
-        ``sim.noise``, or :data:`~frictionlab.loopcheck.DEFAULT_NOISE` when
+        ``sim.noise``, or :data:`~frictionlab.model.loopcheck.DEFAULT_NOISE` when
         that is 0 (a real rig's noise is not configured).
         """
         return check_loop(self.controller, self.cfg.plant,
@@ -356,7 +356,7 @@ class ControlParams:
     def warm(self) -> None:
         """Do now, off the loop, the one-time work of the first change of each kind.
 
-        Designs both presets (:func:`~frictionlab.design.design` caches its
+        Designs both presets (:func:`~frictionlab.model.design.design` caches its
         results) and builds a controller for every compensator model, which
         imports the compensation code on first use.  Done in a request
         thread while the loop runs, this held the GIL for up to 30 ms and

@@ -28,11 +28,11 @@ Backends (:func:`open_rig` parses the ``--backend`` string):
 
 ``sim``
     :class:`SimRig`: the simulated plant in-process
-    (:class:`frictionlab.simulation.SimulatedPlant`, the simulator's own
+    (:class:`frictionlab.model.simulation.SimulatedPlant`, the simulator's own
     integrator).  Paced in real time by the loop: reading tick k first
     advances the plant to step k with the last u held, so after missed
     deadlines the plant has moved on as a real one would.  Readings go
-    through :class:`AdcModel` (:mod:`frictionlab.sensor`: App. B scaling,
+    through :class:`AdcModel` (:mod:`frictionlab.model.sensor`: App. B scaling,
     arm offset, wrap-around, optional 12-bit quantisation and noise per
     ``sim.quantization``, ``sim.noise`` and ``sim.seed``), so the loop's
     raw-to-SI conversion is exercised.
@@ -95,7 +95,7 @@ class BadReading(Exception):
 class AdcModel:
     """SI plant signals to raw ADC values as the rig's converters produce them.
 
-    A runner of :func:`frictionlab.sensor.adc` (the one sensor model).  The
+    A runner of :func:`frictionlab.model.sensor.adc` (the one sensor model).  The
     noise of a reading is that of its sample number: the tick (``SimRig``) or
     the request's sequence number (``rig-sim``; the loop asks for tick k with
     sequence number k), so tick k of a run carries the noise the simulator

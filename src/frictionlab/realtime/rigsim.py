@@ -1,7 +1,7 @@
 """The emulated rig (``frictionlab rig-sim``): the plant behind the raw protocol.
 
 :class:`RigEmulator` answers protocol frames the way the rig's
-microcontroller would, in front of :class:`frictionlab.simulation.SimulatedPlant`
+microcontroller would, in front of :class:`frictionlab.model.simulation.SimulatedPlant`
 running in real time:
 
 * **Real time, lazily.**  The plant is integrated in quanta of
@@ -14,11 +14,11 @@ running in real time:
 * **Raw signals.**  Readings are App. B raw values: the angle and arm
   channels wrap around at +-1, the velocity channel clips, all three are
   quantised to 12 bits and carry ``sim.noise`` (SI units) of Gaussian noise,
-  through the one sensor model :mod:`frictionlab.sensor` with the ``rig.*``
+  through the one sensor model :mod:`frictionlab.model.sensor` with the ``rig.*``
   factors as the rig's true ones; the noise of a reading is that of the
   request's sequence number (the loop's tick), so a reading at tick k is the
   simulator's at tick k for the same state and ``sim.seed``.
-  The arm starts at the raw reading :data:`~frictionlab.sensor.ARM_START`
+  The arm starts at the raw reading :data:`~frictionlab.model.sensor.ARM_START`
   (the controller captures it as x_0).
 * **Sessions.**  ``HELLO`` starts a session: the "operator" balances the
   pendulum upright (``sim.initial_angle``, at rest; the arm stays where it

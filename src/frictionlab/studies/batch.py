@@ -7,17 +7,17 @@ from Python, each costs the compiled simulation plus the Python around it
 whole batch of parameter sets - a sweep's chunk, one generation of the
 identification's global search - is packed into arrays once and handed to one
 compiled driver, which for every set runs the same compiled closed loop as
-:func:`frictionlab.simulation.simulate_config` (:func:`~frictionlab.simulation._run`:
+:func:`frictionlab.model.simulation.simulate_config` (:func:`~frictionlab.model.simulation._run`:
 sensor model, controller step, plant tick) and the same compiled feature
-extraction as :func:`frictionlab.limit_cycles.features`
-(:func:`~frictionlab.limit_cycles._features_kernel`), with no Python per run.
-The features are those of :func:`frictionlab.simulation.run_features`, bit
-for bit (noise included: :func:`frictionlab.sensor.measure`'s noise is a
+extraction as :func:`frictionlab.model.limit_cycles.features`
+(:func:`~frictionlab.model.limit_cycles._features_kernel`), with no Python per run.
+The features are those of :func:`frictionlab.model.simulation.run_features`, bit
+for bit (noise included: :func:`frictionlab.model.sensor.measure`'s noise is a
 function of the seed and the sample number, with no generator state to share
 between threads).
 
 Two drivers: :func:`_batch_serial` (one thread; the Dask and process-pool
-workers of :mod:`frictionlab.sweep`) and :func:`_batch_threads` (numba
+workers of :mod:`frictionlab.studies.sweep`) and :func:`_batch_threads` (numba
 ``prange`` over ``threads`` numba threads, the GIL released; the sets are
 dealt to the threads in turn, so that short runs - a pendulum that falls - do
 not pile up on one thread).  numba's ``workqueue`` threading layer (its
@@ -25,7 +25,7 @@ fallback when neither OpenMP nor TBB is available) must not be entered by
 two Python threads at once; :func:`run` holds a lock.
 
 numba is imported on the first batch, as for every kernel
-(:mod:`frictionlab._jit`).
+(:mod:`frictionlab.model._jit`).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ prange = range
 
 __all__ = ["Batch", "evaluate_rows", "max_threads", "prepare", "rows", "run"]
 
-#: Feature-extraction settings of :func:`frictionlab.limit_cycles.features`'s defaults.
+#: Feature-extraction settings of :func:`frictionlab.model.limit_cycles.features`'s defaults.
 REL_PROMINENCE, SETTLE_TOL, SMOOTH = 0.02, 2e-3, 9
 #: Status code of a set whose window is not positive (an error row).
 _BAD_WINDOW = 3
@@ -64,10 +64,10 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
          buf, codes, vals, cycles):
     """Run set ``i`` and store its status code, feature values and cycle count.
 
-    As :func:`frictionlab.simulation.run_features`: the closed loop for
+    As :func:`frictionlab.model.simulation.run_features`: the closed loop for
     ``nt[i]`` ticks recorded into ``buf``, then the features of the measured
     angle over the window (``win[i]`` s, nan: the last half) by
-    :func:`frictionlab.limit_cycles.trajectory_features`'s rules.
+    :func:`frictionlab.model.limit_cycles.trajectory_features`'s rules.
     """
     x = np.zeros(5)
     x[0] = x0[i]
@@ -218,7 +218,7 @@ def prepare(base: Config, points: Sequence[Mapping[str, Any]], duration: float |
 def _numba():
     """numba (imported after its cache directory is set), with ``prange`` bound."""
     global prange
-    _njit()  # imports frictionlab._numba_cache, then numba
+    _njit()  # imports frictionlab.model._numba_cache, then numba
     import numba
 
     prange = numba.prange
@@ -283,7 +283,7 @@ def rows(batch: Batch, points: Sequence[Mapping[str, Any]]) -> list[dict[str, An
 
 def evaluate_rows(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
                   window: float | None, threads: int = 1) -> list[dict[str, Any]]:
-    """Rows of :func:`frictionlab.sweep.evaluate` with the default reduction, in one batch.
+    """Rows of :func:`frictionlab.studies.sweep.evaluate` with the default reduction, in one batch.
 
     Parameters
     ----------
@@ -291,14 +291,14 @@ def evaluate_rows(base: Config, points: Sequence[Mapping[str, Any]], duration: f
         Configuration every point modifies.
     points : sequence of mappings ``{key: value}``
     duration, window : float or None
-        As for :func:`frictionlab.simulation.run_features`.
+        As for :func:`frictionlab.model.simulation.run_features`.
     threads : int
         numba threads (1: in the calling thread).
 
     Returns
     -------
     list of dict
-        One row per point, as :func:`frictionlab.sweep.reduce_features` and
+        One row per point, as :func:`frictionlab.studies.sweep.reduce_features` and
         the sweep engine make it.
     """
     return rows(run(prepare(base, points, duration, window), threads), points)

@@ -20,10 +20,10 @@ intended :math:`u_{fb}`.  Three compensators, as in Sec. 6.1-6.3:
     The same observer with its Coulomb and stiction levels adapted online
     from the applied u and the measured arm velocity (the adaptive friction
     estimator Sec. 8 proposes; law, stability conditions and safety rules in
-    :mod:`frictionlab.adaptive`; state: :math:`\hat z` and the law's).
+    :mod:`frictionlab.model.adaptive`; state: :math:`\hat z` and the law's).
 
-The force laws are those of :mod:`frictionlab.friction`, called through the
-compiled :func:`frictionlab.controller.compensator_force` that the simulator
+The force laws are those of :mod:`frictionlab.model.friction`, called through the
+compiled :func:`frictionlab.model.controller.compensator_force` that the simulator
 and the real-time loop run; :class:`Compensator` wraps it as an ``init`` /
 ``step`` pair with explicit state for scripts, tests and other loops.
 
@@ -33,19 +33,19 @@ Eq. (19) leaves e open.  With :math:`\tilde z = z - \hat z` the estimation
 error, :math:`\dot{\tilde z} = -a\tilde z + k e` (:math:`a = \sigma_0|v|/s(v)
 \ge 0`), so e must be a signal that the friction error drives *back*.  The
 controller feeds the observers :math:`u - \hat F` (see
-:mod:`frictionlab.controller`), so the arm observer predicts the acceleration
+:mod:`frictionlab.model.controller`), so the arm observer predicts the acceleration
 :math:`u - \hat F` while the arm gets :math:`u - F`; the velocity innovation
 :math:`e = \dot\Omega_m - \hat{\dot\Omega}` therefore integrates
 :math:`-(F - \hat F) \approx -\sigma_0\tilde z`, and :math:`\dot{\tilde z} =
 -a\tilde z - k\sigma_0\int\tilde z` is a damped oscillator: the observer
 corrects itself.  The arm's control errors carry no such information and, in
 simulation, make the loop fall; docs/compensation.md has the comparison and
-:data:`frictionlab.controller.DEFAULT_ERROR_SIGNAL` is the result.
+:data:`frictionlab.model.controller.DEFAULT_ERROR_SIGNAL` is the result.
 
 Bristle discretisation
 ----------------------
 :math:`\hat z` is advanced with the exact exponential update for the velocity
-held over the sample (:func:`frictionlab.friction.lugre_step_exact`), which is
+held over the sample (:func:`frictionlab.model.friction.lugre_step_exact`), which is
 stable for any :math:`\sigma_0` and exact in steady sliding.  Forward Euler,
 :math:`\hat z^+ = \hat z + h\dot{\hat z}`, has the multiplier
 :math:`1 - ah` and diverges once :math:`ah > 2`, i.e. at h = 5 ms for
@@ -62,7 +62,7 @@ A LuGre model with :math:`F_S = F_C = 0` (on either side of the velocity) makes
 Tuning
 ------
 :func:`tune` runs a grid of ``compensation.*`` values, and the loop without
-compensation, through the sweep engine (:func:`frictionlab.sweep.evaluate`)
+compensation, through the sweep engine (:func:`frictionlab.studies.sweep.evaluate`)
 and picks the point with the smallest ``score = peak_to_peak * (1 + w *
 reversals/s)`` (peak-to-peak of the measured pendulum angle).  Chatter is a
 property of the friction estimate's and u's time series, so the engine
@@ -246,7 +246,7 @@ class LuGreCompensator(Compensator):
     """The LuGre observer of eq. (19) with gain ``params.observer_gain`` (Sec. 6.3).
 
     ``error_signal`` names what the controller feeds as e (one of
-    :data:`frictionlab.controller.ERROR_SIGNALS`); :meth:`step` takes e itself.
+    :data:`frictionlab.model.controller.ERROR_SIGNALS`); :meth:`step` takes e itself.
     """
 
     kind: ClassVar[str] = "lugre"
@@ -262,11 +262,11 @@ class LuGreCompensator(Compensator):
 @dataclass(frozen=True)
 class AdaptiveCompensator(LuGreCompensator):
     """The LuGre observer of eq. (19) with F_C and F_S adapted online
-    (:mod:`frictionlab.adaptive`).
+    (:mod:`frictionlab.model.adaptive`).
 
     ``arm_length`` (:math:`L_1`, m) and ``u_max`` (the saturation of u) are
     the law's; its gains must meet the stability conditions of
-    :func:`frictionlab.adaptive.check_gains` for ``h`` and ``arm_length``.
+    :func:`frictionlab.model.adaptive.check_gains` for ``h`` and ``arm_length``.
     :meth:`step` takes ``u_prev``, the control applied over the last sample.
     """
 
@@ -450,13 +450,13 @@ def features_and_chatter(cfg: Config, duration: float | None,
     cfg : Config
         The run's configuration.
     duration, window : float or None
-        As for :func:`frictionlab.simulation.run_features`.
+        As for :func:`frictionlab.model.simulation.run_features`.
 
     Returns
     -------
     dict
         ``status``, the seven features of
-        :data:`frictionlab.limit_cycles.FEATURES`, and the fields of
+        :data:`frictionlab.model.limit_cycles.FEATURES`, and the fields of
         :class:`ChatterMetrics` (``reversals_per_s``, ``u_roughness``).
     """
     _, status, feats, ch = _run(cfg, duration, window)
@@ -472,7 +472,7 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
     cfg : Config
         The compensated configuration (``cfg.compensation_kind`` != none).
     duration, window : float, optional
-        As for :func:`frictionlab.simulation.run_features`.
+        As for :func:`frictionlab.model.simulation.run_features`.
     controller : Controller, optional
         A controller for the compensated run (e.g. another error signal).
     return_trajectories : bool
@@ -617,7 +617,7 @@ def tune(
 
     Every grid point, and then the loop without compensation (for the
     reduction ratio and the baseline's chatter), runs through
-    :func:`frictionlab.sweep.evaluate` with :func:`features_and_chatter` as
+    :func:`frictionlab.studies.sweep.evaluate` with :func:`features_and_chatter` as
     the reduction, so that each row carries the peak-to-peak of the measured
     pendulum angle and the :func:`chatter`.  Of the points that kept the
     pendulum up (``limit_cycle`` or ``settled`` with a peak-to-peak), the one
@@ -638,7 +638,7 @@ def tune(
     chatter_weight : float
         Penalty weight w (s): 20 reversals/s double the score at w = 0.05.
     workers, dask
-        Passed to both :func:`frictionlab.sweep.evaluate` calls.
+        Passed to both :func:`frictionlab.studies.sweep.evaluate` calls.
     progress : callable, optional
         Called as ``progress(done, total)``: runs done of the grid's points
         and the baseline.

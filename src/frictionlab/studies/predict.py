@@ -1,14 +1,14 @@
 r"""Predicting the friction limit cycle: describing function and exact periodic orbit.
 
-Two predictions of the cycle :func:`frictionlab.simulation.simulate` runs into
+Two predictions of the cycle :func:`frictionlab.model.simulation.simulate` runs into
 (Sec. 4.1 names the describing function; the thesis itself only simulated):
 
 * :func:`describing_function` -- the friction law against the linearised
   sampled loop seen from the friction input
-  (:func:`frictionlab.periodic.linear_loop`), with python-control's
+  (:func:`frictionlab.model.periodic.linear_loop`), with python-control's
   describing-function tools; amplitude and period where the loop's Nyquist
   curve meets :math:`-1/N(A)`.
-* :func:`frictionlab.periodic.periodic_orbit` -- the cycle as a fixed point of
+* :func:`frictionlab.model.periodic.periodic_orbit` -- the cycle as a fixed point of
   the loop's period map, with its features and Floquet multipliers.
 
 :func:`predict` runs both; it is what ``frictionlab predict`` prints.
@@ -296,7 +296,7 @@ def describing_function(cfg: Config, *, amplitudes=None, omega=None,
         Frequencies (rad/s) of the Nyquist curve (default 4000 points
         log-spaced from 0.05 rad/s to just below the Nyquist frequency pi/h).
     loop : LinearLoop, optional
-        The linear part (default :func:`frictionlab.periodic.linear_loop`).
+        The linear part (default :func:`frictionlab.model.periodic.linear_loop`).
     """
     nl, name = friction_nonlinearity(cfg)
     if nl is None:
@@ -367,7 +367,7 @@ def predict(cfg: Config, **orbit_options) -> Prediction:
     ----------
     cfg : Config
     **orbit_options
-        Passed to :func:`frictionlab.periodic.periodic_orbit`.
+        Passed to :func:`frictionlab.model.periodic.periodic_orbit`.
     """
     notes = []
     if cfg.sim.noise > 0:

@@ -5,7 +5,7 @@ Studies
 * Tables 2-3 (Sec. 5.2): fast design, classical model eq. (17) with eq. (20)'s
   F_S = 2.3, F_C = 1.5, zero-velocity band 0.03 rad/s (the band Sec. 5.2
   widened to for these tables); F_C, then F_S varied.  The thesis's values
-  are in :mod:`frictionlab.reference`.
+  are in :mod:`frictionlab.studies.reference`.
 * Tables 4-5: the same grids with the slow design and the band of Sec. 5.2's
   first statement, 0.001 rad/s (with it the slow cycle's period is the
   3.3 s the thesis reports for Figs. 19-20; 3.25 s with 0.03).  The thesis's
@@ -27,8 +27,8 @@ Studies
   Figs. 21-22 (Sec. 5.3).
 
 Every run lasts :data:`DURATION` s and its features are measured over the
-last half (:mod:`frictionlab.limit_cycles`); all runs go through the sweep
-engine (:func:`frictionlab.sweep.evaluate`: a process pool on every core, or
+last half (:mod:`frictionlab.model.limit_cycles`); all runs go through the sweep
+engine (:func:`frictionlab.studies.sweep.evaluate`: a process pool on every core, or
 Dask).  :func:`run` returns the results, :func:`interface_json` the object
 ``frictionlab reproduce --json`` prints, :func:`write_report` the report
 folder: ``report.md`` (the tables beside the thesis's values with relative
@@ -36,7 +36,7 @@ differences, the checked statements of Sec. 5.2-5.3, the figures),
 ``report.json`` (every row with its status and the ``simulate`` command that
 repeats it) and one PNG per simulated figure whose caption the thesis keeps
 (Figs. 17-24) plus the LuGre cycle.  The command line is
-:mod:`frictionlab.reproduce_cli`.
+:mod:`frictionlab.cli.reproduce`.
 """
 
 from __future__ import annotations
@@ -204,7 +204,7 @@ def reduce_with_trace(cfg: Config, duration: float | None,
                       window: float | None) -> dict[str, Any]:
     """A sweep reduction that also returns the last cycles' signals for a figure.
 
-    The features of :func:`frictionlab.sweep.reduce_features`, plus ``trace``:
+    The features of :func:`frictionlab.studies.sweep.reduce_features`, plus ``trace``:
     :data:`TRACE` over the last six periods (at least 5 s).
     """
     from ..model.limit_cycles import trajectory_features

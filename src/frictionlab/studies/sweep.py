@@ -6,7 +6,7 @@ the seven LuGre parameters around the defaults of eq. (21)) and note the
 limit cycle's peaks, period, max(u) and max arm velocity for each setting.
 This module does that for any parameter keys, on one core, all local cores,
 or a Dask cluster.  It is the engine only: the command line (``frictionlab
-sweep``, its table and plot) is :mod:`frictionlab.sweep_cli`, which imports
+sweep``, its table and plot) is :mod:`frictionlab.cli.sweep`, which imports
 this module, never the reverse.
 
 Engine
@@ -14,7 +14,7 @@ Engine
 :func:`evaluate` maps a list of points (``{key: value}`` dicts applied to a
 base :class:`~frictionlab.config.Config`) to result rows, in order.  The unit
 of work is one closed-loop run reduced to a row: by default
-:func:`reduce_features` (:func:`frictionlab.simulation.run_features`); a
+:func:`reduce_features` (:func:`frictionlab.model.simulation.run_features`); a
 caller that needs more of each run than its features (compensation tuning:
 the control chatter) passes its own ``reduce``, which runs in the workers
 beside the simulation so that only the row travels back.  Points are shipped
@@ -29,7 +29,7 @@ Backends (chosen by :func:`evaluate`'s ``workers``, ``dask`` and ``reduce``):
 
 * threads, the default for the default reduction (features): the points go in
   batches (:data:`THREAD_CHUNK` per thread) to the compiled batch evaluator
-  :mod:`frictionlab.batch`, which runs each batch on ``workers`` numba
+  :mod:`frictionlab.studies.batch`, which runs each batch on ``workers`` numba
   threads in this process (``None``: all cores; ``1``: the calling thread),
   simulation and feature extraction compiled, no Python per run and no
   process start-up.  The next batch is packed while one runs;
@@ -53,7 +53,7 @@ Output files
 :class:`SweepFile` writes rows as chunks complete (CSV, flushed and fsynced per
 chunk), reads them back for ``--resume``, and at the end rewrites the file in
 sweep order (atomically).  Columns: the varied keys, the seven features of
-:data:`frictionlab.limit_cycles.FEATURES`, ``status``, ``error`` (a
+:data:`frictionlab.model.limit_cycles.FEATURES`, ``status``, ``error`` (a
 ``reduce``'s extra columns are not written, except the swing-up sweep's
 ``caught`` and ``catch_time``).  A
 ``.parquet`` output is written at the end from all rows; while the sweep runs
@@ -310,12 +310,12 @@ def reduce_features(cfg: Config, duration: float | None,
     cfg : Config
         The point's configuration.
     duration, window : float or None
-        As for :func:`frictionlab.simulation.run_features`.
+        As for :func:`frictionlab.model.simulation.run_features`.
 
     Returns
     -------
     dict
-        The seven features of :data:`~frictionlab.limit_cycles.FEATURES`
+        The seven features of :data:`~frictionlab.model.limit_cycles.FEATURES`
         (``None`` where undefined) and ``status`` (``limit_cycle``,
         ``settled`` or ``fell``).
     """
@@ -332,7 +332,7 @@ def reduce_swingup(cfg: Config, duration: float | None,
     """The reduction of a swing-up run (``sweep --swing-up``).
 
     Returns the features and status of
-    :func:`frictionlab.swingup_sim.swingup_outcome` (``not_caught`` when it
+    :func:`frictionlab.studies.swingup_sim.swingup_outcome` (``not_caught`` when it
     never reached the balancing phase) and ``caught`` (1 when it did, else 0)
     and ``catch_time`` (s, the catch that led to balancing; ``None`` if none).
     """
@@ -376,7 +376,7 @@ def _run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: floa
 
     Each point's configuration is run and reduced by ``reduce`` (default:
     :func:`reduce_features`'s rows, computed by the compiled batch evaluator
-    :func:`frictionlab.batch.evaluate_rows` on one thread); a point whose
+    :func:`frictionlab.studies.batch.evaluate_rows` on one thread); a point whose
     configuration is invalid, or whose run or reduction raises, is an error row.
     """
     if reduce is None:
@@ -461,7 +461,7 @@ def _get_pool(workers: int):
 
             ctx = multiprocessing.get_context("forkserver")
             # the forkserver imports and warms the simulator once; workers fork from it
-            ctx.set_forkserver_preload(["frictionlab.sweep"])
+            ctx.set_forkserver_preload(["frictionlab.studies.sweep"])
             os.environ[_FORKSERVER_WARM_ENV] = "1"
             try:
                 forkserver.ensure_running()
@@ -829,7 +829,7 @@ def evaluate(
     points : sequence of mappings ``{key: value}``
         Parameter sets, applied with :meth:`Config.with_values`.
     duration, window : float, optional
-        As for :func:`frictionlab.simulation.run_features` (defaults:
+        As for :func:`frictionlab.model.simulation.run_features` (defaults:
         ``sim.duration``; the last half of the run).
     workers : int, optional
         Default reduction: ``N`` numba threads in this process (``1``: the
@@ -859,7 +859,7 @@ def evaluate(
     -------
     list of dict
         One row per point, in the order of ``points``: the point's keys and
-        values, the seven features of :data:`~frictionlab.limit_cycles.FEATURES`
+        values, the seven features of :data:`~frictionlab.model.limit_cycles.FEATURES`
         (``None`` where undefined), ``status``
         (``limit_cycle``/``settled``/``fell``/``error``), ``error`` (a
         message, or ``None``) and the extra columns of ``reduce`` (absent

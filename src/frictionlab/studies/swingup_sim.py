@@ -1,14 +1,14 @@
-r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.swingup`).
+r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.model.swingup`).
 
-The runner of :func:`frictionlab.swingup.swingup_step` on the simulator's
-plant (:func:`frictionlab.simulation.plant_tick`, the same compiled
-integrator, sensor (:func:`frictionlab.sensor.measure`) and friction drift as
-:func:`frictionlab.simulation.simulate_config`).  The pendulum's angle is
+The runner of :func:`frictionlab.model.swingup.swingup_step` on the simulator's
+plant (:func:`frictionlab.model.simulation.plant_tick`, the same compiled
+integrator, sensor (:func:`frictionlab.model.sensor.measure`) and friction drift as
+:func:`frictionlab.model.simulation.simulate_config`).  The pendulum's angle is
 unbounded in the plant (it may go over the top); the recorded ``theta`` and
 ``theta_m`` columns are wrapped into [-pi, pi).
 
 A run ends early when the swing-up stops (its time limit, arm travel or arm
-speed, :data:`frictionlab.swingup.STOP_CODES`) or, once balancing, when the
+speed, :data:`frictionlab.model.swingup.STOP_CODES`) or, once balancing, when the
 pendulum falls (``|theta| > sim.fall_angle``, wrapped) or the state becomes
 non-finite.
 """

@@ -4,12 +4,12 @@ Each experiment has two halves:
 
 * ``simulate_*(cfg, ...) -> Trajectory``: runs the experiment open loop (or
   under the experiment's own P velocity loop) against the simulated rig
-  (:class:`frictionlab.simulation.SimulatedPlant` with the plant and friction
+  (:class:`frictionlab.model.simulation.SimulatedPlant` with the plant and friction
   of ``cfg``), recording the signals the rig would log (columns of
-  :data:`frictionlab.simulation.COLUMNS`; measurement noise ``sim.noise``);
+  :data:`frictionlab.model.simulation.COLUMNS`; measurement noise ``sim.noise``);
 * ``analyse_*(log, ...) -> dict``: derives the estimates from a log, which is
-  anything indexable by signal name (a :class:`~frictionlab.simulation.Trajectory`
-  or the dict :func:`frictionlab.identification.logs.read_log` returns), so
+  anything indexable by signal name (a :class:`~frictionlab.model.simulation.Trajectory`
+  or the dict :func:`frictionlab.io.logs.read_log` returns), so
   the same analysis runs on a real rig's recording.
 
 Friction levels are in the plant's units (m/s^2 of arm-tip acceleration, like
@@ -94,7 +94,7 @@ MAX_LEVELS = 100
 class _Recorder:
     """Steps a :class:`SimulatedPlant` and records one row of COLUMNS per tick.
 
-    The measured signals are the simulator's (:func:`frictionlab.sensor.measure`:
+    The measured signals are the simulator's (:func:`frictionlab.model.sensor.measure`:
     ``sim.noise`` seeded by ``sim.seed``, the 12-bit converter with
     ``sim.quantization``, the ``rig.*`` factors; sample n = tick n); the
     controller-estimate columns stay zero (the experiments run open loop).

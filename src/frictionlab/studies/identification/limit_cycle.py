@@ -29,11 +29,11 @@ Search
 ------
 1. Global: :func:`scipy.optimize.differential_evolution` over the bounds
    (in coordinates normalised to [0, 1]); each generation's population is
-   evaluated in one batch through :func:`frictionlab.sweep.evaluate` (all
+   evaluated in one batch through :func:`frictionlab.studies.sweep.evaluate` (all
    experiments of all members in one call of the compiled batch evaluator,
-   :mod:`frictionlab.batch`, on the engine's threads, or on a Dask cluster).
+   :mod:`frictionlab.studies.batch`, on the engine's threads, or on a Dask cluster).
    The engine's workers are chosen once for the whole fit
-   (:func:`frictionlab.sweep.auto_workers` on the fit's largest number of
+   (:func:`frictionlab.studies.sweep.auto_workers` on the fit's largest number of
    runs: all cores, one thread for a fit under about half a second of
    work).  The global search may run on shorter runs than the rest
    (``search_duration``, ``search_window``): it only has to find the basin
@@ -192,7 +192,7 @@ class Experiment:
     sets : dict
         Further parameter keys of this experiment (``{key: value}``).
     features : dict
-        Measured features (names of :data:`frictionlab.limit_cycles.FEATURES`);
+        Measured features (names of :data:`frictionlab.model.limit_cycles.FEATURES`);
         unknown features are left out.
     label : str
         Name used in the residual report.
@@ -373,7 +373,7 @@ class LimitCycleProblem:
         Simulated time per run and the analysed final window (s).
     evaluate : callable, optional
         ``evaluate(base, points, duration=, window=, workers=, dask=)`` with
-        the contract of :func:`frictionlab.sweep.evaluate` (the default).
+        the contract of :func:`frictionlab.studies.sweep.evaluate` (the default).
     workers, dask
         Passed to ``evaluate``.
     stiction_above_coulomb : bool
@@ -896,7 +896,7 @@ def fit_limit_cycle(
         See :class:`LimitCycleProblem`.
     workers : int, optional
         Workers of the sweep engine.  ``None`` (without ``dask``): chosen
-        once for the whole fit by :func:`frictionlab.sweep.auto_workers`
+        once for the whole fit by :func:`frictionlab.studies.sweep.auto_workers`
         from the fit's largest number of runs (all cores unless the whole
         fit is under about half a second of serial work), not per
         generation.  With the default reduction these are threads of the
