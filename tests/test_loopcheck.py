@@ -1,6 +1,6 @@
 """The model's check of controller settings (frictionlab.model.loopcheck) and
-the refusals built on it (frictionlab.realtime.params): against hand-derived matrices, the simulator, and the
-compensation study's evidence."""
+the refusals built on it (frictionlab.realtime.params): against hand-derived
+matrices, the simulator, and the compensation study's evidence."""
 
 from __future__ import annotations
 
