@@ -15,7 +15,7 @@ the friction force is evaluated once and held (friction is discontinuous, so
 a higher-order integration *through* it gains nothing) and the arm moves
 with the resulting constant acceleration (exact).
 The LuGre bristle state is advanced with the exact exponential update for
-frozen velocity (:func:`frictionlab.model.friction.lugre_step_exact`), so a stiff
+frozen velocity (:func:`frictionlab.model.friction.friction_step`), so a stiff
 bristle (``sigma0`` = 1000) stays stable at any substep count; the velocity
 it sees is the substep's midpoint velocity predicted with the last friction,
 which makes the smooth LuGre model second order in the substep (first order
@@ -87,10 +87,8 @@ from .friction import (
     P_FS,
     P_K,
     drifted_params,
-    lugre_force,
-    lugre_step_exact,
+    friction_step,
     resolve_drift,
-    static_force,
 )
 from .plant import accelerations_sc
 from .sensor import SensorParams, measure, sensor_params
@@ -195,14 +193,12 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
                 if kgain != 0.0:
                     e = -(th + tau * (thd + 0.5 * tau * th_acc))
                     tau += dt
-                z_new, z_mean, dz_mean = lugre_step_exact(v, z, e, dt, fp)
-                f = lugre_force(v, z_mean, dz_mean, fp)
-                z = z_new
+                f, z = friction_step(LUGRE, fp, z, v, fe, dt, e)
                 mem = f
             elif fkind == NONE:
                 f = 0.0
             else:
-                f, mem = static_force(fkind, ad, fe, mem, fp)
+                f, mem = friction_step(fkind, fp, mem, ad, fe, dt, 0.0)
             f_sum += f
             a = fe - f
             _, arm_acc = accelerations_sc(sn, cs, thd, ad, a, omega0, zeta, g, arm_len)
