@@ -90,7 +90,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .params import Validated, param
 
 __all__ = [
@@ -428,7 +428,7 @@ def viscous_force(v, p):
     return fv * v
 
 
-@jit
+@jit_inline
 def friction_step(kind, p, state, v, f_ext, dt, e):
     r"""One step of any friction model: the one law the simulator, the
     compensators and the model objects run.
