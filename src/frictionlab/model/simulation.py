@@ -156,14 +156,16 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
         Arm substeps per sample and arm substeps per pendulum step.
     h : float
         Sampling period (s).
-    pp, fkind, fp
-        Packed plant parameters, friction model code, packed friction parameters.
+    pp : PlantRecord
+        Plant parameters (:meth:`frictionlab.model.plant.PlantParams.record`).
+    fkind, fp
+        Friction model code, packed friction parameters.
 
     Returns
     -------
     (mean friction over the sample, mem)
     """
-    omega0, zeta, g, arm_len, ku = pp[0], pp[1], pp[2], pp[3], pp[4]
+    omega0, zeta, g, arm_len, ku = pp.omega0, pp.zeta, pp.g, pp.arm_length, pp.input_gain
     dt = h / substeps
     fe = ku * u
     half_dt_over_l = 0.5 * dt / arm_len
@@ -402,7 +404,7 @@ class SimulatedPlant:
     def __init__(self, cfg: Config, duration: float | None = None):
         self.cfg = cfg
         self.h = cfg.design.h
-        self._pp = _pack_plant(cfg)
+        self._pp = cfg.plant.record()
         self._fkind = KINDS.index(cfg.friction_kind)
         # friction.drift: over friction.drift_time, else to the end of the run
         # (``duration``, default sim.duration)
@@ -433,11 +435,6 @@ class SimulatedPlant:
         x = state.x.copy()
         x[1] += theta_dot_kick
         return PlantState(x, state.memory, state.friction, state.tick)
-
-
-def _pack_plant(cfg: Config) -> np.ndarray:
-    p = cfg.plant
-    return np.array([p.omega0, p.zeta, p.g, p.arm_length, p.input_gain])
 
 
 def make_sensor(cfg: Config) -> SensorParams:
@@ -515,7 +512,7 @@ def simulate_config(
     sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)
     fp = resolve_drift(cfg.friction.pack(), n * h)
-    pp = _pack_plant(cfg)
+    pp = cfg.plant.record()
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
     if progress is None:
         done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
