@@ -78,7 +78,6 @@ from .controller import (
 )
 from .design import design as make_design
 from .friction import (
-    CLASSICAL,
     KINDS,
     LUGRE,
     NONE,
@@ -87,7 +86,6 @@ from .friction import (
     P_FC,
     P_FS,
     P_K,
-    classical_force,
     drifted_params,
     friction_step,
     resolve_drift,
@@ -199,11 +197,6 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
                     tau += dt
                 f, z = friction_step(LUGRE, fp, z, v, fe, dt, e)
                 mem = f
-            elif fkind == CLASSICAL:
-                # called directly, not through static_force: the small law is
-                # inlined into this loop (static_force is not; its call every
-                # substep cost about 15 % of a run)
-                f = classical_force(ad, fe, fp)
             elif fkind == NONE:
                 f = 0.0
             else:
