@@ -23,17 +23,20 @@ import functools
 from importlib import import_module
 from typing import Any
 
-__all__ = ["Kernel", "jit", "jit_parallel"]
+__all__ = ["Kernel", "jit", "jit_inline", "jit_parallel"]
 
 
 @functools.cache
-def _njit(parallel: bool = False):
+def _njit(parallel: bool = False, inline: bool = False):
     import_module("._numba_cache", __package__)  # sets NUMBA_CACHE_DIR before numba loads
     from numba import njit
 
     if parallel:
         # a batch driver (frictionlab.studies.batch): prange over threads, GIL released
         return njit(cache=True, error_model="numpy", parallel=True, nogil=True)
+    if inline:
+        # a step numba inlines into its compiled callers (numba's IR inlining)
+        return njit(cache=True, error_model="numpy", inline="always")
     return njit(cache=True, error_model="numpy")
 
 
@@ -46,9 +49,10 @@ class Kernel:
         The Python function (as numba's dispatchers call it).
     """
 
-    def __init__(self, fn, parallel: bool = False):
+    def __init__(self, fn, parallel: bool = False, inline: bool = False):
         self.py_func = fn
         self._parallel = parallel
+        self._inline = inline
         self._dispatcher = None
         functools.update_wrapper(self, fn)
 
@@ -56,7 +60,7 @@ class Kernel:
     def dispatcher(self):
         """The numba dispatcher (created, and numba imported, on first access)."""
         if self._dispatcher is None:
-            self._dispatcher = _njit(self._parallel)(self.py_func)
+            self._dispatcher = _njit(self._parallel, self._inline)(self.py_func)
         return self._dispatcher
 
     def __call__(self, *args: Any) -> Any:
@@ -89,3 +93,12 @@ def jit_parallel(fn) -> Kernel:
     """As :func:`jit`, with numba's ``parallel=True`` (``prange`` loops run on
     numba's threads) and ``nogil=True``; compiled on first use."""
     return Kernel(fn, parallel=True)
+
+
+def jit_inline(fn) -> Kernel:
+    """As :func:`jit`, inlined by numba into every compiled caller (numba's
+    ``inline="always"``).  LLVM does not inline a large kernel such as a step of
+    the closed loop, and calling one costs its arguments (an array is seven
+    words) every time; ``jit_inline(step.py_func)`` is the same law as a second
+    kernel that a hot loop calls instead of ``step``."""
+    return Kernel(fn, inline=True)
