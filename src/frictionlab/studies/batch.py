@@ -31,6 +31,7 @@ numba is imported on the first batch, as for every kernel
 from __future__ import annotations
 
 import math
+import os
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -234,8 +235,15 @@ def prepare(base: Config, points: Sequence[Mapping[str, Any]], duration: float |
 
 
 def _numba():
-    """numba (imported after its cache directory is set), with ``prange`` bound."""
+    """numba (imported after its cache directory is set), with ``prange`` bound.
+
+    Sets ``OMP_WAIT_POLICY=PASSIVE`` unless the user has set it, before numba's
+    OpenMP threading layer is loaded (on the first parallel batch): a thread
+    that has dealt its sets sleeps at the end of the batch instead of spinning
+    (measured: the spinning cost 0.1-0.2 ms of CPU per set of a 30 s sweep).
+    """
     global prange
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     _njit()  # imports frictionlab.model._numba_cache, then numba
     import numba
 
