@@ -40,7 +40,7 @@ import numpy as np
 
 from ..config import Config
 from ..model._jit import _njit, jit, jit_parallel
-from ..model.controller import NS
+from ..model.controller import NS, gains_record
 from ..model.friction import KINDS, resolve_drift
 from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
 from ..model.plant import plant_record
@@ -75,7 +75,8 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     s = s0[i].copy()
     sp = sensor_record(sens[i])
     done, fell_code, _mem, _x0 = _run(x, 0.0, nt[i], sub[i], rat[i], plant_record(pp[i]), fk[i],
-                                      fp[i], gp[i], cp[i], s, sp, 0, 0.0, fall[i], buf, True)
+                                      fp[i], gains_record(gp[i]), cp[i], s, sp, 0, 0.0, fall[i],
+                                      buf, True)
     fell = fell_code == 1
     for j in range(vals.shape[1]):
         vals[i, j] = np.nan
@@ -167,8 +168,8 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
     pp, fp, gp, cp, s0, sens = [], [], [], [], [], []
     for k, (cfg, ticks) in enumerate(zip(cfgs, durations, strict=True)):
         ctrl = make_controller(cfg)
-        g, c = ctrl.pack()
-        gp.append(g)
+        g, c = ctrl.record()
+        gp.append(np.array(g, dtype=float))  # gains_record reads it back
         cp.append(c)
         s0.append(ctrl.init(cfg.sim.initial_angle))
         pp.append(cfg.plant.record())
