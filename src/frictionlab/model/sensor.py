@@ -67,6 +67,7 @@ __all__ = [
     "arm_to_raw",
     "arm_zero",
     "from_raw",
+    "ideal_reading",
     "measure",
     "noise",
     "quantize",
@@ -269,6 +270,15 @@ def reading(sp, theta, arm, arm_dot, first, x0):
         return (theta_from_raw(y, sp.theta_scale, sp.theta_bias),
                 arm_from_raw(x, x0, sp.arm_scale),
                 velocity_from_raw(v, sp.velocity_scale, sp.velocity_bias), x0)
+    return ideal_reading(theta, arm, arm_dot, first, x0)
+
+
+@jit
+def ideal_reading(theta, arm, arm_dot, first, x0):
+    """The SI reading ``(theta_m, arm_m, arm_dot_m, x0)`` of an ideal sensor (no
+    converter, ``sp.step == 0``): the signals as they are, the arm relative to
+    its first reading ``x0`` (taken from this sample when ``first``).  What
+    :func:`reading` and, without noise, :func:`measure` return for such a sensor."""
     if first:
         x0 = arm
     return theta, arm - x0, arm_dot, x0
