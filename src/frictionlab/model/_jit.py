@@ -90,12 +90,6 @@ def jit(fn) -> Kernel:
     return Kernel(fn)
 
 
-def jit_inline(fn) -> Kernel:
-    """As :func:`jit`, with numba's ``inline="always"``: compiled into each
-    compiled caller (for small dispatchers on the hot path)."""
-    return Kernel(fn, inline=True)
-
-
 def jit_parallel(fn) -> Kernel:
     """As :func:`jit`, with numba's ``parallel=True`` (``prange`` loops run on
     numba's threads) and ``nogil=True``; compiled on first use."""
