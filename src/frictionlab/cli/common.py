@@ -105,16 +105,33 @@ _clean = json_safe  # the one sanitiser (frictionlab.io.jsonsafe)
 #: ``field``) that are this command line's options: only the command line names
 #: its options; the library names its arguments.
 OPTIONS = {"vary": "--vary", "mode": "--mode", "dask": "--dask", "backend": "--backend",
-           "token": "--token", "fit": "--fit", "weights": "--weights", "bounds": "--bounds"}
+           "token": "--token", "fit": "--fit", "weights": "--weights", "bounds": "--bounds",
+           "search_duration": "--search-duration", "search_window": "--search-window",
+           "stiction_above_coulomb": "--allow-stiction-below-coulomb"}
+
+
+def _hinted(obj, options: dict[str, str] = OPTIONS) -> str:
+    """``obj``'s text, followed by the options of the arguments it names as
+    ``hints`` (the ones that would address it), e.g. ``... (--bounds)``."""
+    named = [options[h] for h in getattr(obj, "hints", ()) if h in options]
+    return f"{obj} ({', '.join(named)})" if named else str(obj)
 
 
 def error_message(exc: BaseException) -> str:
     """The message of an error, a refused argument named by its option
-    (``--vary: friction.coulomb: empty value in the list``)."""
+    (``--vary: friction.coulomb: empty value in the list``), and the options
+    that would lift it (its ``hints``) after it."""
     field = getattr(exc, "field", None)
     if isinstance(exc, ParamError | UnknownKeyError) and field in OPTIONS:
-        return f"{OPTIONS[field]}: {exc}"
-    return str(exc)
+        return f"{OPTIONS[field]}: {_hinted(exc)}"
+    return _hinted(exc)
+
+
+def note_text(note: str, options: dict[str, str] = OPTIONS) -> str:
+    """A library warning as the command line prints it: the options of the
+    arguments it names as ``hints`` (a :class:`~frictionlab.io.notes.Note`)
+    after it (``... (--bounds)``); ``options`` maps arguments to options."""
+    return _hinted(note, options)
 
 
 def emit_json(obj) -> None:

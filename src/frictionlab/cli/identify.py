@@ -20,6 +20,7 @@ from .common import (
     emit_json,
     error_message,
     finite,
+    note_text,
     parse_sets,
     progress_bar,
 )
@@ -89,12 +90,23 @@ def _design_h(sets) -> float | None:
     return None
 
 
+#: How each command gives what a run log may lack (a ParamError's ``field``).
+_LOG_HINTS = {
+    "features:": {"design": "--design fast|slow", "h": "--set design.h=SECONDS"},
+    "--measured": {"design": "measure its features with 'frictionlab features --design "
+                             "fast|slow'", "h": "--set design.h=SECONDS"},
+}
+
+
 def _log_experiment(path: str, h: float | None, window: float | None = None,
                     design: str | None = None, what: str = "--measured") -> dict:
     from ..io.runlog import run_log_features
 
     try:
         return run_log_features(path, window=window, h=h, design=design)
+    except ParamError as exc:
+        hint = _LOG_HINTS[what].get(exc.field)
+        raise UsageError(f"{what} {exc}" + (f" ({hint})" if hint else "")) from None
     except ValueError as exc:
         raise UsageError(f"{what} {path}: {exc}") from None
 
@@ -214,6 +226,7 @@ def cmd_limit_cycle(args) -> int:
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
                       evaluate=_never, stiction_above_coulomb=constrained)
+    finite("--search-duration", args.search_duration, 0.0)
     search_settings(args.duration, args.window, args.search_duration, args.search_window)
     err = sys.stderr
     print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
@@ -248,7 +261,7 @@ def cmd_limit_cycle(args) -> int:
     finally:
         signal.signal(signal.SIGTERM, previous)
     for w in result.warnings:
-        print(f"warning: {w}", file=err)
+        print(f"warning: {note_text(w)}", file=err)
     print(f"done in {result.seconds:.1f} s: {result.evaluations} parameter sets, "
           f"{result.generations} generations, cost {result.cost:.4g}", file=err)
     if args.plot:
@@ -260,7 +273,9 @@ def cmd_limit_cycle(args) -> int:
                  for i in range(len(experiments))]
         plot_limit_cycle_fit(result, trajs, args.plot, args.window)
     if args.report:
-        _write_report(args.report, result.to_json())
+        report = result.to_json()
+        report["warnings"] = [note_text(w) for w in report["warnings"]]
+        _write_report(args.report, report)
         print(f"full report: {args.report}", file=err)
     if args.json:
         emit_json({k: result.to_json()[k] for k in INTERFACE_FIELDS})
@@ -295,13 +310,8 @@ def _float_list(text: str, what: str) -> list[float]:
 def _limits(args):
     from ..realtime.experiment import Limits
 
-    try:
-        return Limits(max_speed=args.max_speed, max_travel=args.max_travel,
-                      max_u_da=args.max_u_da)
-    except ValueError as exc:
-        raise UsageError(str(exc).replace("limits.max_speed", "--max-speed")
-                         .replace("limits.max_travel", "--max-travel")
-                         .replace("limits.max_u_da", "--max-u-da")) from None
+    # a refused limit is a ParamError named after its option by _experiment_entry
+    return Limits(max_speed=args.max_speed, max_travel=args.max_travel, max_u_da=args.max_u_da)
 
 
 def _rig_options(args) -> dict:
@@ -498,7 +508,7 @@ def cmd_experiment(args) -> int:
             plots.plot_control_scaling(log, res, args.plot, title)
         else:
             raise UsageError(f"--plot: no figure for {name}")
-    warnings += res.get("warnings", [])
+    warnings += [note_text(w, _EXPERIMENT_OPTIONS) for w in res.get("warnings", [])]
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     out = dict(res)
@@ -708,7 +718,8 @@ _EXPERIMENT_OPTIONS = {"step": "--step", "hold": "--hold", "gain": "--gain",
                        "references": "--references", "levels": "--levels",
                        "max_amplitude": "--max-amplitude", "slide": "--slide",
                        "push": "--push", "coulomb_levels": "--coulomb-levels",
-                       "wait": "--wait"}
+                       "wait": "--wait", "limits.max_speed": "--max-speed",
+                       "limits.max_travel": "--max-travel", "limits.max_u_da": "--max-u-da"}
 
 
 def _experiment_entry(args) -> int:

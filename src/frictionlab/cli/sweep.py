@@ -24,6 +24,7 @@ from ..studies.sweep import (
     MODES,
     STATUSES,
     SWINGUP_COLUMNS,
+    OutputMismatch,
     SweepFile,
     _check_dask_address,
     _get_dask,
@@ -335,7 +336,11 @@ def _plan(args):
         if not args.force:
             raise UsageError(f"--out {args.out} exists; use --resume to continue it or "
                              "--force to overwrite it")
-    old = out.load() if args.resume else []  # a file that does not match exits 2 here
+    try:
+        old = out.load() if args.resume else []  # a file that does not match exits 2 here
+    except OutputMismatch as exc:
+        raise UsageError(f"--resume: {exc} (use another --out, or --force to overwrite)"
+                         ) from None
     if args.dask is not None and points:
         _get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any output
     flush_notes(args)
