@@ -195,8 +195,10 @@ def test_fit_keeps_stiction_above_coulomb_unless_told_not_to():
     fc, fs = held.estimate["friction.coulomb"], held.estimate["friction.stiction"]
     assert fs >= fc and fs - fc < 1e-2
     assert held.cost > free.cost
-    assert any("constraint" in w and "--allow-stiction-below-coulomb" in w
+    # the warning names the argument that lifts the constraint (no command-line option)
+    assert any("constraint" in w and w.hints == ("stiction_above_coulomb",)
                for w in held.warnings)
+    assert not [w for w in held.warnings if "--" in w]
     assert not [w for w in held.warnings if "search bound" in w]
 
 
@@ -417,6 +419,9 @@ def test_search_settings_default_and_validation():
     assert search_settings(30.0, None, 15.0, None) == (15.0, None)
     assert search_settings(30.0, 20.0, 15.0, 12.0) == (15.0, 12.0)
     assert search_settings(30.0, 20.0, None, 5.0) == (30.0, 5.0)
-    for bad in ((-1.0, None), (float("nan"), None), (15.0, 16.0), (15.0, 0.0)):
-        with pytest.raises(ConfigError, match="--search-"):
+    for bad, field in (((-1.0, None), "search_duration"), ((float("nan"), None),
+                                                            "search_duration"),
+                       ((15.0, 16.0), "search_window"), ((15.0, 0.0), "search_window")):
+        with pytest.raises(ConfigError, match=field) as info:
             search_settings(30.0, 20.0, *bad)
+        assert info.value.field == field and "--" not in str(info.value)

@@ -139,7 +139,7 @@ class SimParams(Validated):
 
     initial_angle: float = param(0.05, "initial pendulum angle (pi: hanging down, at rest; "
                                  "rig-sim's pendulum at the start of a session; a start "
-                                 "beyond sim.fall_angle needs --swing-up)", "rad",
+                                 "beyond sim.fall_angle needs a swing-up)", "rad",
                                  lo=-math.pi, hi=math.pi)
     substeps: int | None = param(None, "arm and friction integration substeps per sampling "
                                  "period (None = the model's accurate default: 10, LuGre 6)",

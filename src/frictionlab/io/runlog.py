@@ -113,14 +113,14 @@ def run_log_features(path: str | Path, *, window: float | None = None,
     if preset is None:
         raise ParamError("design", None, "fast or slow",
                          f"{p}: no sidecar ({p.with_suffix('.json').name}) names the run's "
-                         "design; give the design (fast or slow)")
+                         "design; give its design, fast or slow")
     if h is None and meta is not None and isinstance(meta.get("h"), int | float):
         h = float(meta["h"])
     if h is None:
         if p.suffix == ".dat":
             raise ParamError("h", None, "(0, inf) s",
                              f"{p}: a .dat has no time column and no sidecar gives the "
-                             "sampling period; give it (h, the key design.h)")
+                             "sampling period; give its sampling period h")
         h = 0.005
     if not (h > 0 and math.isfinite(h)):
         raise ParamError("h", h, "(0, inf) s", f"{p}: design.h must be > 0, got {h}")

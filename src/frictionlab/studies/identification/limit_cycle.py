@@ -519,7 +519,7 @@ class LimitCycleProblem:
                 "bounds that leave some stiction >= Coulomb level",
                 f"bounds of {c_key} ({self.lo[ic]:g}:{self.hi[ic]:g}) and {s_key} "
                 f"({self.lo[i_s]:g}:{self.hi[i_s]:g}) leave no stiction >= Coulomb level; "
-                "widen them or fit without the constraint (stiction_above_coulomb)",
+                "widen them or fit without the constraint",
                 "stiction_above_coulomb")
         self.hi[ic] = min(self.hi[ic], self.hi[i_s])
         self.lo[i_s] = max(self.lo[i_s], self.lo[ic])
@@ -1036,7 +1036,7 @@ def fit_limit_cycle(
                 f"{prob.keys[i_s]} = {prob.keys[ic]} = {p[ic]:.4g}: the estimate is at the "
                 "constraint stiction >= Coulomb level, which the fit enforces (the "
                 "unconstrained optimum may lie below it); fitting without the constraint "
-                "(stiction_above_coulomb) lifts it", "stiction_above_coulomb"))
+                "lifts it", "stiction_above_coulomb"))
     for i, (k, v, lo, hi) in enumerate(zip(prob.keys, p, prob.lo, prob.hi, strict=True)):
         if i in at_constraint:
             continue
