@@ -92,22 +92,19 @@ def made_env_rate(steps: int, repeats: int) -> float:
 
 
 def vector_rate(steps: int, n: int, repeats: int) -> float:
+    """Steps per second of ``n`` environments in gymnasium's SyncVectorEnv."""
     venv = gymnasium.vector.SyncVectorEnv(
         [lambda: gymnasium.make(fgym.ENV_ID, sets=SETS) for _ in range(n)])
-    rng = np.random.default_rng(0)
-    batches = max(1, steps // n)
-    actions = rng.uniform(-2.0, 2.0, size=(batches, n, 1))
-
-    def run():
-        venv.reset(seed=0)
-        for a in actions:
-            venv.step(a)
-
-    return batches * n / _best(run, repeats)
+    return _vec_rate(venv, steps, n, repeats)
 
 
 def native_vector_rate(steps: int, n: int, repeats: int) -> float:
-    venv = gymnasium.make_vec(fgym.ENV_ID, num_envs=n, sets=SETS)
+    """Steps per second of the environment's own vectorised form (``make_vec``)."""
+    return _vec_rate(gymnasium.make_vec(fgym.ENV_ID, num_envs=n, sets=SETS), steps, n, repeats)
+
+
+def _vec_rate(venv, steps: int, n: int, repeats: int) -> float:
+    """Steps per second of a vector environment of ``n`` copies over random actions."""
     rng = np.random.default_rng(0)
     batches = max(1, steps // n)
     actions = rng.uniform(-2.0, 2.0, size=(batches, n, 1))
