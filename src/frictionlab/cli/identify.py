@@ -14,15 +14,18 @@ from ..studies.identification.experiments import EXPERIMENTS, IdentificationErro
 from .common import (
     UsageError,
     _add_config_args,
+    add_engine_args,
+    add_stall_args,
+    check_engine_args,
     check_output_dir,
     check_output_path,
-    check_workers,
     emit_json,
     error_message,
     finite,
     note_text,
     parse_sets,
     progress_bar,
+    safety_from_args,
 )
 
 __all__ = ["parse_bounds", "parse_weights", "register_cli"]
@@ -202,11 +205,7 @@ def cmd_limit_cycle(args) -> int:
     weights = parse_weights(args.weights)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     check_output_path(args.report, (".json",), "--report")
-    check_workers(args.workers)
-    if args.dask is not None:
-        from ..studies.sweep import _check_dask_address
-
-        _check_dask_address(args.dask)
+    check_engine_args(args)
     if not 1 <= args.maxiter <= MAX_ITER:
         raise UsageError(f"--maxiter must be in 1..{MAX_ITER}, got {args.maxiter}")
     if not 2 <= args.popsize <= MAX_POPSIZE:
@@ -354,15 +353,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
               f"(limits: arm speed {lim.max_speed:g} rad/s, travel {lim.max_travel:g} rad, "
               f"|u_DA| {lim.max_u_da:g}); Ctrl-C stops it with the motor at zero",
               file=err)
-    from ..realtime import Safety
-
-    try:
-        safety = Safety(silent_periods=args.silent_periods,
-                        unread_limit=max(10, 5 * args.silent_periods),
-                        max_pause=args.max_pause)
-    except ValueError as exc:
-        raise UsageError(str(exc).replace("safety.silent_periods", "--silent-periods")
-                         .replace("safety.max_pause", "--max-pause")) from None
+    safety = safety_from_args(args)
     tty = err.isatty() and not args.quiet
     last = [None]
 
@@ -610,11 +601,7 @@ def register_cli(sub) -> None:
     q.add_argument("--search-window", type=float, default=None, metavar="S",
                    help="feature window of the global search (default: --window scaled "
                         "by --search-duration / --duration)")
-    q.add_argument("--workers", type=int, default=None,
-                   help="threads of the sweep engine (default: all cores; 1 = the "
-                        "calling thread); with --dask, the number of Dask workers")
-    q.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
-                   help="evaluate on a Dask cluster")
+    add_engine_args(q)
     q.add_argument("--allow-stiction-below-coulomb", action="store_true",
                    help="when friction.stiction and friction.coulomb (or their _negative "
                         "pair) are both fitted, also search stiction < Coulomb level (by "
@@ -693,14 +680,7 @@ def register_cli(sub) -> None:
                    help="stop when the arm is farther than this from its start (default 60)")
     g.add_argument("--max-u-da", type=float, default=0.5, metavar="U_DA",
                    help="largest |u_DA| commanded, u is clipped (default 0.5)")
-    g.add_argument("--silent-periods", type=int, default=2, metavar="N",
-                   help="stop (rig_silent) after N sample periods with nothing from the "
-                        "rig, or 5N (at least 10) ticks of late replies (default 2; as run's)")
-    g.add_argument("--max-pause", type=float, default=0.05, metavar="S",
-                   help="stop (paused) when the loop did not run for longer than S s "
-                        "(default 0.05; as run's)")
-    g.add_argument("--no-realtime", action="store_true",
-                   help="do not ask for SCHED_FIFO priority")
+    add_stall_args(g)
     g.add_argument("--hand", action="store_true",
                    help="angle-scales: let rig-sim (over UDP) play the operator's hand for "
                         "the laps it asks for")
