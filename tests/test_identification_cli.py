@@ -279,3 +279,18 @@ def test_library_notes_and_refusals_get_their_options_from_the_command_line():
     assert info.value.field == "bounds" and info.value.hints == ("stiction_above_coulomb",)
     assert error_message(info.value).startswith("--bounds: ")
     assert error_message(info.value).endswith("(--allow-stiction-below-coulomb)")
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--max-pause", "-1"], "--max-pause = -1"),
+    (["--silent-periods", "0"], "--silent-periods = 0"),
+    (["--max-speed", "-1"], "--max-speed = -1"),
+    (["--max-u-da", "2"], "--max-u-da = 2"),
+])
+def test_experiment_on_a_rig_names_a_refused_limit_by_its_option(capsys, tmp_path, extra,
+                                                                message):
+    """The loop's limits are the run command's (one parser and check for both)."""
+    rc, out, err = _run(capsys, ["identify", "experiment", "stiction", "--backend", "sim",
+                                 "--log-dir", str(tmp_path), *extra])
+    assert rc == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and message in err

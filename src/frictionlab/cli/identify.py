@@ -346,6 +346,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
     from ..studies.identification.onrig import run_on_rig
     from .run import _RunSignals, interface_stats
 
+    safety = safety_from_args(args)  # a refused value exits 2 before the announcement
     err = sys.stderr
     lim = exp.limits
     if clock is None:
@@ -353,7 +354,6 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
               f"(limits: arm speed {lim.max_speed:g} rad/s, travel {lim.max_travel:g} rad, "
               f"|u_DA| {lim.max_u_da:g}); Ctrl-C stops it with the motor at zero",
               file=err)
-    safety = safety_from_args(args)
     tty = err.isatty() and not args.quiet
     last = [None]
 
