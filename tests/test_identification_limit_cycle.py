@@ -411,6 +411,33 @@ def test_short_search_runs_reach_the_optimum_of_the_full_search():
     assert short.cost <= 1.01 * full.cost + 1e-6
 
 
+def test_the_search_problem_is_the_fit_s_problem_with_other_runs():
+    """with_runs: the same keys, bounds and weights, runs of another length, its
+    own cache and count; the fit's problem is untouched; a bad length is refused."""
+    seen = []
+
+    def spy(base, points, **kw):
+        seen.append((kw["duration"], kw["window"]))
+        return _linear_rows(base, points, **kw)
+
+    prob = LimitCycleProblem(parse_experiments(BELOW), ["friction.coulomb",
+                                                        "friction.stiction"],
+                             duration=30.0, window=20.0, evaluate=spy)
+    short = prob.with_runs(15.0, 10.0)
+    assert (short.duration, short.window) == (15.0, 10.0)
+    assert (prob.duration, prob.window) == (30.0, 20.0)
+    assert short.keys == prob.keys and short.pairs == prob.pairs
+    assert np.array_equal(short.lo, prob.lo) and np.array_equal(short.hi, prob.hi)
+    x = prob.current()
+    res_short, _ = short.evaluate_batch(x)
+    res_full, _ = prob.evaluate_batch(x)
+    assert seen == [(15.0, 10.0), (30.0, 20.0)]  # separate caches
+    assert np.array_equal(res_short, res_full)  # the fake model ignores the run length
+    assert short.nfev == prob.nfev == 1
+    with pytest.raises(ConfigError):
+        prob.with_runs(15.0, 20.0)
+
+
 def test_search_settings_default_and_validation():
     from frictionlab.studies.identification.limit_cycle import search_settings
 

@@ -105,6 +105,7 @@ relative standard error exceeds 50 % is reported as poorly determined.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -421,11 +422,7 @@ class LimitCycleProblem:
             raise ConfigError("no experiments to fit")
         self.experiments = list(experiments)
         self.keys = check_fit_keys(keys)
-        if not (duration > 0 and math.isfinite(duration)):
-            raise ConfigError(f"duration must be > 0 s, got {duration}")
-        if window is not None and not (0 < window <= duration):
-            raise ConfigError(f"window must be in (0, duration], got {window}")
-        self.duration, self.window = float(duration), window
+        self.duration, self.window = _run_length(duration, window)
         self.friction = friction
         self.workers, self.dask = workers, dask
         self._evaluate = evaluate or _sweep_evaluate
@@ -504,6 +501,16 @@ class LimitCycleProblem:
         self.w = np.array(w)
         self.nfev = 0
         self._cache: dict[tuple, tuple[np.ndarray, list[dict]]] = {}
+
+    def with_runs(self, duration: float, window: float | None) -> LimitCycleProblem:
+        """The same problem with runs of ``duration`` s analysed over their last
+        ``window`` s (the global search's shorter runs, :func:`search_settings`),
+        with its own evaluation count and cache."""
+        other = copy.copy(self)
+        other.duration, other.window = _run_length(duration, window)
+        other.nfev = 0
+        other._cache = {}
+        return other
 
     def _add_pair(self, ic: int, i_s: int) -> None:
         """Search only F_S >= F_C for keys ``ic`` (Coulomb) and ``i_s`` (stiction).
@@ -850,6 +857,16 @@ def _max_runs(prob: LimitCycleProblem, maxiter: int, popsize: int) -> int:
     return len(prob.experiments) * (members * (maxiter + 1) + polish)
 
 
+def _run_length(duration: float, window: float | None) -> tuple[float, float | None]:
+    """``(duration, window)`` of a fit's runs, checked: duration > 0, window in
+    (0, duration] or None."""
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ConfigError(f"duration must be > 0 s, got {duration}")
+    if window is not None and not (0 < window <= duration):
+        raise ConfigError(f"window must be in (0, duration], got {window}")
+    return float(duration), window
+
+
 def search_settings(duration: float, window: float | None, search_duration: float | None,
                     search_window: float | None) -> tuple[float, float | None]:
     """Run length and window of the global search (see :func:`fit_limit_cycle`).
@@ -956,10 +973,7 @@ def fit_limit_cycle(
     search = prob
     s_duration, s_window = search_settings(duration, window, search_duration, search_window)
     if (s_duration, s_window) != (prob.duration, prob.window):
-        search = LimitCycleProblem(experiments, keys, friction=friction, sets=sets,
-                                   bounds=bounds, weights=weights, duration=s_duration,
-                                   window=s_window, evaluate=evaluate, workers=prob.workers,
-                                   dask=dask, stiction_above_coulomb=stiction_above_coulomb)
+        search = prob.with_runs(s_duration, s_window)
     report = progress or (lambda stage, f, c: None)
 
     def cost_vec(xt: np.ndarray) -> np.ndarray:
