@@ -189,9 +189,17 @@ def _add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
                        help="friction model of the simulated plant (default: %(default)s)")
         p.add_argument("--compensation", choices=COMPENSATOR_KINDS, default="none",
                        help="friction compensator in the controller (default: %(default)s)")
-    p.add_argument("--config", metavar="FILE", help="TOML file with parameter keys")
+    add_key_args(p)
+
+
+def add_key_args(p, applies_to: str = "") -> None:
+    """``--config FILE`` and ``--set KEY=VALUE`` (repeatable): parameter keys from a
+    TOML file, then the ``--set`` ones over them, later winning (``applies_to``:
+    what they set, for the help, e.g. "all experiments")."""
+    where = f" of {applies_to}" if applies_to else ""
+    p.add_argument("--config", metavar="FILE", help=f"TOML file with parameter keys{where}")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a parameter key (repeatable; later wins); "
+                   help=f"override a parameter key{where} (repeatable; later wins); "
                         "see 'frictionlab keys'")
 
 

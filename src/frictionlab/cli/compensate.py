@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 import time
 
-from ..config import SimParams
+from ..config import COMPENSATOR_KINDS, SimParams
 from .common import (
     UsageError,
     _add_config_args,
@@ -131,6 +131,17 @@ def register_cli(sub) -> None:
     t.set_defaults(func=cmd_tune)
 
 
+def _compensated_config(args):
+    """The configuration of ``compensate compare``/``tune``, checked: it has a
+    compensator, and the run's length, window and figure path are usable."""
+    cfg = config_from_args(args)
+    if cfg.compensation_kind == "none":
+        kinds = [k for k in COMPENSATOR_KINDS if k != "none"]
+        raise UsageError(f"--compensation must be {', '.join(kinds[:-1])} or {kinds[-1]}")
+    _check_run_args(args)
+    return cfg
+
+
 def _check_run_args(args):
     hi = SimParams.__dataclass_fields__["duration"].metadata["hi"]
     finite("--duration", args.duration, 0.0, hi=hi)
@@ -143,10 +154,7 @@ def cmd_compare(args) -> int:
     """``frictionlab compensate compare``."""
     from ..studies.compensation import compare
 
-    cfg = config_from_args(args)
-    if cfg.compensation_kind == "none":
-        raise UsageError("--compensation must be coulomb, classical or lugre")
-    _check_run_args(args)
+    cfg = _compensated_config(args)
     flush_notes(args)
     res, traj_on, traj_off = compare(cfg, args.duration, args.window,
                                      return_trajectories=True)
@@ -176,10 +184,7 @@ def cmd_tune(args) -> int:
     from ..studies.sweep import parse_vary
 
     t0 = time.perf_counter()
-    cfg = config_from_args(args)
-    if cfg.compensation_kind == "none":
-        raise UsageError("--compensation must be coulomb, classical or lugre")
-    _check_run_args(args)
+    cfg = _compensated_config(args)
     finite("--chatter-weight", args.chatter_weight, 0.0, lo_open=False)
     check_engine_args(args)
     grid = [parse_vary(v) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]

@@ -15,6 +15,7 @@ from .common import (
     UsageError,
     _add_config_args,
     add_engine_args,
+    add_key_args,
     add_stall_args,
     check_engine_args,
     check_output_dir,
@@ -584,9 +585,7 @@ def register_cli(sub) -> None:
                    help="plant friction model of the simulations (default: classical)")
     q.add_argument("--fit", required=True, metavar="KEY[,KEY...]",
                    help="keys to estimate, e.g. friction.coulomb,plant.omega0")
-    q.add_argument("--config", metavar="FILE", help="TOML file with parameter keys")
-    q.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="setting common to all experiments (repeatable)")
+    add_key_args(q, "all experiments")
     q.add_argument("--bounds", action="append", default=[], metavar="KEY=LO:HI",
                    help="search bounds of a fitted key (repeatable; defaults per key)")
     q.add_argument("--weights", action="append", default=[], metavar="FEATURE=W",
