@@ -62,22 +62,19 @@ def _best(fn, repeats: int) -> float:
 
 
 def env_rate(steps: int, repeats: int) -> float:
-    env = fgym.FurutaEnv(sets=SETS)
-    rng = np.random.default_rng(0)
-    actions = rng.uniform(-2.0, 2.0, size=(steps, 1))
-
-    def run():
-        env.reset(seed=0)
-        for a in actions:
-            _, _, term, _, _ = env.step(a)
-            if term:
-                env.reset()
-
-    return steps / _best(run, repeats)
+    """Steps per second of the environment class itself (reset when it terminates)."""
+    return _env_rate(fgym.FurutaEnv(sets=SETS), steps, repeats, reset_on_truncation=False)
 
 
 def made_env_rate(steps: int, repeats: int) -> float:
-    env = gymnasium.make(fgym.ENV_ID, sets=SETS)
+    """Steps per second through ``gymnasium.make`` (its wrappers; reset when an
+    episode ends)."""
+    return _env_rate(gymnasium.make(fgym.ENV_ID, sets=SETS), steps, repeats,
+                     reset_on_truncation=True)
+
+
+def _env_rate(env, steps: int, repeats: int, *, reset_on_truncation: bool) -> float:
+    """Steps per second of one environment over random actions."""
     rng = np.random.default_rng(0)
     actions = rng.uniform(-2.0, 2.0, size=(steps, 1))
 
@@ -85,7 +82,7 @@ def made_env_rate(steps: int, repeats: int) -> float:
         env.reset(seed=0)
         for a in actions:
             _, _, term, trunc, _ = env.step(a)
-            if term or trunc:
+            if term or (trunc and reset_on_truncation):
                 env.reset()
 
     return steps / _best(run, repeats)
