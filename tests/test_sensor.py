@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from frictionlab.config import build_config
 from frictionlab.model import sensor as S
@@ -64,8 +66,25 @@ def test_ideal_sensor_reads_the_truth_plus_noise():
     assert S.measure(clean, 0.123, 0.0, -1.5, 0, 0.0)[:3] == (0.123, 0.0, -1.5)
 
 
-def test_simulator_measures_through_the_sensor_kernel():
-    cfg = build_config("fast", "classical", sets=NOISY)
+_FINITE = st.floats(-1e3, 1e3, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(_FINITE, _FINITE, _FINITE, st.integers(0, 10**6), _FINITE)
+def test_ideal_reading_is_measure_of_a_noise_free_ideal_sensor(theta, arm, arm_dot, n, x0):
+    # the simulator's fast path for this sensor (model.simulation._run) reads
+    # through ideal_reading instead of measure: the same values, bit for bit
+    sp = make_sensor(build_config(sets=["sim.noise=0", "sim.quantization=0"]))
+    assert sp.noise == 0.0 and sp.step == 0.0
+    assert S.measure(sp, theta, arm, arm_dot, n, x0) == S.ideal_reading(theta, arm, arm_dot,
+                                                                      n == 0, x0)
+
+
+@pytest.mark.parametrize("sets", [NOISY, ["sim.initial_angle=0.05"],
+                                  ["sim.quantization=1", "sim.initial_angle=0.05"]],
+                         ids=["noisy", "ideal", "converter"])
+def test_simulator_measures_through_the_sensor_kernel(sets):
+    cfg = build_config("fast", "classical", sets=sets)
     traj = simulate_config(cfg, 1.0)
     sp = make_sensor(cfg)
     x0 = 0.0

@@ -23,17 +23,21 @@ import functools
 from importlib import import_module
 from typing import Any
 
-__all__ = ["Kernel", "jit", "jit_parallel"]
+__all__ = ["Kernel", "jit", "jit_inline", "jit_parallel"]
 
 
 @functools.cache
-def _njit(parallel: bool = False):
+def _njit(parallel: bool = False, inline: bool = False):
     import_module("._numba_cache", __package__)  # sets NUMBA_CACHE_DIR before numba loads
     from numba import njit
 
     if parallel:
         # a batch driver (frictionlab.studies.batch): prange over threads, GIL released
         return njit(cache=True, error_model="numpy", parallel=True, nogil=True)
+    if inline:
+        # inlined into each compiled caller at numba's IR level (a dispatch on a
+        # constant kind then costs nothing on the hot path)
+        return njit(cache=True, error_model="numpy", inline="always")
     return njit(cache=True, error_model="numpy")
 
 
@@ -46,9 +50,10 @@ class Kernel:
         The Python function (as numba's dispatchers call it).
     """
 
-    def __init__(self, fn, parallel: bool = False):
+    def __init__(self, fn, parallel: bool = False, inline: bool = False):
         self.py_func = fn
         self._parallel = parallel
+        self._inline = inline
         self._dispatcher = None
         functools.update_wrapper(self, fn)
 
@@ -56,7 +61,7 @@ class Kernel:
     def dispatcher(self):
         """The numba dispatcher (created, and numba imported, on first access)."""
         if self._dispatcher is None:
-            self._dispatcher = _njit(self._parallel)(self.py_func)
+            self._dispatcher = _njit(self._parallel, self._inline)(self.py_func)
         return self._dispatcher
 
     def __call__(self, *args: Any) -> Any:
@@ -83,6 +88,12 @@ class Kernel:
 def jit(fn) -> Kernel:
     """Decorate a kernel: nopython, cached, numpy error model; compiled on first use."""
     return Kernel(fn)
+
+
+def jit_inline(fn) -> Kernel:
+    """As :func:`jit`, with numba's ``inline="always"``: compiled into each
+    compiled caller (for small dispatchers on the hot path)."""
+    return Kernel(fn, inline=True)
 
 
 def jit_parallel(fn) -> Kernel:

@@ -10,6 +10,7 @@ range; the command line turns it into exit status 2 and one line on stderr.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 from typing import Any
@@ -52,23 +53,27 @@ def check_range(field: str, value: Any, lo: float | None = None, hi: float | Non
                 integer: bool = False) -> float:
     """Check a number against ``[lo, hi]`` (open ends as asked); return it as float
     (int when ``integer``).  Raises :class:`ParamError` naming ``field``."""
-    meta = {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "integer": integer}
-    allowed = range_text(meta)
+    # the range's text is built only for an error (a sweep validates every field
+    # of every parameter set)
+    def allowed() -> str:
+        return range_text({"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open,
+                           "integer": integer})
+
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParamError(field, value, allowed,
-                         f"{field} must be a number, got {_show(value)}; allowed {allowed}")
+        raise ParamError(field, value, allowed(),
+                         f"{field} must be a number, got {_show(value)}; allowed {allowed()}")
     if isinstance(value, float):  # (ints compare exactly, however large)
         if math.isnan(value):
-            raise ParamError(field, value, allowed, f"{field} is NaN; allowed {allowed}")
+            raise ParamError(field, value, allowed(), f"{field} is NaN; allowed {allowed()}")
         if integer and (math.isinf(value) or not value.is_integer()):
-            raise ParamError(field, value, allowed, f"{field} must be an integer, got "
-                                                    f"{_show(value)}; allowed {allowed}")
+            raise ParamError(field, value, allowed(), f"{field} must be an integer, got "
+                                                      f"{_show(value)}; allowed {allowed()}")
     bad = ((lo is not None and (value < lo or (lo_open and value == lo)))
            or (hi is not None and (value > hi or (hi_open and value == hi)))
            or (isinstance(value, float) and math.isinf(value)
                and not ((lo is None and value < 0) or (hi is None and value > 0))))
     if bad:
-        raise ParamError(field, value, allowed)
+        raise ParamError(field, value, allowed())
     return int(value) if integer else float(value)
 
 
@@ -154,29 +159,33 @@ def _bound(v: float, integer: bool) -> str:
     return str(int(v)) if integer and float(v).is_integer() else f"{v:g}"
 
 
+@functools.cache
+def _param_fields(cls: type) -> tuple[tuple[str, Any], ...]:
+    """``(name, metadata)`` of the ``param`` fields of a dataclass, in order (looked
+    up once per class)."""
+    return tuple((f.name, f.metadata) for f in dataclasses.fields(cls) if "doc" in f.metadata)
+
+
 class Validated:
     """Mixin: validate every ``param`` field of a frozen dataclass on construction."""
 
     _prefix = ""  # config-key prefix used in error messages, e.g. "plant."
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):  # type: ignore[arg-type]
-            meta = f.metadata
-            if "doc" not in meta:
-                continue
-            value = getattr(self, f.name)
-            name = f"{self._prefix}{f.name}"
+        for fname, meta in _param_fields(type(self)):
+            value = getattr(self, fname)
+            name = f"{self._prefix}{fname}"
             if value is None:
                 if meta["optional"]:
                     continue
                 raise ParamError(name, value, range_text(meta),
                                  f"{name} must be set; allowed range {range_text(meta)}")
             if meta.get("length"):
-                object.__setattr__(self, f.name, _vector(name, value, meta))
+                object.__setattr__(self, fname, _vector(name, value, meta))
                 continue
             value = check_range(name, value, meta["lo"], meta["hi"], lo_open=meta["lo_open"],
                                 hi_open=meta["hi_open"], integer=meta["integer"])
-            object.__setattr__(self, f.name, value)
+            object.__setattr__(self, fname, value)
 
     @classmethod
     def describe(cls) -> list[tuple[str, str, str, str]]:

@@ -66,11 +66,13 @@ __all__ = [
     "arm_from_raw",
     "arm_to_raw",
     "arm_zero",
+    "ideal_reading",
     "measure",
     "noise",
     "quantize",
     "reading",
     "sensor_params",
+    "sensor_record",
     "theta_from_raw",
     "theta_to_raw",
     "unwrap",
@@ -114,6 +116,14 @@ class SensorParams(NamedTuple):
     step: float
     noise: float
     seed: int
+
+
+@jit
+def sensor_record(row):
+    """The :class:`SensorParams` stored as the float row ``np.array(record, dtype=float)``
+    (a batch's row; the seed is whole)."""
+    return SensorParams(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7],
+                        int(row[8]))
 
 
 def sensor_params(rig, quantization: float = 1.0, noise: float = 0.0, seed: int = 0,
@@ -260,6 +270,15 @@ def reading(sp, theta, arm, arm_dot, first, x0):
         return (theta_from_raw(y, sp.theta_scale, sp.theta_bias),
                 arm_from_raw(x, x0, sp.arm_scale),
                 velocity_from_raw(v, sp.velocity_scale, sp.velocity_bias), x0)
+    return ideal_reading(theta, arm, arm_dot, first, x0)
+
+
+@jit
+def ideal_reading(theta, arm, arm_dot, first, x0):
+    """The SI reading ``(theta_m, arm_m, arm_dot_m, x0)`` of an ideal sensor (no
+    converter, ``sp.step == 0``): the signals as they are, the arm relative to
+    its first reading ``x0`` (taken from this sample when ``first``).  What
+    :func:`reading` and, without noise, :func:`measure` return for such a sensor."""
     if first:
         x0 = arm
     return theta, arm - x0, arm_dot, x0

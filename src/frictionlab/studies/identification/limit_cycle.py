@@ -106,7 +106,6 @@ relative standard error exceeds 50 % is reported as poorly determined.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -117,11 +116,11 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from ...config import (
-    _CLASSES,
     Config,
     ConfigError,
     ConfigValueError,
     build_config,
+    key_metadata,
     parse_assignment,
     valid_keys,
 )
@@ -290,12 +289,6 @@ def parse_experiments(obj: Any) -> list[Experiment]:
     return out
 
 
-def _key_meta(key: str) -> dict:
-    section, name = key.split(".")
-    for f in dataclasses.fields(_CLASSES[section]):
-        if f.name == name:
-            return dict(f.metadata)
-    raise ConfigError(f"unknown key {key!r}")  # pragma: no cover - guarded by caller
 
 
 def check_fit_keys(keys: Sequence[str]) -> list[str]:
@@ -308,7 +301,7 @@ def check_fit_keys(keys: Sequence[str]) -> list[str]:
             raise ConfigValueError("fit", key, "parameter keys", f"{key!r} is not a parameter key; "
                               "see 'frictionlab keys'")
         section = key.split(".")[0]
-        if section not in _FITTABLE_SECTIONS or _key_meta(key)["integer"]:
+        if section not in _FITTABLE_SECTIONS or key_metadata(key)["integer"]:
             raise ConfigValueError("fit", key, "real-valued model parameters",
                                    f"{key!r} is not a real-valued model parameter "
                               f"(fittable sections: {', '.join(_FITTABLE_SECTIONS)})")
@@ -327,7 +320,7 @@ def default_bounds(key: str, current: float | None) -> tuple[float, float]:
         raise ConfigValueError("bounds", key, "LO:HI of each fitted key without default "
                                "bounds", f"no default search bounds for {key} (current value "
                                f"{current}); give its bounds")
-    meta = _key_meta(key)
+    meta = key_metadata(key)
     lo, hi = 0.5 * current, 2.0 * current
     if meta["lo"] is not None:
         lo = max(lo, meta["lo"])
@@ -341,7 +334,7 @@ def _check_bounds(key: str, lo: float, hi: float) -> None:
         raise ConfigError(f"bounds of {key}: {lo}:{hi} must be finite")
     if not lo < hi:
         raise ConfigError(f"bounds of {key}: lower {lo:g} must be below upper {hi:g}")
-    meta = _key_meta(key)
+    meta = key_metadata(key)
     if meta["lo"] is not None and (lo < meta["lo"] or (meta["lo_open"] and lo == meta["lo"])):
         raise ConfigError(f"bounds of {key}: lower {lo:g} is outside the key's allowed "
                           f"range (minimum {meta['lo']:g})")
