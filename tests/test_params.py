@@ -230,3 +230,13 @@ def test_interface_keys_exist():
         "sim.substeps", "sim.noise", "sim.seed",
     ]:
         assert k in keys, k
+
+
+@pytest.mark.parametrize("kw, field", [({"friction_kind": "sand"}, "friction"),
+                                       ({"compensation_kind": "prayer"}, "compensation")])
+def test_a_bad_model_kind_is_refused_by_its_field(kw, field):
+    from frictionlab.config import Config, ConfigValueError
+
+    with pytest.raises(ConfigValueError) as info:
+        Config(**kw)
+    assert info.value.field == field and f"{field} must be one of" in str(info.value)

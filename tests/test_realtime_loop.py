@@ -8,6 +8,7 @@ steps the plant in fake time.
 import dataclasses
 import gc
 import json
+import math
 import random
 import subprocess
 import sys
@@ -300,6 +301,11 @@ def test_a_change_is_taken_from_the_mailbox_after_a_tick_without_a_reading(cfg):
     assert futures[0].result(timeout=0) == 54
     samples = {s.k: s for s in sub.drain() if not s.flags & STOP}
     assert all(samples[k].flags & NO_READING for k in range(50, 60))
+    # a tick without a reading records no signal and holds the last u_DA written
+    for k in range(50, 60):
+        assert all(math.isnan(v) for v in samples[k][3:16]), k
+        assert samples[k].u_da == samples[49].u_da and samples[k].rig_us >= 0
+    assert not any(math.isnan(v) for v in samples[60][3:16])
     assert [k for k, s in samples.items() if s.flags & CHANGED] == [54]
     assert ctl.status()["design"]["preset"] == "slow"
     # from the first reading after the gap on, the slow design's gains controlled

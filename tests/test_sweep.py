@@ -28,6 +28,7 @@ from frictionlab.studies.reference import TABLE2
 from frictionlab.studies.sweep import (
     MAX_CHUNK,
     MIN_TAIL_CHUNK,
+    OutputMismatch,
     SweepFile,
     _get_dask,
     _guided_chunks,
@@ -416,6 +417,11 @@ def test_resume_refuses_a_different_setup(tmp_path):
     assert run_cli(*args)[0] == 0
     rc, _, err = run_cli(*args, "--resume", "--set", "plant.omega0=7.5")
     assert rc == 2 and "plant.omega0" in err and len(err.strip().splitlines()) == 1
+    assert "--resume" in err and "--force" in err  # the command line names its options
+    meta = json.loads(Path(f"{path}.meta.json").read_text())
+    with pytest.raises(OutputMismatch) as info:  # the library names what differs
+        SweepFile(path, meta["keys"], {**meta, "duration": 5.0}).load()
+    assert info.value.field == "duration" and "--" not in str(info.value)
     rc, _, err = run_cli(*args[:3], "5", *args[4:], "--resume")
     assert rc == 2 and "duration" in err
     # the same set-up resumes with nothing to compute; more values extend it

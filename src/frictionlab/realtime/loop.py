@@ -142,6 +142,8 @@ STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_readin
                 "log_failed", "exception", "finished", "experiment_limit", "not_caught",
                 "arm_travel", "arm_speed")
 _NAN = math.nan
+#: The signals of a :class:`Sample` from ``theta_m`` to ``v`` in a tick without a reading.
+_NO_SIGNALS = (_NAN,) * 13
 _TWO_PI = 2.0 * math.pi
 _FMAX = sys.float_info.max
 _rt_warned = False
@@ -522,20 +524,9 @@ class Loop:
                 if unread >= unread_max:
                     raise _Stop("rig_silent", f"no timely reading for {unread} consecutive "
                                 "ticks (the rig's replies come too late)")
-                write(k, u_da_prev)  # hold u, keep the rig's watchdog fed
-                t_w = now()
-                if t_w > deadline + h_ns:
-                    self.overruns += 1
-                    flags |= OVERRUN
-                jit_add(late)
-                comp_add(t_w - wake - rig_ns)
-                rig_add(rig_ns)
-                smp = Sample(k, k * h, flags | NO_READING, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
-                             _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, u_da_prev, late / 1e3,
-                             (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
-                for sink in self.sinks:
-                    sink(smp)
-                self.ticks += 1
+                u_da = u_da_prev  # hold u, keep the rig's watchdog fed
+                flags |= NO_READING
+                signals = _NO_SIGNALS
             else:
                 silent = 0
                 unread = 0
@@ -649,22 +640,24 @@ class Loop:
                                 f"{(now() - deadline) / 1e6:.1f} ms after its deadline "
                                 f"(limit {safety.max_pause * 1e3:g} ms): the process was "
                                 "suspended or the host stalled; the reading is stale", r)
-                write(k, u_da)
-                t_w = now()
-                u_da_prev = u_da
                 commanded = True
-                if t_w > deadline + h_ns:
-                    self.overruns += 1
-                    flags |= OVERRUN
-                jit_add(late)
-                comp_add(t_w - wake - rig_ns)
-                rig_add(rig_ns)
-                smp = Sample(k, k * h, flags, theta, th_hat, thd_hat, u, arm, arm_dot, arm_hat,
-                             armd_hat, f_hat, z_hat, y, x, v, u_da, late / 1e3,
-                             (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
-                for sink in self.sinks:
-                    sink(smp)
-                self.ticks += 1
+                signals = (theta, th_hat, thd_hat, u, arm, arm_dot, arm_hat, armd_hat, f_hat,
+                           z_hat, y, x, v)
+            # ---- the tick's output and its record (with a reading or without) ----
+            write(k, u_da)
+            t_w = now()
+            u_da_prev = u_da
+            if t_w > deadline + h_ns:
+                self.overruns += 1
+                flags |= OVERRUN
+            jit_add(late)
+            comp_add(t_w - wake - rig_ns)
+            rig_add(rig_ns)
+            smp = Sample(k, k * h, flags, *signals, u_da, late / 1e3,
+                         (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
+            for sink in self.sinks:
+                sink(smp)
+            self.ticks += 1
             # ---- between ticks ----
             if mailbox:
                 old_kind = gp.compensator
