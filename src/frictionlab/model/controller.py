@@ -61,11 +61,10 @@ from .friction import (
     CLASSICAL,
     COULOMB,
     LUGRE,
-    P_FC,
-    P_FS,
     STRIBECK,
     FrictionParams,
     friction_step,
+    levels,
     with_levels,
 )
 from .observers import arm_observer_step, pendulum_observer_step
@@ -280,7 +279,7 @@ def compensator_levels(s, gp, cp):
         return s[S_FC_HAT], s[S_FS_HAT]
     if gp.compensator == 0:
         return 0.0, 0.0
-    return cp[P_FC], cp[P_FS]
+    return levels(cp)
 
 
 def compensator_params(params: FrictionParams) -> np.ndarray:

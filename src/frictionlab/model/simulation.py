@@ -78,11 +78,10 @@ from .friction import (
     KINDS,
     LUGRE,
     NONE,
-    P_DRIFT,
-    P_K,
     drifted_params,
     friction_step,
     is_drifting,
+    observer_gain,
     resolve_drift,
 )
 from .plant import accelerations_sc
@@ -168,7 +167,7 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     th, thd, arm, ad, z = x[0], x[1], x[2], x[3], x[4]
     sn = np.sin(th)
     cs = np.cos(th)
-    kgain = fp[P_K] if fkind == LUGRE else 0.0
+    kgain = observer_gain(fp) if fkind == LUGRE else 0.0
     done = 0
     while done < substeps:
         m = min(ratio, substeps - done)
@@ -427,7 +426,7 @@ class SimulatedPlant:
         # (``duration``, default sim.duration)
         self._fp = resolve_drift(cfg.friction.pack(),
                                  cfg.sim.duration if duration is None else duration)
-        self._drifting = bool(self._fp[P_DRIFT] != 0.0)
+        self._drifting = bool(is_drifting(self._fp))
         self._fpt = self._fp.copy()
         self._substeps = cfg.substeps
         self._ratio = cfg.pendulum_ratio
