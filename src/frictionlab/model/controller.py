@@ -54,7 +54,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .adaptive import adaptation_step, check_gains
 from .design import Design
 from .friction import (
@@ -85,6 +85,7 @@ __all__ = [
     "compensator_levels",
     "compensator_params",
     "controller_step",
+    "estimates",
     "gains_record",
     "reset_compensator",
 ]
@@ -268,6 +269,15 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     s[S_VPREV] = v
     f, s[S_ZHAT] = friction_step(LUGRE, with_levels(cp, fc, fs), s[S_ZHAT], v, 0.0, h, e)
     return f
+
+
+@jit_inline
+def estimates(s, gp):
+    """The estimates the controller state ``s`` holds before its tick:
+    :math:`(\\hat\\theta, \\hat{\\dot\\theta}, \\hat\\Omega,
+    \\hat{\\dot\\Omega}, \\hat z)` (rad, rad/s, rad, rad/s, the LuGre
+    compensator's bristle)."""
+    return s[S_X1], gp.omega0 * s[S_X2], s[S_ARM], s[S_ARMDOT], s[S_ZHAT]
 
 
 @jit

@@ -65,13 +65,10 @@ from ._jit import jit, jit_inline
 from .controller import (
     DEFAULT_ERROR_SIGNAL,
     NS,
-    S_ARMDOT,
-    S_X1,
-    S_X2,
-    S_ZHAT,
     Controller,
     compensator_levels,
     controller_step,
+    estimates,
 )
 from .design import design as make_design
 from .friction import (
@@ -279,7 +276,6 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
     an unresolved one, NaN, is ignored).
     """
     h = gp.h
-    w0 = gp.omega0
     drifting = is_drifting(fp)
     fpt = fp.copy()
     # an ideal noise-free sensor measures the true signals: its (inlined) reading
@@ -290,11 +286,7 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
             th_m, arm_m, armd_m, x0 = ideal_reading(x[0], x[2], x[3], n0 + k == 0, x0)
         else:
             th_m, arm_m, armd_m, x0 = _measure_inline(sp, x[0], x[2], x[3], n0 + k, x0)
-        th_hat = s[S_X1]
-        thd_hat = w0 * s[S_X2]
-        arm_hat = s[2]
-        armd_hat = s[S_ARMDOT]
-        z_hat = s[S_ZHAT]
+        th_hat, thd_hat, arm_hat, armd_hat, z_hat = estimates(s, gp)
         u, _u_fb, f_hat = _controller_step_inline(s, gp, cp, th_m, arm_m, armd_m)
         if record:
             fc_used, fs_used = compensator_levels(s, gp, cp)
