@@ -107,7 +107,8 @@ _clean = json_safe  # the one sanitiser (frictionlab.io.jsonsafe)
 OPTIONS = {"vary": "--vary", "mode": "--mode", "dask": "--dask", "backend": "--backend",
            "token": "--token", "fit": "--fit", "weights": "--weights", "bounds": "--bounds",
            "search_duration": "--search-duration", "search_window": "--search-window",
-           "stiction_above_coulomb": "--allow-stiction-below-coulomb"}
+           "stiction_above_coulomb": "--allow-stiction-below-coulomb",
+           "duration": "--duration", "window": "--window"}
 
 
 def _hinted(obj, options: dict[str, str] = OPTIONS) -> str:

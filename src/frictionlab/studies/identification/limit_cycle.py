@@ -854,9 +854,11 @@ def _run_length(duration: float, window: float | None) -> tuple[float, float | N
     """``(duration, window)`` of a fit's runs, checked: duration > 0, window in
     (0, duration] or None."""
     if not (duration > 0 and math.isfinite(duration)):
-        raise ConfigError(f"duration must be > 0 s, got {duration}")
+        raise ConfigValueError("duration", duration, "(0, inf) s",
+                               f"duration must be > 0 s, got {duration}")
     if window is not None and not (0 < window <= duration):
-        raise ConfigError(f"window must be in (0, duration], got {window}")
+        raise ConfigValueError("window", window, f"(0, {duration:g}] s",
+                               f"window must be in (0, duration], got {window}")
     return float(duration), window
 
 
