@@ -181,7 +181,7 @@ def emit_json(obj) -> None:
     sys.stdout.flush()
 
 
-def _add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
+def add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
     p.add_argument("--design", choices=("fast", "slow"), default="fast",
                    help="design preset of Sec. 2.4 (eqs. 13-16), applied before --set "
                         "(default: %(default)s)")
