@@ -11,7 +11,10 @@ from frictionlab.model.simulation import run_features
 from frictionlab.studies import batch
 
 # (design, plant friction, compensation, sets): every plant friction model, both
-# designs, measurement noise on, a compensator, and a run that falls
+# designs, measurement noise on, a compensator, drifting friction with the
+# adaptive compensator, and a run that falls (at tick 363, in its second chunk);
+# the 8 s runs (1,600 ticks) are recorded in chunks of batch.CHUNK_TICKS, the
+# last one partial
 CASES = [
     ("fast", "none", "none", {}),
     ("fast", "coulomb", "none", {"sim.noise": 0.002, "sim.seed": 3}),
@@ -19,6 +22,7 @@ CASES = [
     ("fast", "classical", "classical", {"sim.noise": 0.001}),
     ("slow", "lugre", "none", {"friction.observer_gain": 1.0, "sim.noise": 0.002}),
     ("fast", "lugre", "lugre", {}),
+    ("slow", "lugre", "adaptive", {"friction.drift": -0.3}),
     ("slow", "coulomb", "none", {"sim.fall_angle": 0.1}),  # falls
 ]
 

@@ -68,6 +68,7 @@ def _rel(est: dict, key: str) -> float:
     return abs(est[key] - TRUTH[key]) / TRUTH[key]
 
 
+@pytest.mark.xdist_group("limit-cycle-fits")
 @pytest.mark.slow
 def test_synthetic_recovery(clean_fit):
     """Acceptance: default bounds and budget, F_C and omega0 within 2 %, F_S within 10 %."""
@@ -80,6 +81,7 @@ def test_synthetic_recovery(clean_fit):
     assert _rel(est, "friction.stiction") < 0.10
 
 
+@pytest.mark.xdist_group("limit-cycle-fits")
 @pytest.mark.slow
 def test_residuals_cover_every_measured_feature(clean_fit):
     assert set(clean_fit.residuals) == {"fast", "slow"}
@@ -91,6 +93,8 @@ def test_residuals_cover_every_measured_feature(clean_fit):
     assert clean_fit.cost <= clean_fit.global_cost + 1e-12
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("limit-cycle-fits")
 def test_stderr_reported_and_no_flat_direction(clean_fit):
     assert set(clean_fit.stderr) == set(TRUTH)
     assert all(se is not None and 0 < se < 0.05 * TRUTH[k]
@@ -102,6 +106,7 @@ def test_stderr_reported_and_no_flat_direction(clean_fit):
         assert abs(clean_fit.estimate[key] - value) < 3.0 * clean_fit.stderr[key]
 
 
+@pytest.mark.xdist_group("limit-cycle-fits")
 @pytest.mark.slow
 def test_noisy_features_truth_within_three_stderr(noisy_fit):
     """Acceptance: with 1 % feature noise the true values lie within 3
@@ -128,6 +133,8 @@ def test_covariance_is_the_student_t_one_with_the_jitter_added():
         assert cov is None and "degree" in why
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("limit-cycle-fits")
 def test_json_fields(clean_fit):
     out = clean_fit.to_json()
     assert {"estimate", "stderr", "residuals", "cost"} <= set(out)

@@ -273,6 +273,7 @@ def test_bad_input_exits_2_with_a_message(argv, message, capsys, tmp_path):
     assert message in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow  # waits for the handshake's timeout
 def test_unreachable_rig_exits_1(tmp_path, capsys):
     import socket
 

@@ -372,3 +372,13 @@ def test_inert_key_note_on_stderr(capsys):
     assert rc == 0
     assert ("friction.observer_gain has no effect with the 'classical' plant friction"
             in capsys.readouterr().err)
+
+
+def test_the_loop_inlines_the_same_step_laws():
+    # _run calls inlined kernels of the very functions plant_tick and controller_step
+    # (one law each, not copies)
+    from frictionlab.model import controller, sensor, simulation
+
+    assert simulation._plant_tick_inline.py_func is simulation.plant_tick.py_func
+    assert simulation._controller_step_inline.py_func is controller.controller_step.py_func
+    assert simulation._measure_inline.py_func is sensor.measure.py_func

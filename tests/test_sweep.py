@@ -259,7 +259,8 @@ def test_reduce_hook_replaces_the_feature_reduction(workers):
                     reduce=reduce_features) == plain[:1]
 
 
-@pytest.mark.parametrize("workers", [1, 2])
+# workers=2 starts the process pool (new interpreters): slow
+@pytest.mark.parametrize("workers", [1, pytest.param(2, marks=pytest.mark.slow)])
 def test_a_reduce_that_raises_gives_an_error_row(workers):
     base = build_config("fast", "classical")
     points = [{"friction.coulomb": v} for v in (1.3, 1.7)]
@@ -300,6 +301,7 @@ def _chunk_that_kills_its_worker(base, points, duration, window, reduce):
     return _RUN_CHUNK(base, points, duration, window, reduce)
 
 
+@pytest.mark.slow  # a process pool, one of whose workers dies
 def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
     base = build_config("fast", "classical")
     points = [{"friction.coulomb": v} for v in (1.3, 1.5, 1.7, 1.9)]

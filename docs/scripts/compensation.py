@@ -70,8 +70,8 @@ class _FlippedGain:
     def __init__(self, ctrl: Controller):
         self.ctrl = ctrl
 
-    def pack(self):
-        gp, cp = self.ctrl.pack()
+    def record(self):
+        gp, cp = self.ctrl.record()
         cp = cp.copy()
         cp[P_K] = -cp[P_K]
         return gp, cp
