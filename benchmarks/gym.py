@@ -46,7 +46,7 @@ import frictionlab.gym as fgym
 from frictionlab.config import build_config
 from frictionlab.model._jit import jit
 from frictionlab.model.friction import KINDS
-from frictionlab.model.simulation import _pack_plant, plant_tick
+from frictionlab.model.simulation import plant_tick
 
 SETS = ["sim.noise=0.002", "sim.quantization=1"]
 
@@ -129,7 +129,7 @@ def _batched(xs, us, mems, substeps, ratio, h, pp, fkind, fp, n_steps):
 
 def plant_rate(steps: int, n: int, repeats: int) -> float:
     cfg = build_config(sets=SETS)
-    pp, fp = _pack_plant(cfg), cfg.friction.pack()
+    pp, fp = cfg.plant.record(), cfg.friction.pack()
     fkind = KINDS.index(cfg.friction_kind)
     batches = max(1, steps // n)
 

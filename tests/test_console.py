@@ -1073,12 +1073,15 @@ def test_swing_up_button_starts_a_swing_up_and_the_phase_is_shown(tmp_path):
         assert r.status_code == 200
         assert r.json()["status"]["swing_up"]["phase"] in ("swinging", "caught", "balancing")
         assert client.post("/api/swingup", json={}).status_code == 409
-        seen = set()
+        # the loop runs unpaced (fake clock): polls may all fall after the catch, so
+        # the swing itself shows in its time, not in a polled "swinging" phase
+        seen = {r.json()["status"]["swing_up"]["phase"]}
         while (st := client.get("/api/status").json())["t"] < 4.0:
             assert st["running"], (st["stop_reason"], st["stop_detail"])
             seen.add(st["swing_up"]["phase"])
-        assert st["swing_up"]["phase"] == "balancing" and "swinging" in seen
-        assert 0 < st["swing_up"]["swing_up_time"] < 4.0
+        assert st["swing_up"]["phase"] == "balancing"
+        assert seen <= {"swinging", "caught", "balancing"}
+        assert 0.5 < st["swing_up"]["swing_up_time"] < 4.0
         assert client.post("/api/stop", json={}).status_code == 200
         page = client.get("/").text
         assert 'id="swingup"' in page and 'id="swing-phase"' in page

@@ -51,12 +51,7 @@ def test_stribeck_curve_closed_form(v, fs, fc, fv, vs):
 def test_static_models_never_add_energy(v, fe, fs, fc, band, kind):
     """F*v >= 0 whenever the arm moves (|v| beyond the zero-velocity band)."""
     m = make_model(kind, stiction=fs, coulomb=fc, zero_velocity_band=band, hysteresis=0.0)
-    if kind == "viscous":
-        F = m.force(v)
-    elif kind == "coulomb":
-        F, _ = m.force(v, float(np.sign(v)))
-    else:
-        F = m.force(v, fe)
+    F, _ = m.step(float(np.sign(v)), v, fe, 0.005)
     if abs(v) >= band and v != 0.0:
         assert F * v >= 0.0
 
@@ -102,41 +97,41 @@ def test_asymmetric_lugre_levels():
 def test_classical_holds_arm_below_stiction(fe, band, frac):
     """Inside the band, |F_e| < F_S: friction balances the force (no acceleration)."""
     m = make_model("classical", zero_velocity_band=band)
-    assert m.force(frac * band, fe) == fe
+    assert m.step(m.init(), frac * band, fe, 0.005)[0] == fe
 
 
 def test_classical_breaks_away_and_slides():
     m = make_model("classical")
-    assert m.force(0.0, 3.0) == pytest.approx(2.3)
-    assert m.force(0.0, -3.0) == pytest.approx(-2.3)
-    assert m.force(0.5, 10.0) == pytest.approx(1.5)
-    assert m.force(-0.5, 10.0) == pytest.approx(-1.5)
+    assert m.step(0.0, 0.0, 3.0, 0.005)[0] == pytest.approx(2.3)
+    assert m.step(0.0, 0.0, -3.0, 0.005)[0] == pytest.approx(-2.3)
+    assert m.step(0.0, 0.5, 10.0, 0.005)[0] == pytest.approx(1.5)
+    assert m.step(0.0, -0.5, 10.0, 0.005)[0] == pytest.approx(-1.5)
 
 
 def test_stribeck_classical_implementation_form():
     m = make_model("stribeck", hysteresis=0.08, stiction=2.3, coulomb=1.55, stribeck_velocity=1)
-    assert m.force(0.05, 1.0) == 1.0  # inside +-eps: F = u
-    assert m.force(0.05, 5.0) == pytest.approx(2.3)  # limited to F_S
+    assert m.step(0.0, 0.05, 1.0, 0.005)[0] == 1.0  # inside +-eps: F = u
+    assert m.step(0.0, 0.05, 5.0, 0.005)[0] == pytest.approx(2.3)  # limited to F_S
     v = 0.7
-    assert m.force(v, 0.0) == pytest.approx(1.55 + 0.75 * np.exp(-(v**2)))
+    assert m.step(0.0, v, 0.0, 0.005)[0] == pytest.approx(1.55 + 0.75 * np.exp(-(v**2)))
 
 
 def test_hysteresis_relay_depends_on_history():
     m = make_model("coulomb", coulomb=1.5, hysteresis=0.05)
     # the same velocity inside the band gives different forces after different histories
-    _, s_up = m.force(0.2, m.init())
-    _, s_down = m.force(-0.2, m.init())
-    f1, _ = m.force(0.01, s_up)
-    f2, _ = m.force(0.01, s_down)
+    _, s_up = m.step(m.init(), 0.2, 0.0, 0.005)
+    _, s_down = m.step(m.init(), -0.2, 0.0, 0.005)
+    f1, _ = m.step(s_up, 0.01, 0.0, 0.005)
+    f2, _ = m.step(s_down, 0.01, 0.0, 0.005)
     assert f1 == 1.5 and f2 == -1.5
     # beyond the band the history no longer matters
-    assert m.force(0.06, s_down)[0] == 1.5
+    assert m.step(s_down, 0.06, 0.0, 0.005)[0] == 1.5
 
 
 def test_ideal_relay_without_hysteresis_switches_at_zero():
     m = make_model("coulomb", hysteresis=0.0)
-    assert m.force(1e-6, -1.0)[0] == 1.5
-    assert m.force(-1e-6, 1.0)[0] == -1.5
+    assert m.step(-1.0, 1e-6, 0.0, 0.005)[0] == 1.5
+    assert m.step(1.0, -1e-6, 0.0, 0.005)[0] == -1.5
 
 
 def test_observer_gain_zero_is_plain_lugre():
@@ -164,19 +159,21 @@ def test_lugre_object_steps_to_the_stribeck_curve_and_matches_the_force_law():
     assert m.kind == "lugre" and m.has_state
     z = m.init()
     for _ in range(2000):
-        f, z = m.step(z, 0.8, 0.005)
+        f, z = m.step(z, 0.8, 0.0, 0.005)
     assert f == pytest.approx(m.steady_state(0.8), abs=1e-9)
-    # at the steady state the bristle rate vanishes and force() agrees
-    assert abs(m.dz(0.8, z)) < 1e-9
-    assert m.force(0.8, z) == pytest.approx(f, abs=1e-9)
+    # at the steady state the bristle rate vanishes and the force law agrees
+    p = m.params.pack()
+    assert abs(lugre_dz(0.8, z, 0.0, p)) < 1e-9
+    assert lugre_force(0.8, z, 0.0, p) == pytest.approx(f, abs=1e-9)
 
 
 def test_each_kind_has_its_own_model_class():
     for kind in ("none", "viscous", "coulomb", "classical", "stribeck", "lugre"):
         m = make_model(kind)
         assert type(m).kind == kind and m.code == KINDS.index(kind)
-    assert make_model("viscous", viscous=0.5).force(-2.0) == pytest.approx(-1.0)
-    assert make_model("none").force(3.0) == 0.0
+    assert make_model("viscous", viscous=0.5).step(0.0, -2.0, 0.0, 0.005)[0] == \
+        pytest.approx(-1.0)
+    assert make_model("none").step(0.0, 3.0, 1.0, 0.005) == (0.0, 0.0)
 
 
 def test_unknown_kind_rejected():

@@ -11,6 +11,8 @@ from frictionlab.config import (
     SimParams,
     UnknownKeyError,
     build_config,
+    describe_keys,
+    key_metadata,
     valid_keys,
 )
 from frictionlab.model.design import DesignSpec
@@ -110,6 +112,32 @@ def test_unknown_key_suggests_the_nearest_keys(key, nearest):
     msg = str(info.value)
     assert key in msg and " or ".join(nearest) in msg
     assert len(msg) < 200 and "\n" not in msg  # not the whole list of keys
+
+
+@pytest.mark.parametrize("key, home", [
+    ("friction.adaptation_gain", "compensation.adaptation_gain"),
+    ("friction.adaptation_max", "compensation.adaptation_max"),
+    ("compensation.drift", "friction.drift"),
+    ("compensation.drift_time", "friction.drift_time"),
+])
+def test_a_field_only_the_other_section_reads_is_not_a_key_there(key, home):
+    # the drift is the plant's, the adaptation law the compensator's: each has one home
+    assert key not in valid_keys() and home in valid_keys()
+    assert key not in build_config().as_flat_dict()
+    assert key not in [row[0] for row in describe_keys()]
+    with pytest.raises(UnknownKeyError) as info:
+        build_config(sets=[f"{key}=1"])
+    assert info.value.suggestions[0] == home
+
+
+def test_key_metadata_and_descriptions_agree_with_the_keys():
+    rows = describe_keys()
+    assert [r[0] for r in rows] == valid_keys()
+    for key, doc, unit, _rng in rows:
+        meta = key_metadata(key)
+        assert (meta["doc"], meta["unit"]) == (doc, unit)
+    with pytest.raises(UnknownKeyError):
+        key_metadata("friction.adaptation_gain")
 
 
 def test_unknown_key_without_a_near_one_names_its_section_or_the_sections():

@@ -225,7 +225,7 @@ class Config:
         for section in _SECTIONS:
             obj = getattr(self, section)
             for f in dataclasses.fields(obj):
-                if "doc" in f.metadata:
+                if "doc" in f.metadata and f.name not in _NOT_IN_SECTION.get(section, ()):
                     out[f"{section}.{f.name}"] = getattr(obj, f.name)
         return out
 
@@ -279,12 +279,22 @@ def inert_keys(cfg: Config, keys: Iterable[str]) -> list[str]:
     return out
 
 
+#: Fields of :class:`FrictionParams` that only one of its two sections reads, so the
+#: other section has no such key: the drift is the plant's (``friction.drift*``), the
+#: adaptation law the compensator's (``compensation.adaptation_*``).
+_NOT_IN_SECTION = {
+    "friction": frozenset(f.name for f in dataclasses.fields(FrictionParams)
+                          if f.name.startswith("adaptation_")),
+    "compensation": frozenset(_DRIFT),
+}
+
+
 @functools.cache
 def _key_tuple() -> tuple[str, ...]:
     keys = []
     for section in _SECTIONS:
         for f in dataclasses.fields(_CLASSES[section]):
-            if "doc" in f.metadata:
+            if "doc" in f.metadata and f.name not in _NOT_IN_SECTION.get(section, ()):
                 keys.append(f"{section}.{f.name}")
     return tuple(keys)
 
@@ -297,6 +307,29 @@ def _key_set() -> frozenset[str]:
 def valid_keys() -> list[str]:
     """Every accepted ``section.field`` key."""
     return list(_key_tuple())
+
+
+def key_metadata(key: str) -> Mapping[str, Any]:
+    """The field metadata of a parameter key: ``doc``, ``unit``, the range
+    (``lo``, ``hi``...), ``integer`` (:func:`frictionlab.model.params.param`).
+
+    Raises
+    ------
+    UnknownKeyError
+        ``key`` is not a parameter key.
+    """
+    section, field = _split(key)
+    return _CLASSES[section].__dataclass_fields__[field].metadata
+
+
+def describe_keys() -> list[tuple[str, str, str, str]]:
+    """``(key, doc, unit, allowed range)`` of every parameter key, in
+    ``frictionlab keys`` order."""
+    keys = _key_set()
+    return [(f"{section}.{name}", doc, unit, rng)
+            for section in _SECTIONS
+            for name, doc, unit, rng in _CLASSES[section].describe()
+            if f"{section}.{name}" in keys]
 
 
 def _split(key: str) -> tuple[str, str]:

@@ -105,8 +105,9 @@ from gymnasium.vector.utils import batch_space
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
 from .model.friction import KINDS
+from .model.plant import plant_record
 from .model.sensor import reading
-from .model.simulation import _pack_plant, make_sensor, plant_tick
+from .model.simulation import make_sensor, plant_tick
 
 __all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "SWINGUP_ENV_ID", "TASKS",
            "FurutaEnv", "FurutaVectorEnv"]
@@ -141,7 +142,7 @@ def _step_plants(mask, xs, us, mems, friction, substeps, ratios, h, pps, fkinds,
     for i in range(xs.shape[0]):
         if mask[i]:
             friction[i], mems[i] = plant_tick(xs[i], us[i], mems[i], substeps[i], ratios[i], h,
-                                              pps[i], fkinds[i], fps[i])
+                                              plant_record(pps[i]), fkinds[i], fps[i])
 
 
 @jit
@@ -183,7 +184,7 @@ class _Plants:
     def start(self, i: int, cfg: Config, theta0: float) -> None:
         """Plant i at rest at ``theta0`` with the parameters of ``cfg``."""
         self.configs[i] = cfg
-        self.pps[i] = _pack_plant(cfg)
+        self.pps[i] = cfg.plant.record()
         self.fps[i] = cfg.friction.pack()
         self.fkinds[i] = KINDS.index(cfg.friction_kind)
         self.substeps[i] = cfg.substeps
@@ -195,7 +196,7 @@ class _Plants:
         self.us[i] = 0.0
         self.steps[i] = 0
         if i == 0:  # plant 0's arguments, ready for step_first
-            self._first = (int(self.substeps[0]), int(self.ratios[0]), self.h, self.pps[0],
+            self._first = (int(self.substeps[0]), int(self.ratios[0]), self.h, cfg.plant.record(),
                            int(self.fkinds[0]), self.fps[0])
 
     def step(self, mask: np.ndarray, u: np.ndarray) -> None:

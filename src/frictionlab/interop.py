@@ -61,7 +61,7 @@ import control
 import numpy as np
 
 from .config import Config, build_config
-from .model.friction import COULOMB, KINDS, LUGRE, NONE, P_EPS, lugre_dz, lugre_force, static_force
+from .model.friction import COULOMB, KINDS, LUGRE, NONE, P_EPS, friction_step, lugre_dz, lugre_force
 from .model.plant import ARM, ARM_DOT, THETA, Z, rhs
 
 __all__ = ["INPUTS", "OUTPUTS", "STATES", "linearize", "to_control"]
@@ -138,7 +138,7 @@ def to_control(config: Config | None = None) -> control.NonlinearIOSystem:
         elif kind == NONE:
             friction = 0.0
         else:
-            friction, _ = static_force(kind, v, ku * u0, 0.0, fp)
+            friction, _ = friction_step(kind, fp, 0.0, v, ku * u0, 0.0, 0.0)
         dx = rhs(t, x, (u0, friction), plant)
         if kind == LUGRE:
             dx[Z] = dz

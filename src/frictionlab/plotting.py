@@ -89,12 +89,12 @@ def feature_label(name: str) -> str:
 
 def key_label(key: str) -> str:
     """Axis label of a parameter key with its unit, e.g. ``friction.coulomb [m/s^2]``."""
-    from .config import _CLASSES
+    from .config import ConfigError, key_metadata
 
-    section, _, name = key.partition(".")
-    cls = _CLASSES.get(section)
-    fields = {f.name: f for f in dataclasses.fields(cls)} if cls else {}
-    unit = fields[name].metadata.get("unit", "") if name in fields else ""
+    try:
+        unit = key_metadata(key).get("unit", "")
+    except ConfigError:
+        unit = ""
     return axis_label(key, unit)
 
 

@@ -149,16 +149,12 @@ def cmd_simulate(args) -> int:
 
 def cmd_keys(args) -> int:
     """``frictionlab keys``: every parameter key with its default, range, unit and meaning."""
-    from ..config import _CLASSES, _SECTIONS
+    from ..config import describe_keys
 
     cfg = build_config(design=args.design, friction=args.friction,
                        compensation=args.compensation)
-    rows = []
-    for section in _SECTIONS:
-        for name, doc, unit, rng in _CLASSES[section].describe():
-            key = f"{section}.{name}"
-            rows.append({"key": key, "default": cfg.get(key), "range": rng, "unit": unit,
-                         "doc": doc})
+    rows = [{"key": key, "default": cfg.get(key), "range": rng, "unit": unit, "doc": doc}
+            for key, doc, unit, rng in describe_keys()]
     if args.json:
         emit_json({"design": args.design, "friction": args.friction,
                    "compensation": args.compensation, "keys": rows})

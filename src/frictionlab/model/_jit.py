@@ -35,7 +35,8 @@ def _njit(parallel: bool = False, inline: bool = False):
         # a batch driver (frictionlab.studies.batch): prange over threads, GIL released
         return njit(cache=True, error_model="numpy", parallel=True, nogil=True)
     if inline:
-        # a step numba inlines into its compiled callers (numba's IR inlining)
+        # inlined into each compiled caller at numba's IR level (a dispatch on a
+        # constant kind then costs nothing on the hot path)
         return njit(cache=True, error_model="numpy", inline="always")
     return njit(cache=True, error_model="numpy")
 
@@ -89,16 +90,17 @@ def jit(fn) -> Kernel:
     return Kernel(fn)
 
 
+def jit_inline(fn) -> Kernel:
+    """As :func:`jit`, with numba's ``inline="always"``: compiled into each
+    compiled caller (for small dispatchers on the hot path).  LLVM does not
+    inline a large kernel such as a step of the closed loop, and calling one
+    costs its arguments (an array is seven words) every tick;
+    ``jit_inline(step.py_func)`` is the same law as a second kernel that a hot
+    loop calls instead of ``step``."""
+    return Kernel(fn, inline=True)
+
+
 def jit_parallel(fn) -> Kernel:
     """As :func:`jit`, with numba's ``parallel=True`` (``prange`` loops run on
     numba's threads) and ``nogil=True``; compiled on first use."""
     return Kernel(fn, parallel=True)
-
-
-def jit_inline(fn) -> Kernel:
-    """As :func:`jit`, inlined by numba into every compiled caller (numba's
-    ``inline="always"``).  LLVM does not inline a large kernel such as a step of
-    the closed loop, and calling one costs its arguments (an array is seven
-    words) every time; ``jit_inline(step.py_func)`` is the same law as a second
-    kernel that a hot loop calls instead of ``step``."""
-    return Kernel(fn, inline=True)

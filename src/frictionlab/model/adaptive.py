@@ -104,8 +104,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ._jit import jit
 from .friction import (
     P_ABW,
@@ -117,9 +115,8 @@ from .friction import (
     P_AMIN,
     P_FC,
     P_FS,
-    P_FV,
-    P_FVN,
-    P_VS,
+    stribeck_weight,
+    viscous_force,
 )
 from .params import ParamError
 
@@ -198,8 +195,7 @@ def check_gains(params, h: float, arm_length: float) -> None:
 @jit
 def regressor(v, p):
     """:math:`\\varphi(v)`: the Stribeck curve's sensitivities to (F_C, F_S)."""
-    r = v / p[P_VS]
-    e = np.exp(-r * r)
+    e = stribeck_weight(v, p)
     sg = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
     return sg * (1.0 - e), sg * e
 
@@ -246,9 +242,9 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_l
     if not (math.isfinite(v_hat) and math.isfinite(v_prev)):
         v0 = v if math.isfinite(v) else 0.0
         return float(A_BAD), fc, fs, v0, -1.0
-    fv = p[P_FV] if v_prev >= 0.0 else p[P_FVN]
+    # the Stribeck curve of friction.stribeck_curve in its linear-in-(F_C, F_S) form
     phc, phs = regressor(v_prev, p)
-    f_model = fc * phc + fs * phs + fv * v_prev
+    f_model = fc * phc + fs * phs + viscous_force(v_prev, p)
     lam = p[P_ABW]
     pred = v_hat + h * ((u_prev - f_model) / arm_len + lam * (v_prev - v_hat))
     if not math.isfinite(v):

@@ -59,17 +59,10 @@ from .friction import (
     CLASSICAL,
     COULOMB,
     LUGRE,
-    P_EPS,
-    P_FC,
-    P_FCN,
-    P_FS,
-    P_FSN,
     STRIBECK,
     FrictionParams,
-    coulomb_relay,
-    lugre_force,
-    lugre_step_exact,
-    stribeck_level,
+    friction_step,
+    with_levels,
 )
 from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
@@ -85,6 +78,7 @@ __all__ = [
     "Controller",
     "ControllerOutput",
     "check_compensator",
+    "compensator_params",
     "controller_step",
     "reset_compensator",
 ]
@@ -143,6 +137,14 @@ DEFAULT_ERROR_SIGNAL = "velocity_innovation"
 def compensator_force(kind, s, cp, v, u_fb, e, h):
     """Friction estimate of the compensator (Sec. 6.1-6.3) for the coming sample.
 
+    The compensators are the plant's friction laws
+    (:func:`frictionlab.model.friction.friction_step`) run with the
+    compensator's own parameters on the measured arm velocity: ``COULOMB``
+    the relay (state ``S_RELAY``), ``STRIBECK`` the classical model's
+    implementation form of Sec. 6.2 (the external force it balances inside
+    the band is the feedback signal ``u_fb``; memoryless), ``LUGRE`` the
+    observer of eq. (19) over the sample (state ``S_ZHAT``).
+
     Parameters
     ----------
     kind : int
@@ -151,7 +153,8 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
     s : ndarray
         Controller state (relay and bristle entries are updated in place).
     cp : ndarray
-        Packed compensator friction parameters.
+        The compensator's packed friction parameters
+        (:func:`compensator_params`).
     v : float
         Measured arm velocity (rad/s).
     u_fb : float
@@ -162,21 +165,17 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
     h : float
         Sampling period.
     """
-    if kind == COULOMB:
-        f, r = coulomb_relay(v, s[S_RELAY], cp)
-        s[S_RELAY] = r
-        return f
-    if kind == STRIBECK or kind == CLASSICAL:
-        eps = cp[P_EPS]
-        if abs(v) < eps or v == 0.0:
-            fs = cp[P_FS] if u_fb >= 0.0 else cp[P_FSN]
-            return min(max(u_fb, -fs), fs)
-        sg = 1.0 if v > 0.0 else -1.0
-        return stribeck_level(v, cp) * sg
+    if kind == CLASSICAL:
+        kind = STRIBECK
     if kind == LUGRE:
-        z_new, z_mean, dz_mean = lugre_step_exact(v, s[S_ZHAT], e, h, cp)
-        s[S_ZHAT] = z_new
-        return lugre_force(v, z_mean, dz_mean, cp)
+        f, s[S_ZHAT] = friction_step(LUGRE, cp, s[S_ZHAT], v, u_fb, h, e)
+        return f
+    if kind == COULOMB:
+        f, s[S_RELAY] = friction_step(COULOMB, cp, s[S_RELAY], v, u_fb, h, e)
+        return f
+    if kind == STRIBECK:
+        f, _ = friction_step(STRIBECK, cp, 0.0, v, u_fb, h, e)
+        return f
     return 0.0
 
 
@@ -186,8 +185,9 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
 
     One tick of :func:`frictionlab.model.adaptive.adaptation_step` (its state in
     ``s``, with the last applied u in ``S_U``), then the LuGre observer of
-    eq. (19) with the adapted levels (both directions) in place of the
-    compensator's ``coulomb``/``stiction``.  Updates ``s`` in place.
+    eq. (19) (:func:`frictionlab.model.friction.friction_step`) with the adapted
+    levels (both directions) in place of the compensator's
+    ``coulomb``/``stiction``.  Updates ``s`` in place.
     """
     st, fc, fs, vh, slide = adaptation_step(s[S_ADAPT], s[S_FC_HAT], s[S_FS_HAT], s[S_VHAT],
                                             s[S_VPREV], s[S_SLIDE], s[S_U], v, cp, h,
@@ -198,14 +198,19 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     s[S_FS_HAT] = fs
     s[S_VHAT] = vh
     s[S_VPREV] = v
-    q = cp.copy()
-    q[P_FC] = fc
-    q[P_FCN] = fc
-    q[P_FS] = fs
-    q[P_FSN] = fs
-    z_new, z_mean, dz_mean = lugre_step_exact(v, s[S_ZHAT], e, h, q)
-    s[S_ZHAT] = z_new
-    return lugre_force(v, z_mean, dz_mean, q)
+    f, s[S_ZHAT] = friction_step(LUGRE, with_levels(cp, fc, fs), s[S_ZHAT], v, 0.0, h, e)
+    return f
+
+
+def compensator_params(params: FrictionParams) -> np.ndarray:
+    """The packed parameters a compensator runs with (:func:`compensator_force`).
+
+    Those of ``params``, except that the classical compensator's band is its
+    hysteresis :math:`\\varepsilon` alone (Sec. 6.2): the plant's
+    ``zero_velocity_band`` (Sec. 5.2) is not a compensator setting and is
+    set to 0, so that with :math:`\\varepsilon = 0` only v = 0 counts as rest.
+    """
+    return dataclasses.replace(params, zero_velocity_band=0.0).pack()
 
 
 def reset_compensator(s: np.ndarray) -> None:
@@ -355,7 +360,7 @@ class Controller:
         gp[G_COMP] = self.compensator_code
         gp[G_ERR] = ERROR_SIGNALS.index(self.error_signal)
         gp[G_FEEDNET] = 1.0 if (self.feed_net and self.compensation != "none") else 0.0
-        return gp, self.compensation_params.pack()
+        return gp, compensator_params(self.compensation_params)
 
     def init(self, theta0: float = 0.0) -> np.ndarray:
         """Initial state: the observers start at the first measured angle, at rest."""

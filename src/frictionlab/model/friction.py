@@ -63,16 +63,22 @@ run (App. E.1: the friction changes as the rig warms up):
 :func:`drifted_params`.  The ``adaptation_*`` fields belong to the adaptive
 compensator (:mod:`frictionlab.model.adaptive`).
 
-The pure force laws are numba-compiled functions over a packed parameter
-vector (:meth:`FrictionParams.pack`) so that the simulator, the observers and
-the real-time loop share them.  For interactive use each model is also a
-small frozen object wrapping the same functions (:func:`make_model` returns
-one): :class:`NoFriction`, :class:`Viscous`, :class:`Coulomb` (``init`` and
-``force(v, s) -> (F, s)``), :class:`Classical` and :class:`Stribeck`
-(``force(v, fe)``), :class:`LuGre` (``init``, ``dz``, ``force`` and the exact
-``step(z, v, dt) -> (F_mean, z)``).  Their parameters are one validated
-:class:`FrictionParams` (the ``friction.*`` / ``compensation.*`` keys); each
-model reads the fields listed above.
+One interface
+-------------
+Every model is one compiled step, :func:`friction_step` ``(kind, p, state, v,
+f_ext, dt, e) -> (F, state)`` over a packed parameter vector
+(:meth:`FrictionParams.pack`); it is the only place each law is evaluated:
+the simulator's plant (:func:`frictionlab.model.simulation.plant_tick`), the
+compensators (:func:`frictionlab.model.controller.compensator_force`, with the
+compensator's own parameters) and the model objects all call it.  The
+Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` is written once, in
+:func:`stribeck_level`.  For interactive use each model is a small frozen
+object with the same two methods, ``init() -> state`` and ``step(state, v,
+f_ext, dt, e=0.0) -> (F, state)``, plus ``steady_state(v)``
+(:class:`NoFriction`, :class:`Viscous`, :class:`Coulomb`, :class:`Classical`,
+:class:`Stribeck`, :class:`LuGre`; :func:`make_model` builds one).  Their
+parameters are one validated :class:`FrictionParams` (the ``friction.*`` /
+``compensation.*`` keys); each model reads the fields listed above.
 """
 
 from __future__ import annotations
@@ -84,7 +90,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .params import Validated, param
 
 __all__ = [
@@ -102,14 +108,17 @@ __all__ = [
     "coulomb_relay",
     "drift_factor",
     "drifted_params",
+    "friction_step",
     "lugre_dz",
     "lugre_force",
     "lugre_step_exact",
     "make_model",
     "resolve_drift",
-    "static_force",
     "stribeck_curve",
     "stribeck_level",
+    "stribeck_weight",
+    "viscous_force",
+    "with_levels",
 ]
 
 #: Integer codes of the friction models (index = code).
@@ -280,21 +289,28 @@ def _sgn(x):
 
 
 @jit
+def stribeck_weight(v, p):
+    """The Stribeck decay :math:`e^{-(v/v_S)^2}`: the share of the stiction
+    excess :math:`F_S - F_C` left at velocity ``v`` (eq. 18's g(v))."""
+    r = v / p[P_VS]
+    return np.exp(-r * r)
+
+
+@jit
 def stribeck_level(v, p):
-    """Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (direction-dependent)."""
+    """Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (direction-dependent):
+    the one implementation of the Stribeck curve (eq. 18's :math:`\\sigma_0 g(v)`)."""
     if v >= 0.0:
         fs, fc = p[P_FS], p[P_FC]
     else:
         fs, fc = p[P_FSN], p[P_FCN]
-    r = v / p[P_VS]
-    return fc + (fs - fc) * np.exp(-r * r)
+    return fc + (fs - fc) * stribeck_weight(v, p)
 
 
 @jit
 def stribeck_curve(v, p):
     """Steady-state (Stribeck) friction :math:`s(v)\\,\\mathrm{sgn}(v) + F_v v`."""
-    fv = p[P_FV] if v >= 0.0 else p[P_FVN]
-    return stribeck_level(v, p) * _sgn(v) + fv * v
+    return stribeck_level(v, p) * _sgn(v) + viscous_force(v, p)
 
 
 @jit
@@ -316,6 +332,16 @@ def coulomb_relay(v, s_prev, p):
 
 
 @jit
+def _stuck(fe, p):
+    """Friction at rest: it balances the external force ``fe`` up to the
+    stiction level (eq. 17's :math:`|F_e| < F_S` branch, Sec. 5.2, 6.2)."""
+    fs = p[P_FS] if fe >= 0.0 else p[P_FSN]
+    if abs(fe) < fs:
+        return fe
+    return fs * _sgn(fe)
+
+
+@jit
 def classical_force(v, fe, p):
     """Stiction + Coulomb friction, eq. (17), with a zero-velocity band.
 
@@ -330,10 +356,7 @@ def classical_force(v, fe, p):
     """
     if abs(v) >= p[P_BAND] and v != 0.0:
         return p[P_FC] * _sgn(v) if v > 0.0 else p[P_FCN] * _sgn(v)
-    fs = p[P_FS] if fe >= 0.0 else p[P_FSN]
-    if abs(fe) < fs:
-        return fe
-    return fs * _sgn(fe)
+    return _stuck(fe, p)
 
 
 @jit
@@ -341,31 +364,8 @@ def stribeck_classical_force(v, fe, p):
     """The classical model's implementation form with Stribeck decay (Sec. 6.2)."""
     band = p[P_EPS] if p[P_EPS] > 0.0 else p[P_BAND]
     if abs(v) < band or v == 0.0:
-        fs = p[P_FS] if fe >= 0.0 else p[P_FSN]
-        if abs(fe) < fs:
-            return fe
-        return fs * _sgn(fe)
+        return _stuck(fe, p)
     return stribeck_level(v, p) * _sgn(v)
-
-
-@jit
-def static_force(kind, v, fe, s_prev, p):
-    """Force of any static (memoryless or relay) model.
-
-    Returns
-    -------
-    (F, s) : friction and the (possibly updated) relay state.
-    """
-    if kind == VISCOUS:
-        fv = p[P_FV] if v >= 0.0 else p[P_FVN]
-        return fv * v, s_prev
-    if kind == COULOMB:
-        return coulomb_relay(v, s_prev, p)
-    if kind == CLASSICAL:
-        return classical_force(v, fe, p), s_prev
-    if kind == STRIBECK:
-        return stribeck_classical_force(v, fe, p), s_prev
-    return 0.0, s_prev
 
 
 @jit
@@ -386,8 +386,7 @@ def lugre_dz(v, z, e, p):
 @jit
 def lugre_force(v, z, dz, p):
     """LuGre friction :math:`\\sigma_0 z + \\sigma_1(v)\\dot z + F_v v`."""
-    fv = p[P_FV] if v >= 0.0 else p[P_FVN]
-    return p[P_S0] * z + _sigma1(v, p) * dz + fv * v
+    return p[P_S0] * z + _sigma1(v, p) * dz + viscous_force(v, p)
 
 
 @jit
@@ -420,6 +419,79 @@ def lugre_step_exact(v, z, e, dt, p):
     z_ss = b * dt * inv_x  # b / a
     q = (z - z_ss) * (1.0 - np.exp(-x))  # z - z_new
     return z - q, z_ss + q * inv_x, -q * (1.0 / dt)
+
+
+@jit
+def viscous_force(v, p):
+    """Viscous friction :math:`F_v v` (:math:`F_v^-` for v < 0)."""
+    fv = p[P_FV] if v >= 0.0 else p[P_FVN]
+    return fv * v
+
+
+@jit_inline
+def friction_step(kind, p, state, v, f_ext, dt, e):
+    r"""One step of any friction model: the one law the simulator, the
+    compensators and the model objects run.
+
+    Parameters
+    ----------
+    kind : int
+        Model code (index in :data:`KINDS`).
+    p : ndarray
+        Packed parameters (:meth:`FrictionParams.pack`).
+    state : float
+        The model's memory: the relay output :math:`s \in \{-1, 0, 1\}`
+        (``coulomb``, Sec. 6.1), the bristle deflection z (``lugre``,
+        eq. 18); passed through unchanged by the memoryless models.
+    v : float
+        Arm velocity (rad/s), held over the step.
+    f_ext : float
+        External force on the arm in units of u (:math:`k_u u` in the plant,
+        the feedback signal :math:`u_{fb}` in the classical compensator): the
+        force that friction balances at rest (eq. 17, Sec. 6.2); read by
+        ``classical`` and ``stribeck`` only.
+    dt : float
+        Length of the step (s); read by ``lugre`` only.
+    e : float
+        The error signal of eq. (19), held over the step; read by ``lugre``
+        only (0 gives plain eq. 18).  It is an argument rather than part of
+        the parameters because it is a signal that changes every step and
+        whose meaning the caller chooses: the plant's balancing error
+        :math:`-	heta`, or an estimation error in the compensator
+        (:data:`frictionlab.model.controller.ERROR_SIGNALS`).
+
+    Returns
+    -------
+    (F, state)
+        The friction (units of u; for ``lugre`` the exact mean over the step
+        of :func:`lugre_step_exact`, else the value at ``v``) and the new
+        memory.
+    """
+    if kind == LUGRE:
+        z_new, z_mean, dz_mean = lugre_step_exact(v, state, e, dt, p)
+        return lugre_force(v, z_mean, dz_mean, p), z_new
+    if kind == COULOMB:
+        return coulomb_relay(v, state, p)
+    if kind == CLASSICAL:
+        return classical_force(v, f_ext, p), state
+    if kind == STRIBECK:
+        return stribeck_classical_force(v, f_ext, p), state
+    if kind == VISCOUS:
+        return viscous_force(v, p), state
+    return 0.0, state
+
+
+@jit
+def with_levels(p, fc, fs):
+    """``p`` with the Coulomb and stiction levels (both directions) replaced by
+    ``fc`` and ``fs`` (a new parameter set; the adaptive compensator's
+    estimates, :mod:`frictionlab.model.adaptive`)."""
+    q = p.copy()
+    q[P_FC] = fc
+    q[P_FCN] = fc
+    q[P_FS] = fs
+    q[P_FSN] = fs
+    return q
 
 
 @jit
@@ -474,10 +546,12 @@ def resolve_drift(p: np.ndarray, duration: float) -> np.ndarray:
 class FrictionModel:
     """Base of the friction models: a kind and its (validated) parameters.
 
-    Each model is a frozen dataclass with a pure force law over the compiled
-    functions above; stateful models keep no state inside: the relay state
-    ``s`` (Coulomb) and the bristle deflection ``z`` (LuGre) are passed in
-    and returned (``init`` gives their initial value).  Build one with
+    Every model has the same interface, ``init() -> state`` and
+    ``step(state, v, f_ext, dt, e=0.0) -> (F, state)``, both running the
+    compiled :func:`friction_step` that the simulator and the compensators
+    run; a model keeps no state inside (the Coulomb relay output and the
+    LuGre bristle deflection are the ``state`` passed in and returned; the
+    memoryless models return it unchanged).  Build one with
     :func:`make_model`.
     """
 
@@ -493,19 +567,31 @@ class FrictionModel:
     def _p(self) -> np.ndarray:
         return self.params.pack()
 
+    def init(self) -> float:
+        """Initial state: relay undecided (0), bristle relaxed (z = 0)."""
+        return 0.0
+
+    def step(self, state: float, v: float, f_ext: float, dt: float,
+             e: float = 0.0) -> tuple[float, float]:
+        """``(F, next_state)`` over ``dt`` s with ``v``, ``f_ext`` and ``e`` held.
+
+        See :func:`friction_step` for the arguments (``f_ext`` is read by the
+        classical models at rest, ``dt`` and ``e`` by LuGre, eq. 19).
+        """
+        f, state = friction_step(self.code, self._p(), float(state), float(v), float(f_ext),
+                                 float(dt), float(e))
+        return float(f), float(state)
+
     def steady_state(self, v: float) -> float:
-        """Friction in steady sliding at constant velocity ``v``."""
-        f, _ = static_force(self.code, v, 0.0, float(np.sign(v)), self._p())
+        """Friction in steady sliding at constant velocity ``v`` with no external
+        force (the relay switched to the direction of ``v``)."""
+        f, _ = friction_step(self.code, self._p(), float(np.sign(v)), float(v), 0.0, 0.0, 0.0)
         return float(f)
 
 
 @dataclass(frozen=True)
 class NoFriction(FrictionModel):
-    """No friction (``none``)."""
-
-    def force(self, v: float) -> float:
-        """Always 0."""
-        return 0.0
+    """No friction (``none``): F = 0."""
 
 
 @dataclass(frozen=True)
@@ -514,26 +600,13 @@ class Viscous(FrictionModel):
 
     kind: ClassVar[str] = "viscous"
 
-    def force(self, v: float) -> float:
-        """Friction at arm velocity ``v`` (rad/s), in m/s^2."""
-        return float(static_force(VISCOUS, v, 0.0, 0.0, self._p())[0])
-
 
 @dataclass(frozen=True)
 class Coulomb(FrictionModel):
-    """Coulomb relay with hysteresis :math:`\\pm\\varepsilon` (Sec. 6.1)."""
+    """Coulomb relay with hysteresis :math:`\\pm\\varepsilon` (Sec. 6.1); state: the relay."""
 
     kind: ClassVar[str] = "coulomb"
     has_state: ClassVar[bool] = True
-
-    def init(self) -> float:
-        """Initial relay state (0: not yet switched)."""
-        return 0.0
-
-    def force(self, v: float, s: float) -> tuple[float, float]:
-        """``(F, s_new)``: friction at velocity ``v`` after relay state ``s``."""
-        f, s_new = coulomb_relay(v, s, self._p())
-        return float(f), float(s_new)
 
 
 @dataclass(frozen=True)
@@ -542,10 +615,6 @@ class Classical(FrictionModel):
 
     kind: ClassVar[str] = "classical"
 
-    def force(self, v: float, fe: float) -> float:
-        """Friction at velocity ``v`` under the applied force ``fe`` (units of u)."""
-        return float(classical_force(v, fe, self._p()))
-
 
 @dataclass(frozen=True)
 class Stribeck(FrictionModel):
@@ -553,40 +622,18 @@ class Stribeck(FrictionModel):
 
     kind: ClassVar[str] = "stribeck"
 
-    def force(self, v: float, fe: float) -> float:
-        """Friction at velocity ``v`` under the applied force ``fe`` (units of u)."""
-        return float(stribeck_classical_force(v, fe, self._p()))
-
 
 @dataclass(frozen=True)
 class LuGre(FrictionModel):
-    """The LuGre model, eq. (18), with the observer correction of eq. (19)."""
+    """The LuGre model, eq. (18), with the observer correction of eq. (19);
+    state: the bristle deflection z."""
 
     kind: ClassVar[str] = "lugre"
     has_state: ClassVar[bool] = True
 
-    def init(self) -> float:
-        """Initial bristle deflection (relaxed)."""
-        return 0.0
-
-    def dz(self, v: float, z: float, e: float = 0.0) -> float:
-        """Bristle rate :math:`\\dot z` (eq. 18; ``e`` enters with gain k, eq. 19)."""
-        return float(lugre_dz(v, z, e, self._p()))
-
-    def force(self, v: float, z: float, e: float = 0.0) -> float:
-        """Friction :math:`\\sigma_0 z + \\sigma_1\\dot z + F_v v` at state ``z``."""
-        p = self._p()
-        return float(lugre_force(v, z, lugre_dz(v, z, e, p), p))
-
-    def step(self, z: float, v: float, dt: float, e: float = 0.0) -> tuple[float, float]:
-        """``(F_mean, z_new)`` over ``dt`` with ``v`` and ``e`` held: the exact
-        bristle update (:func:`lugre_step_exact`) and the mean friction."""
-        p = self._p()
-        z_new, z_mean, dz_mean = lugre_step_exact(v, z, e, dt, p)
-        return float(lugre_force(v, z_mean, dz_mean, p)), float(z_new)
-
     def steady_state(self, v: float) -> float:
-        """The Stribeck curve :math:`s(v)\\,\\mathrm{sgn}(v) + F_v v`."""
+        """The Stribeck curve :math:`s(v)\\,\\mathrm{sgn}(v) + F_v v` (z settled at
+        :math:`\\dot z = 0`)."""
         return float(stribeck_curve(v, self._p()))
 
 

@@ -96,7 +96,6 @@ from .simulation import (
     NC,
     STATUS,
     Trajectory,
-    _pack_plant,
     _run,
     make_controller,
     make_sensor,
@@ -209,7 +208,7 @@ class _Loop:
         ctrl = make_controller(cfg)
         self.controller = ctrl
         self.gp, self.cp = ctrl.pack()
-        self.pp = _pack_plant(cfg)
+        self.pp = cfg.plant.record()
         self.fkind = KINDS.index(cfg.friction_kind)
         self.fp = cfg.friction.pack()
         self.fp[P_DRIFT] = 0.0  # periodic orbits of the plant at its starting levels

@@ -38,6 +38,7 @@ and the tests use, while the compiled simulator and the observers call
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -51,11 +52,13 @@ __all__ = [
     "THETA",
     "THETA_DOT",
     "PlantParams",
+    "PlantRecord",
     "Z",
     "accelerations",
     "accelerations_sc",
     "linearize",
     "linearized_model",
+    "plant_record",
     "rhs",
     "zoh",
     "zoh_closed_form",
@@ -84,6 +87,29 @@ class PlantParams(Validated):
     def pendulum_length(self) -> float:
         """Equivalent pendulum length :math:`L_2 = g/\\omega_0^2` in m."""
         return self.g / self.omega0**2
+
+    def record(self) -> PlantRecord:
+        """The typed record the compiled integrator reads."""
+        return PlantRecord(float(self.omega0), float(self.zeta), float(self.g),
+                           float(self.arm_length), float(self.input_gain))
+
+
+class PlantRecord(NamedTuple):
+    """The plant parameters as the compiled code reads them (a float record;
+    :meth:`PlantParams.record`; ``np.array(record)`` is a row of a batch,
+    :func:`plant_record` reads it back)."""
+
+    omega0: float
+    zeta: float
+    g: float
+    arm_length: float
+    input_gain: float
+
+
+@jit
+def plant_record(row):
+    """The :class:`PlantRecord` stored as the float row ``np.array(record)``."""
+    return PlantRecord(row[0], row[1], row[2], row[3], row[4])
 
 
 @jit

@@ -72,6 +72,7 @@ __all__ = [
     "quantize",
     "reading",
     "sensor_params",
+    "sensor_record",
     "theta_from_raw",
     "theta_to_raw",
     "unwrap",
@@ -115,6 +116,14 @@ class SensorParams(NamedTuple):
     step: float
     noise: float
     seed: int
+
+
+@jit
+def sensor_record(row):
+    """The :class:`SensorParams` stored as the float row ``np.array(record, dtype=float)``
+    (a batch's row; the seed is whole)."""
+    return SensorParams(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7],
+                        int(row[8]))
 
 
 def sensor_params(rig, quantization: float = 1.0, noise: float = 0.0, seed: int = 0,

@@ -15,7 +15,7 @@ the friction force is evaluated once and held (friction is discontinuous, so
 a higher-order integration *through* it gains nothing) and the arm moves
 with the resulting constant acceleration (exact).
 The LuGre bristle state is advanced with the exact exponential update for
-frozen velocity (:func:`frictionlab.model.friction.lugre_step_exact`), so a stiff
+frozen velocity (:func:`frictionlab.model.friction.friction_step`), so a stiff
 bristle (``sigma0`` = 1000) stays stable at any substep count; the velocity
 it sees is the substep's midpoint velocity predicted with the last friction,
 which makes the smooth LuGre model second order in the substep (first order
@@ -78,7 +78,6 @@ from .controller import (
 )
 from .design import design as make_design
 from .friction import (
-    CLASSICAL,
     KINDS,
     LUGRE,
     NONE,
@@ -87,12 +86,9 @@ from .friction import (
     P_FC,
     P_FS,
     P_K,
-    classical_force,
     drifted_params,
-    lugre_force,
-    lugre_step_exact,
+    friction_step,
     resolve_drift,
-    static_force,
 )
 from .plant import accelerations_sc
 from .sensor import SensorParams, ideal_reading, measure, sensor_params
@@ -160,14 +156,16 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
         Arm substeps per sample and arm substeps per pendulum step.
     h : float
         Sampling period (s).
-    pp, fkind, fp
-        Packed plant parameters, friction model code, packed friction parameters.
+    pp : PlantRecord
+        Plant parameters (:meth:`frictionlab.model.plant.PlantParams.record`).
+    fkind, fp
+        Friction model code, packed friction parameters.
 
     Returns
     -------
     (mean friction over the sample, mem)
     """
-    omega0, zeta, g, arm_len, ku = pp[0], pp[1], pp[2], pp[3], pp[4]
+    omega0, zeta, g, arm_len, ku = pp.omega0, pp.zeta, pp.g, pp.arm_length, pp.input_gain
     dt = h / substeps
     fe = ku * u
     half_dt_over_l = 0.5 * dt / arm_len
@@ -197,19 +195,12 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
                 if kgain != 0.0:
                     e = -(th + tau * (thd + 0.5 * tau * th_acc))
                     tau += dt
-                z_new, z_mean, dz_mean = lugre_step_exact(v, z, e, dt, fp)
-                f = lugre_force(v, z_mean, dz_mean, fp)
-                z = z_new
+                f, z = friction_step(LUGRE, fp, z, v, fe, dt, e)
                 mem = f
-            elif fkind == CLASSICAL:
-                # called directly, not through static_force: the small law is
-                # inlined into this loop (static_force is not; its call every
-                # substep cost about 15 % of a run)
-                f = classical_force(ad, fe, fp)
             elif fkind == NONE:
                 f = 0.0
             else:
-                f, mem = static_force(fkind, ad, fe, mem, fp)
+                f, mem = friction_step(fkind, fp, mem, ad, fe, dt, 0.0)
             f_sum += f
             a = fe - f
             _, arm_acc = accelerations_sc(sn, cs, thd, ad, a, omega0, zeta, g, arm_len)
@@ -427,7 +418,7 @@ class SimulatedPlant:
     def __init__(self, cfg: Config, duration: float | None = None):
         self.cfg = cfg
         self.h = cfg.design.h
-        self._pp = _pack_plant(cfg)
+        self._pp = cfg.plant.record()
         self._fkind = KINDS.index(cfg.friction_kind)
         # friction.drift: over friction.drift_time, else to the end of the run
         # (``duration``, default sim.duration)
@@ -458,11 +449,6 @@ class SimulatedPlant:
         x = state.x.copy()
         x[1] += theta_dot_kick
         return PlantState(x, state.memory, state.friction, state.tick)
-
-
-def _pack_plant(cfg: Config) -> np.ndarray:
-    p = cfg.plant
-    return np.array([p.omega0, p.zeta, p.g, p.arm_length, p.input_gain])
 
 
 def make_sensor(cfg: Config) -> SensorParams:
@@ -540,7 +526,7 @@ def simulate_config(
     sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)
     fp = resolve_drift(cfg.friction.pack(), n * h)
-    pp = _pack_plant(cfg)
+    pp = cfg.plant.record()
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
     if progress is None:
         done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,

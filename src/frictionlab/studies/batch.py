@@ -44,8 +44,9 @@ from ..model._jit import _njit, jit, jit_parallel
 from ..model.controller import NS
 from ..model.friction import KINDS, resolve_drift
 from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
-from ..model.sensor import SensorParams
-from ..model.simulation import NC, _pack_plant, _run, make_controller, make_sensor, run_ticks
+from ..model.plant import plant_record
+from ..model.sensor import SensorParams, sensor_record
+from ..model.simulation import NC, _run, make_controller, make_sensor, run_ticks
 
 #: ``numba.prange`` once a parallel batch has run (:func:`_numba`); numba reads
 #: it when it compiles :func:`_batch_threads`, on that batch's first call.
@@ -82,14 +83,14 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     x = np.zeros(5)
     x[0] = x0[i]
     s = s0[i].copy()
-    r = sens[i]
-    sp = SensorParams(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], int(r[8]))
+    sp = sensor_record(sens[i])
+    prec = plant_record(pp[i])
     n = nt[i]
     chunk = buf.shape[0]
     done, fell_code, mem, zero = 0, 0, 0.0, 0.0
     while done < n and fell_code == 0:
         m = min(chunk, n - done)
-        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], pp[i], fk[i], fp[i], gp[i],
+        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], prec, fk[i], fp[i], gp[i],
                                        cp[i], s, sp, done, zero, fall[i], buf, True)
         for k in range(d):
             sig[0, done + k] = buf[k, 0]
@@ -115,7 +116,7 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
         codes[i] = _BAD_WINDOW
         return
     code, fv, cyc = _features_kernel(t, sig[0, :done], sig[1, :done], sig[2, :done], span, fell,
-                                     sens[i, 7], REL_PROMINENCE, SETTLE_TOL, SMOOTH)
+                                     sp.noise, REL_PROMINENCE, SETTLE_TOL, SMOOTH)
     codes[i] = code
     vals[i, :] = fv
     cycles[i] = cyc
@@ -190,9 +191,9 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
         gp.append(g)
         cp.append(c)
         s0.append(ctrl.init(cfg.sim.initial_angle))
-        pp.append(_pack_plant(cfg))
+        pp.append(cfg.plant.record())
         fp.append(resolve_drift(cfg.friction.pack(), ticks * cfg.design.h))
-        sens.append(np.array(make_sensor(cfg), dtype=float))
+        sens.append(np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
         x0[k] = cfg.sim.initial_angle
         nt[k] = ticks
         sub[k] = cfg.substeps

@@ -95,6 +95,7 @@ from ..model.controller import (
     S_ZHAT,
     adaptive_force,
     compensator_force,
+    compensator_params,
 )
 from ..model.friction import FrictionParams
 from ..model.rig import RigScaling
@@ -185,7 +186,7 @@ class Compensator:
             raise ValueError(f"h must be in (0, 1] s, got {self.h!r}")
         check_compensator(self.kind, self.params, h=self.h,
                           arm_length=getattr(self, "arm_length", None))
-        object.__setattr__(self, "_cp", self.params.pack())
+        object.__setattr__(self, "_cp", compensator_params(self.params))
 
     @property
     def code(self) -> int:

@@ -25,7 +25,7 @@ from ..model._jit import jit
 from ..model.controller import ADAPTIVE, G_COMP, S_FC_HAT, S_FS_HAT, Controller
 from ..model.friction import KINDS, P_DRIFT, P_DRIFT_TIME, P_FC, P_FS, drifted_params, resolve_drift
 from ..model.sensor import measure
-from ..model.simulation import NC, Trajectory, _pack_plant, make_controller, make_sensor, plant_tick
+from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick
 from ..model.swingup import (
     BALANCING,
     PHASES,
@@ -151,7 +151,7 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
-    done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, _pack_plant(cfg),
+    done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, cfg.plant.record(),
                                 KINDS.index(cfg.friction_kind),
                                 resolve_drift(cfg.friction.pack(), n * h), gp, cp, sp, s, w,
                                 make_sensor(cfg), cfg.sim.fall_angle, out, phase)

@@ -105,7 +105,6 @@ relative standard error exceeds 50 % is reported as poorly determined.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -116,11 +115,11 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from ...config import (
-    _CLASSES,
     Config,
     ConfigError,
     ConfigValueError,
     build_config,
+    key_metadata,
     parse_assignment,
     valid_keys,
 )
@@ -279,12 +278,6 @@ def parse_experiments(obj: Any) -> list[Experiment]:
     return out
 
 
-def _key_meta(key: str) -> dict:
-    section, name = key.split(".")
-    for f in dataclasses.fields(_CLASSES[section]):
-        if f.name == name:
-            return dict(f.metadata)
-    raise ConfigError(f"unknown key {key!r}")  # pragma: no cover - guarded by caller
 
 
 def check_fit_keys(keys: Sequence[str]) -> list[str]:
@@ -297,7 +290,7 @@ def check_fit_keys(keys: Sequence[str]) -> list[str]:
             raise ConfigValueError("fit", key, "parameter keys", f"{key!r} is not a parameter key; "
                               "see 'frictionlab keys'")
         section = key.split(".")[0]
-        if section not in _FITTABLE_SECTIONS or _key_meta(key)["integer"]:
+        if section not in _FITTABLE_SECTIONS or key_metadata(key)["integer"]:
             raise ConfigValueError("fit", key, "real-valued model parameters",
                                    f"{key!r} is not a real-valued model parameter "
                               f"(fittable sections: {', '.join(_FITTABLE_SECTIONS)})")
@@ -315,7 +308,7 @@ def default_bounds(key: str, current: float | None) -> tuple[float, float]:
     if current is None or current <= 0:
         raise ConfigError(f"no default bounds for {key} (current value {current}); "
                           f"give --bounds {key}=LO:HI")
-    meta = _key_meta(key)
+    meta = key_metadata(key)
     lo, hi = 0.5 * current, 2.0 * current
     if meta["lo"] is not None:
         lo = max(lo, meta["lo"])
@@ -329,7 +322,7 @@ def _check_bounds(key: str, lo: float, hi: float) -> None:
         raise ConfigError(f"bounds of {key}: {lo}:{hi} must be finite")
     if not lo < hi:
         raise ConfigError(f"bounds of {key}: lower {lo:g} must be below upper {hi:g}")
-    meta = _key_meta(key)
+    meta = key_metadata(key)
     if meta["lo"] is not None and (lo < meta["lo"] or (meta["lo_open"] and lo == meta["lo"])):
         raise ConfigError(f"bounds of {key}: lower {lo:g} is outside the key's allowed "
                           f"range (minimum {meta['lo']:g})")
