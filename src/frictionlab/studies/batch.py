@@ -84,13 +84,13 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     x[0] = x0[i]
     s = s0[i].copy()
     sp = sensor_record(sens[i])
-    prec = plant_record(pp[i])
+    plant = plant_record(pp[i])
     n = nt[i]
     chunk = buf.shape[0]
     done, fell_code, mem, zero = 0, 0, 0.0, 0.0
     while done < n and fell_code == 0:
         m = min(chunk, n - done)
-        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], prec, fk[i], fp[i], gp[i],
+        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], plant, fk[i], fp[i], gp[i],
                                        cp[i], s, sp, done, zero, fall[i], buf, True)
         for k in range(d):
             sig[0, done + k] = buf[k, 0]
