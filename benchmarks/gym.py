@@ -62,22 +62,19 @@ def _best(fn, repeats: int) -> float:
 
 
 def env_rate(steps: int, repeats: int) -> float:
-    env = fgym.FurutaEnv(sets=SETS)
-    rng = np.random.default_rng(0)
-    actions = rng.uniform(-2.0, 2.0, size=(steps, 1))
-
-    def run():
-        env.reset(seed=0)
-        for a in actions:
-            _, _, term, _, _ = env.step(a)
-            if term:
-                env.reset()
-
-    return steps / _best(run, repeats)
+    """Steps per second of the environment class itself (reset when it terminates)."""
+    return _env_rate(fgym.FurutaEnv(sets=SETS), steps, repeats, reset_on_truncation=False)
 
 
 def made_env_rate(steps: int, repeats: int) -> float:
-    env = gymnasium.make(fgym.ENV_ID, sets=SETS)
+    """Steps per second through ``gymnasium.make`` (its wrappers; reset when an
+    episode ends)."""
+    return _env_rate(gymnasium.make(fgym.ENV_ID, sets=SETS), steps, repeats,
+                     reset_on_truncation=True)
+
+
+def _env_rate(env, steps: int, repeats: int, *, reset_on_truncation: bool) -> float:
+    """Steps per second of one environment over random actions."""
     rng = np.random.default_rng(0)
     actions = rng.uniform(-2.0, 2.0, size=(steps, 1))
 
@@ -85,29 +82,26 @@ def made_env_rate(steps: int, repeats: int) -> float:
         env.reset(seed=0)
         for a in actions:
             _, _, term, trunc, _ = env.step(a)
-            if term or trunc:
+            if term or (trunc and reset_on_truncation):
                 env.reset()
 
     return steps / _best(run, repeats)
 
 
 def vector_rate(steps: int, n: int, repeats: int) -> float:
+    """Steps per second of ``n`` environments in gymnasium's SyncVectorEnv."""
     venv = gymnasium.vector.SyncVectorEnv(
         [lambda: gymnasium.make(fgym.ENV_ID, sets=SETS) for _ in range(n)])
-    rng = np.random.default_rng(0)
-    batches = max(1, steps // n)
-    actions = rng.uniform(-2.0, 2.0, size=(batches, n, 1))
-
-    def run():
-        venv.reset(seed=0)
-        for a in actions:
-            venv.step(a)
-
-    return batches * n / _best(run, repeats)
+    return _vec_rate(venv, steps, n, repeats)
 
 
 def native_vector_rate(steps: int, n: int, repeats: int) -> float:
-    venv = gymnasium.make_vec(fgym.ENV_ID, num_envs=n, sets=SETS)
+    """Steps per second of the environment's own vectorised form (``make_vec``)."""
+    return _vec_rate(gymnasium.make_vec(fgym.ENV_ID, num_envs=n, sets=SETS), steps, n, repeats)
+
+
+def _vec_rate(venv, steps: int, n: int, repeats: int) -> float:
+    """Steps per second of a vector environment of ``n`` copies over random actions."""
     rng = np.random.default_rng(0)
     batches = max(1, steps // n)
     actions = rng.uniform(-2.0, 2.0, size=(batches, n, 1))

@@ -55,6 +55,8 @@ import os
 import time
 from pathlib import Path
 
+from _measure import cpu_seconds, load_average
+
 from frictionlab.config import build_config
 from frictionlab.model.simulation import run_features
 from frictionlab.studies.identification.limit_cycle import fit_limit_cycle, parse_experiments
@@ -82,30 +84,15 @@ DOCS_BUDGET = {"maxiter": 80, "popsize": 12}
 DOCS_COST = 0.1452
 
 
-def _cpu_seconds() -> float:
-    """CPU time (user + system) of this process (all its threads) and its live children."""
-    import psutil
-
-    me = psutil.Process()
-    total = 0.0
-    for p in [me, *me.children(recursive=True)]:
-        try:
-            t = p.cpu_times()
-        except psutil.NoSuchProcess:
-            continue
-        total += t.user + t.system
-    return total
-
-
 #: CPU seconds of the last :func:`run`.
 LAST_CPU = [0.0]
 
 
 def run(measured: dict, workers: int | None, seed: int, **kw) -> tuple[dict, float]:
-    c0, t0 = _cpu_seconds(), time.perf_counter()
+    c0, t0 = cpu_seconds(), time.perf_counter()
     res = fit_limit_cycle(parse_experiments(measured), KEYS, duration=DURATION, window=WINDOW,
                           workers=workers, seed=seed, **kw)
-    LAST_CPU[0] = _cpu_seconds() - c0
+    LAST_CPU[0] = cpu_seconds() - c0
     return res, time.perf_counter() - t0
 
 
@@ -171,7 +158,7 @@ def main() -> None:
         evaluate(build_config(), [{"friction.coulomb": 1.5}] * (2 * cpus), duration=2.0,
                  workers=cpus, reduce=reduce_features)
     start = time.perf_counter() - t0
-    print(f"load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    print(f"load average {load_average()}")
     print(f"compiled code loaded (and the per-run pool of {cpus} warm) in {start:.1f} s "
           "(not part of the fit times)")
 

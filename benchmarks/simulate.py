@@ -129,7 +129,7 @@ def scipy_closed_loop(cfg: Config, duration: float, rtol: float = RTOL,
     if cfg.sim.noise > 0.0 or cfg.sim.quantization > 0.0:
         raise ValueError("scipy baseline runs without measurement noise and quantisation")
     ctrl = make_controller(cfg)
-    gp, cp = ctrl.pack()
+    gp, cp = ctrl.record()
     pp = cfg.plant
     fp = cfg.friction.pack()
     h = cfg.design.h

@@ -65,7 +65,7 @@ import math
 import statistics
 import time
 
-import psutil
+from _measure import cpu_seconds, load_average
 
 from frictionlab.config import Config, build_config
 from frictionlab.model.simulation import simulate_config
@@ -85,28 +85,15 @@ def sweep_points(base: Config) -> list[dict]:
     return points
 
 
-def _cpu_seconds() -> float:
-    """CPU time (user + system) of this process and all its live descendants."""
-    me = psutil.Process()
-    total = 0.0
-    for p in [me, *me.children(recursive=True)]:
-        try:
-            t = p.cpu_times()
-        except psutil.NoSuchProcess:
-            continue
-        total += t.user + t.system
-    return total
-
-
 def _rates(fn, n_sets: int, repeats: int) -> tuple[float, float, float, list]:
     """Best and median sets per second of ``fn()`` over ``repeats`` calls, CPU ms per set
     (all processes, median), and the last rows."""
     times, cpu, rows = [], [], None
     for _ in range(repeats):
-        c0, t0 = _cpu_seconds(), time.perf_counter()
+        c0, t0 = cpu_seconds(), time.perf_counter()
         rows = fn()
         times.append(time.perf_counter() - t0)
-        cpu.append(_cpu_seconds() - c0)
+        cpu.append(cpu_seconds() - c0)
     return (n_sets / min(times), n_sets / statistics.median(times),
             1e3 * statistics.median(cpu) / n_sets, rows)
 
@@ -143,7 +130,7 @@ def main(argv: list[str] | None = None) -> dict:
     points = sweep_points(base)
     print(f"{N_SETS} sets x {DURATION:g} s, fast design, classical friction, {cores} workers "
           f"(os.cpu_count() = {os.cpu_count()}; load average "
-          f"{', '.join(f'{x:.1f}' for x in os.getloadavg())})")
+          f"{load_average()})")
 
     def run(**kw):
         return evaluate(base, points, duration=DURATION, **kw)

@@ -4,6 +4,8 @@
   no imports paid again), with the exit status, stdout and stderr of the real
   command.  Use a subprocess only where the test is about the process itself
   (signals, the installed executable, start-up time, servers).
+- Markers set here by node id: ``realtime`` (:data:`REALTIME_MODULES`, UDP tests) and
+  ``alone`` (:data:`ALONE`), the phases of ``scripts/test``.
 - Tests marked ``slow`` are collected first, so that with pytest-xdist
   (``scripts/test`` runs ``-n auto --dist loadgroup``) the long ones start at
   once and the short ones fill the gaps at the end.
@@ -38,10 +40,17 @@ def cli():
 
 
 #: Modules whose tests drive a real-time loop in real time against another process
-#: (marker ``realtime``: scripts/test runs them one at a time after the rest).
+#: (marker ``realtime``: scripts/test runs them after the rest, two at a time).
 REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
                     "tests/test_rig_experiments_udp.py",
                     "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop")
+#: Real-time tests that must have the machine to themselves within the suite (marker
+#: ``alone``: scripts/test runs them last, one at a time): a browser beside a console
+#: (chromium takes a CPU of its own while it renders) and a timing statistic compared
+#: with a quiet period just before it.  Two of them, or one beside another real-time
+#: test, lost deadlines on a loaded machine (docs/performance.md, "Test suite").
+ALONE = ("tests/browser/",
+         "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop")
 
 
 def pytest_collection_modifyitems(config, items):
@@ -54,6 +63,8 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.nodeid.startswith(REALTIME_MODULES) or "udp" in item.name:
             item.add_marker(pytest.mark.realtime)
+        if item.nodeid.startswith(ALONE):
+            item.add_marker(pytest.mark.alone)
     slow = {item.nodeid.split("::")[0] for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.nodeid.split("::")[0] not in slow)
 

@@ -254,7 +254,7 @@ def test_the_bound_follows_the_sampling_period():
 def test_controller_step_freezes_the_estimates_on_an_injected_nan_and_recovers():
     cfg = build_config("fast", "lugre", "adaptive", sets=["compensation.coulomb=1.0"])
     ctrl = make_controller(cfg)
-    gp, cp = ctrl.pack()
+    gp, cp = ctrl.record()
     s = ctrl.init(0.0)
     for k in range(50):
         controller_step(s, gp, cp, 0.0, 0.0, 1.0 + 0.01 * k)

@@ -123,10 +123,12 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_the_import_graph_is_acyclic_counting_function_level_imports():
     assert _cycles(_graph()) == []
 
 
+@pytest.mark.slow
 def test_the_model_imports_only_numpy_scipy_numba_and_the_standard_library():
     bad = {}
     for name, targets in _graph().items():
@@ -162,6 +164,7 @@ def _unresolved(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
     return out
 
 
+@pytest.mark.slow
 def test_the_package_imports_its_modules_by_their_current_paths():
     # a module merged in at a former path, or an import of a former path, shows here:
     # move the module into its layer (docs/architecture.md) and import the new path

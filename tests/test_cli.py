@@ -140,3 +140,31 @@ def test_notes_wait_until_the_input_is_checked(capsys):
     rc, _, err = _run(capsys, "simulate", "--set", "friction.sigma0=200", "--duration", "1",
                         "--json")
     assert rc == 0 and "friction.sigma0 has no effect" in err
+
+
+@pytest.mark.parametrize("argv", [
+    ["sweep", "--vary", "friction.coulomb=1,2", "--out", "{tmp}/s.csv"],
+    ["reproduce", "--out", "{tmp}/r"],
+    ["compensate", "tune"],
+    ["identify", "limit-cycle", "--measured", "{tmp}/m.json", "--fit", "friction.coulomb"],
+])
+@pytest.mark.parametrize("extra, message", [
+    (["--workers", "0"], "--workers must be in 1.."),
+    (["--dask", "udp://nowhere"], "--dask: must be 'local' or tcp://HOST:PORT"),
+])
+def test_the_sweep_engine_s_options_are_checked_alike(capsys, tmp_path, argv, extra, message):
+    """--workers and --dask: one parser and one check for every command that runs the
+    sweep engine, refused before any work."""
+    (tmp_path / "m.json").write_text(json.dumps(
+        {"experiments": [{"design": "fast", "features": {"period": 1.0, "peak1": 0.1}}]}))
+    rc, out, err = _run(capsys, *[a.format(tmp=tmp_path) for a in argv], *extra)
+    assert rc == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and message in err
+    assert not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.parametrize("action", ["compare", "tune"])
+def test_compensate_needs_a_compensator_and_lists_every_kind(capsys, action):
+    rc, _, err = _run(capsys, "compensate", action, "--compensation", "none")
+    assert rc == 2
+    assert "--compensation must be coulomb, classical, lugre or adaptive" in err

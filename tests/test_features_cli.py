@@ -76,6 +76,28 @@ def test_without_sidecar_the_design_and_the_period_must_be_given(run_log, tmp_pa
     assert rc == 2 and "design.h" in err
 
 
+def test_the_library_names_what_a_bare_log_lacks_by_field(run_log, tmp_path):
+    """run_log_features raises ParamError naming its argument (no option); the
+    command line names the option (above)."""
+    from frictionlab.io.runlog import run_log_features
+    from frictionlab.model.params import ParamError
+
+    _, log = run_log
+    for ext in ("csv", "dat"):
+        shutil.copy(log.removesuffix(".csv") + f".{ext}", tmp_path / f"bare.{ext}")
+    with pytest.raises(ParamError) as info:
+        run_log_features(tmp_path / "bare.csv")
+    assert info.value.field == "design" and "--" not in str(info.value)
+    with pytest.raises(ParamError) as info:
+        run_log_features(tmp_path / "bare.dat", design="slow")
+    assert info.value.field == "h" and "--" not in str(info.value)
+    with pytest.raises(ParamError) as info:
+        run_log_features(tmp_path / "bare.dat", design="slow", h=-1.0)
+    assert info.value.field == "h"
+    got = run_log_features(tmp_path / "bare.csv", design="slow", window=1e3)
+    assert any("window" in n and "--" not in n for n in got["notes"])
+
+
 def test_identify_limit_cycle_takes_run_logs_and_features_objects(run_log, tmp_path,
                                                                    capsys):
     _, log = run_log

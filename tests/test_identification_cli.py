@@ -253,3 +253,44 @@ def test_experiment_log_lacking_a_signal_exits_2(capsys, tmp_path):
     p.write_text("t,theta_m\n0,3.1\n0.005,3.1\n0.01,3.1\n")
     rc, _, err = _run(capsys, ["identify", "experiment", "control-scaling", "--log", str(p)])
     assert rc == 2 and "'u'" in err
+
+
+def test_library_notes_and_refusals_get_their_options_from_the_command_line():
+    """The library names arguments (``hints``, ``field``); only the command line
+    names options."""
+    import pickle
+
+    from frictionlab.cli.common import error_message, note_text
+    from frictionlab.io.notes import Note
+    from frictionlab.studies.identification.limit_cycle import LimitCycleProblem, parse_experiments
+
+    note = Note("friction.coulomb = 4 is at its search bound [0.2, 4]: widen its bounds",
+                "bounds")
+    assert note_text(note) == f"{note} (--bounds)"
+    assert note_text("no hints") == "no hints"
+    again = pickle.loads(pickle.dumps(note))
+    assert again == note and again.hints == ("bounds",)
+    exps = parse_experiments(GOOD)
+    with pytest.raises(ValueError) as info:
+        LimitCycleProblem(exps, ["friction.coulomb", "friction.stiction"],
+                          bounds={"friction.coulomb": (2.0, 3.0),
+                                  "friction.stiction": (0.5, 1.5)})
+    assert "--" not in str(info.value)
+    assert info.value.field == "bounds" and info.value.hints == ("stiction_above_coulomb",)
+    assert error_message(info.value).startswith("--bounds: ")
+    assert error_message(info.value).endswith("(--allow-stiction-below-coulomb)")
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--max-pause", "-1"], "--max-pause = -1"),
+    (["--silent-periods", "0"], "--silent-periods = 0"),
+    (["--max-speed", "-1"], "--max-speed = -1"),
+    (["--max-u-da", "2"], "--max-u-da = 2"),
+])
+def test_experiment_on_a_rig_names_a_refused_limit_by_its_option(capsys, tmp_path, extra,
+                                                                message):
+    """The loop's limits are the run command's (one parser and check for both)."""
+    rc, out, err = _run(capsys, ["identify", "experiment", "stiction", "--backend", "sim",
+                                 "--log-dir", str(tmp_path), *extra])
+    assert rc == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and message in err

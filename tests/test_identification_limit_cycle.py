@@ -68,6 +68,7 @@ def _rel(est: dict, key: str) -> float:
     return abs(est[key] - TRUTH[key]) / TRUTH[key]
 
 
+@pytest.mark.xdist_group("limit-cycle-fits")
 @pytest.mark.slow
 def test_synthetic_recovery(clean_fit):
     """Acceptance: default bounds and budget, F_C and omega0 within 2 %, F_S within 10 %."""
@@ -80,6 +81,7 @@ def test_synthetic_recovery(clean_fit):
     assert _rel(est, "friction.stiction") < 0.10
 
 
+@pytest.mark.xdist_group("limit-cycle-fits")
 @pytest.mark.slow
 def test_residuals_cover_every_measured_feature(clean_fit):
     assert set(clean_fit.residuals) == {"fast", "slow"}
@@ -91,6 +93,8 @@ def test_residuals_cover_every_measured_feature(clean_fit):
     assert clean_fit.cost <= clean_fit.global_cost + 1e-12
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("limit-cycle-fits")
 def test_stderr_reported_and_no_flat_direction(clean_fit):
     assert set(clean_fit.stderr) == set(TRUTH)
     assert all(se is not None and 0 < se < 0.05 * TRUTH[k]
@@ -102,6 +106,7 @@ def test_stderr_reported_and_no_flat_direction(clean_fit):
         assert abs(clean_fit.estimate[key] - value) < 3.0 * clean_fit.stderr[key]
 
 
+@pytest.mark.xdist_group("limit-cycle-fits")
 @pytest.mark.slow
 def test_noisy_features_truth_within_three_stderr(noisy_fit):
     """Acceptance: with 1 % feature noise the true values lie within 3
@@ -128,6 +133,8 @@ def test_covariance_is_the_student_t_one_with_the_jitter_added():
         assert cov is None and "degree" in why
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("limit-cycle-fits")
 def test_json_fields(clean_fit):
     out = clean_fit.to_json()
     assert {"estimate", "stderr", "residuals", "cost"} <= set(out)
@@ -195,8 +202,10 @@ def test_fit_keeps_stiction_above_coulomb_unless_told_not_to():
     fc, fs = held.estimate["friction.coulomb"], held.estimate["friction.stiction"]
     assert fs >= fc and fs - fc < 1e-2
     assert held.cost > free.cost
-    assert any("constraint" in w and "--allow-stiction-below-coulomb" in w
+    # the warning names the argument that lifts the constraint (no command-line option)
+    assert any("constraint" in w and w.hints == ("stiction_above_coulomb",)
                for w in held.warnings)
+    assert not [w for w in held.warnings if "--" in w]
     assert not [w for w in held.warnings if "search bound" in w]
 
 
@@ -409,6 +418,33 @@ def test_short_search_runs_reach_the_optimum_of_the_full_search():
     assert short.cost <= 1.01 * full.cost + 1e-6
 
 
+def test_the_search_problem_is_the_fit_s_problem_with_other_runs():
+    """with_runs: the same keys, bounds and weights, runs of another length, its
+    own cache and count; the fit's problem is untouched; a bad length is refused."""
+    seen = []
+
+    def spy(base, points, **kw):
+        seen.append((kw["duration"], kw["window"]))
+        return _linear_rows(base, points, **kw)
+
+    prob = LimitCycleProblem(parse_experiments(BELOW), ["friction.coulomb",
+                                                        "friction.stiction"],
+                             duration=30.0, window=20.0, evaluate=spy)
+    short = prob.with_runs(15.0, 10.0)
+    assert (short.duration, short.window) == (15.0, 10.0)
+    assert (prob.duration, prob.window) == (30.0, 20.0)
+    assert short.keys == prob.keys and short.pairs == prob.pairs
+    assert np.array_equal(short.lo, prob.lo) and np.array_equal(short.hi, prob.hi)
+    x = prob.current()
+    res_short, _ = short.evaluate_batch(x)
+    res_full, _ = prob.evaluate_batch(x)
+    assert seen == [(15.0, 10.0), (30.0, 20.0)]  # separate caches
+    assert np.array_equal(res_short, res_full)  # the fake model ignores the run length
+    assert short.nfev == prob.nfev == 1
+    with pytest.raises(ConfigError):
+        prob.with_runs(15.0, 20.0)
+
+
 def test_search_settings_default_and_validation():
     from frictionlab.studies.identification.limit_cycle import search_settings
 
@@ -417,6 +453,9 @@ def test_search_settings_default_and_validation():
     assert search_settings(30.0, None, 15.0, None) == (15.0, None)
     assert search_settings(30.0, 20.0, 15.0, 12.0) == (15.0, 12.0)
     assert search_settings(30.0, 20.0, None, 5.0) == (30.0, 5.0)
-    for bad in ((-1.0, None), (float("nan"), None), (15.0, 16.0), (15.0, 0.0)):
-        with pytest.raises(ConfigError, match="--search-"):
+    for bad, field in (((-1.0, None), "search_duration"), ((float("nan"), None),
+                                                            "search_duration"),
+                       ((15.0, 16.0), "search_window"), ((15.0, 0.0), "search_window")):
+        with pytest.raises(ConfigError, match=field) as info:
             search_settings(30.0, 20.0, *bad)
+        assert info.value.field == field and "--" not in str(info.value)

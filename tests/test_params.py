@@ -256,3 +256,13 @@ def test_check_range_accepts_exactly_the_values_in_the_range(value, lo, hi, lo_o
         with pytest.raises(ParamError) as err:
             check_range("x", value, lo, hi, lo_open=lo_open, hi_open=hi_open)
         assert err.value.field == "x"
+
+
+@pytest.mark.parametrize("kw, field", [({"friction_kind": "sand"}, "friction"),
+                                       ({"compensation_kind": "prayer"}, "compensation")])
+def test_a_bad_model_kind_is_refused_by_its_field(kw, field):
+    from frictionlab.config import Config, ConfigValueError
+
+    with pytest.raises(ConfigValueError) as info:
+        Config(**kw)
+    assert info.value.field == field and f"{field} must be one of" in str(info.value)

@@ -261,6 +261,8 @@ def test_the_console_s_signal_handler_stops_the_loop_itself():
     (["run", "--headless", "--backend", "tcp://x:1"], "backend"),
     (["run", "--headless", "--set", "design.omega1=-3"], "design.omega1"),
     (["run", "--headless", "--angle-limit", "0"], "angle-limit"),
+    (["run", "--headless", "--silent-periods", "0"], "--silent-periods = 0"),
+    (["run", "--headless", "--max-pause", "-1"], "--max-pause = -1"),
     (["rig-sim", "--fault", "meteor=1"], "--fault"),
     (["run", "--json"], "--json needs --headless"),
     (["run", "--duration", "1", "--json"], "--json needs --headless"),
@@ -271,6 +273,7 @@ def test_bad_input_exits_2_with_a_message(argv, message, capsys, tmp_path):
     assert message in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow  # waits for the handshake's timeout
 def test_unreachable_rig_exits_1(tmp_path, capsys):
     import socket
 

@@ -8,6 +8,7 @@ steps the plant in fake time.
 import dataclasses
 import gc
 import json
+import math
 import random
 import subprocess
 import sys
@@ -173,7 +174,7 @@ def _replay_u(samples, params_at):
     out = []
     for smp in samples:
         q = params_at(smp.k)
-        if q.gp[:].tolist() != p.gp.tolist() and q.comp_kind != p.comp_kind:
+        if q.gp != p.gp and q.comp_kind != p.comp_kind:
             s[S_RELAY] = 0.0
             s[S_ZHAT] = 0.0
         p = q
@@ -230,15 +231,13 @@ def test_new_gains_replace_the_running_ones_linearly_over_the_transition(cfg):
     samples = [s for s in sub.drain() if not s.flags & STOP]
     k_new = futures[0].result(timeout=0)
     n = 100  # 0.5 s of ticks
-    l_old, l_new = before.gp[0:4], after.gp[0:4]
+    l_old, l_new = before.gp.feedback, after.gp.feedback
 
     def params_at(k):
         if k < k_new:
             return before
         a = min(1.0, (k - k_new + 1) / n)
-        gp = after.gp.copy()
-        gp[0:4] = l_old + a * (l_new - l_old)
-        return dataclasses.replace(after, gp=gp)
+        return dataclasses.replace(after, gp=after.gp.with_feedback(l_old + a * (l_new - l_old)))
 
     u_log = np.array([s.u for s in samples])
     np.testing.assert_allclose(u_log, _replay_u(samples, params_at), rtol=0, atol=1e-9)
@@ -302,6 +301,11 @@ def test_a_change_is_taken_from_the_mailbox_after_a_tick_without_a_reading(cfg):
     assert futures[0].result(timeout=0) == 54
     samples = {s.k: s for s in sub.drain() if not s.flags & STOP}
     assert all(samples[k].flags & NO_READING for k in range(50, 60))
+    # a tick without a reading records no signal and holds the last u_DA written
+    for k in range(50, 60):
+        assert all(math.isnan(v) for v in samples[k][3:16]), k
+        assert samples[k].u_da == samples[49].u_da and samples[k].rig_us >= 0
+    assert not any(math.isnan(v) for v in samples[60][3:16])
     assert [k for k, s in samples.items() if s.flags & CHANGED] == [54]
     assert ctl.status()["design"]["preset"] == "slow"
     # from the first reading after the gap on, the slow design's gains controlled

@@ -46,6 +46,7 @@ def _varied(row):
     return keys[0], row[keys[0]]
 
 
+@pytest.mark.xdist_group("reproduce-report")
 @pytest.mark.slow
 def test_json_is_the_documented_object(report):
     result, out = report
@@ -63,6 +64,7 @@ def test_json_is_the_documented_object(report):
     assert lugre == APPENDIX_F_KEYS
 
 
+@pytest.mark.xdist_group("reproduce-report")
 @pytest.mark.slow
 @pytest.mark.parametrize("number", ["2", "3"])
 def test_tables_2_and_3_within_5_percent_of_the_thesis(report, number):
@@ -74,6 +76,8 @@ def test_tables_2_and_3_within_5_percent_of_the_thesis(report, number):
             assert row[name] == pytest.approx(expected, rel=0.05), (row[key], name)
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("reproduce-report")
 def test_slow_tables_vary_the_same_grids(report):
     tables = report[0]["tables"]
     for fast, slow in (("2", "4"), ("3", "5")):
@@ -82,6 +86,8 @@ def test_slow_tables_vary_the_same_grids(report):
         assert all(r["period"] > 3.0 for r in tables[slow])
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("reproduce-report")
 def test_lugre_rows_follow_the_observer_gain(report):
     """Table 7's k rows (0 to 2, eq. 19 with e = -theta acting in the plant): the
     cycle quickens and grows with k; sigma0 = 100 is extremal (App. F)."""
@@ -96,6 +102,8 @@ def test_lugre_rows_follow_the_observer_gain(report):
     assert sig[100.0]["peak1"] < min(sig[50.0]["peak1"], sig[200.0]["peak1"])
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("reproduce-report")
 def test_report_files(report):
     result, out = report
     md = (out / "report.md").read_text(encoding="utf-8")
@@ -120,6 +128,8 @@ def test_report_files(report):
     assert len(full["omega0_studies"]) == len(rp.CASES)
 
 
+@pytest.mark.slow
+@pytest.mark.xdist_group("reproduce-report")
 def test_rows_match_simulate(report):
     """A sampled row of every table equals a `simulate` run of the same settings
     (the command report.json gives for it)."""

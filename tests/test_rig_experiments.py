@@ -202,6 +202,7 @@ def test_angle_scales_without_the_operator_stops_at_the_wait_limit(tmp_path):
     assert emu.u_da == 0.0
 
 
+@pytest.mark.slow
 def test_a_run_log_is_analysed_again_with_its_marks(tmp_path):
     """`identify experiment NAME --log RUN.csv` on a --backend run: the marks (where the
     free decay starts) come from the run's sidecar, so the excitation is left out."""

@@ -14,6 +14,8 @@ import pytest
 from test_rig_experiments import KNOWN_CHANNEL, TRUE, check
 
 CLI = [sys.executable, "-m", "frictionlab"]
+# every test starts a frictionlab process (rig-sim, identify) and most run in real time
+pytestmark = pytest.mark.slow
 #: The rig's hidden values as rig-sim settings.
 RIG_SETS = [f"{k}={v}" for k, v in TRUE.items()]
 #: Short schedules on the command line.

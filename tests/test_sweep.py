@@ -28,6 +28,7 @@ from frictionlab.studies.reference import TABLE2
 from frictionlab.studies.sweep import (
     MAX_CHUNK,
     MIN_TAIL_CHUNK,
+    OutputMismatch,
     SweepFile,
     _get_dask,
     _guided_chunks,
@@ -258,7 +259,8 @@ def test_reduce_hook_replaces_the_feature_reduction(workers):
                     reduce=reduce_features) == plain[:1]
 
 
-@pytest.mark.parametrize("workers", [1, 2])
+# workers=2 starts the process pool (new interpreters): slow
+@pytest.mark.parametrize("workers", [1, pytest.param(2, marks=pytest.mark.slow)])
 def test_a_reduce_that_raises_gives_an_error_row(workers):
     base = build_config("fast", "classical")
     points = [{"friction.coulomb": v} for v in (1.3, 1.7)]
@@ -299,6 +301,7 @@ def _chunk_that_kills_its_worker(base, points, duration, window, reduce):
     return _RUN_CHUNK(base, points, duration, window, reduce)
 
 
+@pytest.mark.slow  # a process pool, one of whose workers dies
 def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
     base = build_config("fast", "classical")
     points = [{"friction.coulomb": v} for v in (1.3, 1.5, 1.7, 1.9)]
@@ -416,6 +419,11 @@ def test_resume_refuses_a_different_setup(tmp_path):
     assert run_cli(*args)[0] == 0
     rc, _, err = run_cli(*args, "--resume", "--set", "plant.omega0=7.5")
     assert rc == 2 and "plant.omega0" in err and len(err.strip().splitlines()) == 1
+    assert "--resume" in err and "--force" in err  # the command line names its options
+    meta = json.loads(Path(f"{path}.meta.json").read_text())
+    with pytest.raises(OutputMismatch) as info:  # the library names what differs
+        SweepFile(path, meta["keys"], {**meta, "duration": 5.0}).load()
+    assert info.value.field == "duration" and "--" not in str(info.value)
     rc, _, err = run_cli(*args[:3], "5", *args[4:], "--resume")
     assert rc == 2 and "duration" in err
     # the same set-up resumes with nothing to compute; more values extend it

@@ -70,8 +70,8 @@ class _FlippedGain:
     def __init__(self, ctrl: Controller):
         self.ctrl = ctrl
 
-    def pack(self):
-        gp, cp = self.ctrl.pack()
+    def record(self):
+        gp, cp = self.ctrl.record()
         cp = cp.copy()
         cp[P_K] = -cp[P_K]
         return gp, cp
@@ -83,6 +83,13 @@ class _FlippedGain:
 def controller(cfg, error_signal="velocity_innovation", feed_net=True):
     return Controller(make_design(cfg.design, cfg.plant), cfg.compensation_kind,
                       cfg.compensation, error_signal=error_signal, feed_net=feed_net)
+
+
+def row_cells(status, f, chatter) -> str:
+    """The cells of one run in the main table: status, features, chatter."""
+    return (f"{status} | {fmt(f['peak_to_peak'])} | {fmt(f['period'])} | {fmt(f['max_u'])} | "
+            f"{fmt(f['max_arm_velocity'])} | {fmt(chatter.reversals_per_s, '.1f')} | "
+            f"{fmt(chatter.u_roughness, '.2f')}")
 
 
 def cell(res):
@@ -110,19 +117,10 @@ def main_table() -> None:
                 cfg = build_config(design, kind, cname, sets=[NOISE, *sets])
                 res = compare(cfg, DUR, WIN)
                 if base is None:
-                    b = res.baseline_features
-                    print(f"| {design} | {pname} | none | {res.baseline_status} | "
-                          f"{fmt(b['peak_to_peak'])} | {fmt(b['period'])} | "
-                          f"{fmt(b['max_u'])} | {fmt(b['max_arm_velocity'])} | "
-                          f"{fmt(res.baseline_chatter.reversals_per_s, '.1f')} | "
-                          f"{fmt(res.baseline_chatter.u_roughness, '.2f')} | 1 |")
-                    base = b
-                f = res.features
-                print(f"| | | {cname} | {res.status} | {fmt(f['peak_to_peak'])} | "
-                      f"{fmt(f['period'])} | {fmt(f['max_u'])} | "
-                      f"{fmt(f['max_arm_velocity'])} | "
-                      f"{fmt(res.chatter.reversals_per_s, '.1f')} | "
-                      f"{fmt(res.chatter.u_roughness, '.2f')} | "
+                    base = res.baseline_features
+                    print(f"| {design} | {pname} | none | "
+                          f"{row_cells(res.baseline_status, base, res.baseline_chatter)} | 1 |")
+                print(f"| | | {cname} | {row_cells(res.status, res.features, res.chatter)} | "
                       f"**{fmt(res.reduction, '.1f')}x** |")
 
 

@@ -139,7 +139,7 @@ class SimParams(Validated):
 
     initial_angle: float = param(0.05, "initial pendulum angle (pi: hanging down, at rest; "
                                  "rig-sim's pendulum at the start of a session; a start "
-                                 "beyond sim.fall_angle needs --swing-up)", "rad",
+                                 "beyond sim.fall_angle needs a swing-up)", "rad",
                                  lo=-math.pi, hi=math.pi)
     substeps: int | None = param(None, "arm and friction integration substeps per sampling "
                                  "period (None = the model's accurate default: 10, LuGre 6)",
@@ -186,12 +186,12 @@ class Config:
     swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
 
     def __post_init__(self) -> None:
-        if self.friction_kind not in PLANT_FRICTION_KINDS:
-            raise ConfigError(f"friction must be one of {', '.join(PLANT_FRICTION_KINDS)}; "
-                              f"got {self.friction_kind!r}")
-        if self.compensation_kind not in COMPENSATOR_KINDS:
-            raise ConfigError(f"compensation must be one of {', '.join(COMPENSATOR_KINDS)}; "
-                              f"got {self.compensation_kind!r}")
+        for field, kind, kinds in (("friction", self.friction_kind, PLANT_FRICTION_KINDS),
+                                   ("compensation", self.compensation_kind, COMPENSATOR_KINDS)):
+            if kind not in kinds:
+                raise ConfigValueError(field, kind, ", ".join(kinds),
+                                       f"{field} must be one of {', '.join(kinds)}; "
+                                       f"got {kind!r}")
         if self.compensation_kind != "none":
             check_compensator(self.compensation_kind, self.compensation, h=self.design.h,
                               arm_length=self.plant.arm_length)

@@ -12,7 +12,7 @@ from playwright.sync_api import expect
 
 from .conftest import ConsoleProcess, wait_until
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -105,16 +105,74 @@ _clean = json_safe  # the one sanitiser (frictionlab.io.jsonsafe)
 #: ``field``) that are this command line's options: only the command line names
 #: its options; the library names its arguments.
 OPTIONS = {"vary": "--vary", "mode": "--mode", "dask": "--dask", "backend": "--backend",
-           "token": "--token", "fit": "--fit", "weights": "--weights", "bounds": "--bounds"}
+           "token": "--token", "fit": "--fit", "weights": "--weights", "bounds": "--bounds",
+           "search_duration": "--search-duration", "search_window": "--search-window",
+           "stiction_above_coulomb": "--allow-stiction-below-coulomb"}
+
+
+def _hinted(obj, options: dict[str, str] = OPTIONS) -> str:
+    """``obj``'s text, followed by the options of the arguments it names as
+    ``hints`` (the ones that would address it), e.g. ``... (--bounds)``."""
+    named = [options[h] for h in getattr(obj, "hints", ()) if h in options]
+    return f"{obj} ({', '.join(named)})" if named else str(obj)
 
 
 def error_message(exc: BaseException) -> str:
     """The message of an error, a refused argument named by its option
-    (``--vary: friction.coulomb: empty value in the list``)."""
+    (``--vary: friction.coulomb: empty value in the list``), and the options
+    that would lift it (its ``hints``) after it."""
     field = getattr(exc, "field", None)
     if isinstance(exc, ParamError | UnknownKeyError) and field in OPTIONS:
-        return f"{OPTIONS[field]}: {exc}"
-    return str(exc)
+        return f"{OPTIONS[field]}: {_hinted(exc)}"
+    return _hinted(exc)
+
+
+def note_text(note: str, options: dict[str, str] = OPTIONS) -> str:
+    """A library warning as the command line prints it: the options of the
+    arguments it names as ``hints`` (a :class:`~frictionlab.io.notes.Note`)
+    after it (``... (--bounds)``); ``options`` maps arguments to options."""
+    return _hinted(note, options)
+
+
+#: The ``safety.*`` fields the real-time commands take as options.
+SAFETY_OPTIONS = {"safety.angle_limit": "--angle-limit",
+                  "safety.start_tolerance": "--start-tolerance",
+                  "safety.gain_transition": "--gain-transition",
+                  "safety.silent_periods": "--silent-periods",
+                  "safety.max_pause": "--max-pause"}
+
+
+def add_stall_args(p) -> None:
+    """The real-time loop's stall limits and its priority, as ``run`` and ``identify
+    experiment --backend`` take them (``--silent-periods``, ``--max-pause``,
+    ``--no-realtime``); :func:`safety_from_args` reads them."""
+    p.add_argument("--silent-periods", type=int, default=2, metavar="N",
+                   help="stop (rig_silent, motor zeroed) after N consecutive sample periods "
+                        "with nothing from the rig, or 5N (at least 10) ticks whose replies "
+                        "all came too late (default 2; raise it only for a rig or host known "
+                        "to stall, e.g. an emulator on a loaded machine)")
+    p.add_argument("--max-pause", type=float, default=0.05, metavar="S",
+                   help="stop (paused, motor zeroed) when the loop did not run for longer "
+                        "than S seconds (a suspended process, a stalled host; default 0.05)")
+    p.add_argument("--no-realtime", action="store_true",
+                   help="do not ask for SCHED_FIFO priority")
+
+
+def safety_from_args(args, **limits):
+    """The loop's :class:`~frictionlab.realtime.Safety` from :func:`add_stall_args`'s
+    options and ``limits`` (more ``Safety`` fields); a refused value is named by
+    its option (:data:`SAFETY_OPTIONS`)."""
+    from ..realtime import Safety
+
+    try:
+        return Safety(silent_periods=args.silent_periods,
+                      unread_limit=max(10, 5 * args.silent_periods),
+                      max_pause=args.max_pause, **limits)
+    except ParamError as exc:
+        option = SAFETY_OPTIONS.get(exc.field)
+        if option is None:
+            raise
+        raise UsageError(str(exc).replace(exc.field, option, 1)) from None
 
 
 def emit_json(obj) -> None:
@@ -131,9 +189,17 @@ def _add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
                        help="friction model of the simulated plant (default: %(default)s)")
         p.add_argument("--compensation", choices=COMPENSATOR_KINDS, default="none",
                        help="friction compensator in the controller (default: %(default)s)")
-    p.add_argument("--config", metavar="FILE", help="TOML file with parameter keys")
+    add_key_args(p)
+
+
+def add_key_args(p, applies_to: str = "") -> None:
+    """``--config FILE`` and ``--set KEY=VALUE`` (repeatable): parameter keys from a
+    TOML file, then the ``--set`` ones over them, later winning (``applies_to``:
+    what they set, for the help, e.g. "all experiments")."""
+    where = f" of {applies_to}" if applies_to else ""
+    p.add_argument("--config", metavar="FILE", help=f"TOML file with parameter keys{where}")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a parameter key (repeatable; later wins); "
+                   help=f"override a parameter key{where} (repeatable; later wins); "
                         "see 'frictionlab keys'")
 
 
@@ -200,6 +266,26 @@ def flush_notes(args) -> None:
 
 #: Most local worker processes a command starts.
 MAX_WORKERS = 256
+
+
+def add_engine_args(p) -> None:
+    """``--workers`` and ``--dask`` of the commands that run the sweep engine
+    (``sweep``, ``reproduce``, ``identify limit-cycle``, ``compensate tune``);
+    :func:`check_engine_args` checks them."""
+    p.add_argument("--workers", type=int, default=None,
+                   help="threads of the sweep engine (default: all cores; 1 = the calling "
+                        "thread); with --dask local, the number of Dask workers")
+    p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
+                   help="run on Dask: start a LocalCluster, or join a running scheduler")
+
+
+def check_engine_args(args) -> None:
+    """Refuse, before any work, a worker count or a Dask address that cannot be used."""
+    check_workers(args.workers)
+    if args.dask is not None:
+        from ..studies.sweep import _check_dask_address
+
+        _check_dask_address(args.dask)
 
 
 def check_workers(value: int | None, option: str = "--workers") -> None:

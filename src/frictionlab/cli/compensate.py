@@ -12,12 +12,13 @@ from __future__ import annotations
 import sys
 import time
 
-from ..config import SimParams
+from ..config import COMPENSATOR_KINDS, SimParams
 from .common import (
     UsageError,
     _add_config_args,
+    add_engine_args,
+    check_engine_args,
     check_output_path,
-    check_workers,
     config_from_args,
     emit_json,
     finite,
@@ -122,15 +123,23 @@ def register_cli(sub) -> None:
                    help="analyse the last S seconds of each run (default: the last half)")
     t.add_argument("--chatter-weight", type=float, default=0.05, metavar="W",
                    help="penalty weight in s (default 0.05: 20 reversals/s double the score)")
-    t.add_argument("--workers", type=int, default=None,
-                   help="local processes (default: all cores; 1 = in-process)")
-    t.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
-                   help="run the grid on Dask")
+    add_engine_args(t)
     t.add_argument("--plot", metavar="FILE.png",
                    help="before/after figure of the best setting (cf. Figs. 25-30)")
     t.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     t.add_argument("--json", action="store_true", help="print one JSON object")
     t.set_defaults(func=cmd_tune)
+
+
+def _compensated_config(args):
+    """The configuration of ``compensate compare``/``tune``, checked: it has a
+    compensator, and the run's length, window and figure path are usable."""
+    cfg = config_from_args(args)
+    if cfg.compensation_kind == "none":
+        kinds = [k for k in COMPENSATOR_KINDS if k != "none"]
+        raise UsageError(f"--compensation must be {', '.join(kinds[:-1])} or {kinds[-1]}")
+    _check_run_args(args)
+    return cfg
 
 
 def _check_run_args(args):
@@ -145,10 +154,7 @@ def cmd_compare(args) -> int:
     """``frictionlab compensate compare``."""
     from ..studies.compensation import compare
 
-    cfg = config_from_args(args)
-    if cfg.compensation_kind == "none":
-        raise UsageError("--compensation must be coulomb, classical or lugre")
-    _check_run_args(args)
+    cfg = _compensated_config(args)
     flush_notes(args)
     res, traj_on, traj_off = compare(cfg, args.duration, args.window,
                                      return_trajectories=True)
@@ -175,17 +181,12 @@ def cmd_compare(args) -> int:
 def cmd_tune(args) -> int:
     """``frictionlab compensate tune``."""
     from ..studies.compensation import DEFAULT_GRIDS, check_grid, tune
-    from ..studies.sweep import _check_dask_address, parse_vary
+    from ..studies.sweep import parse_vary
 
     t0 = time.perf_counter()
-    cfg = config_from_args(args)
-    if cfg.compensation_kind == "none":
-        raise UsageError("--compensation must be coulomb, classical or lugre")
-    _check_run_args(args)
+    cfg = _compensated_config(args)
     finite("--chatter-weight", args.chatter_weight, 0.0, lo_open=False)
-    check_workers(args.workers)
-    if args.dask is not None:
-        _check_dask_address(args.dask)
+    check_engine_args(args)
     grid = [parse_vary(v) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]
     n = len(check_grid(cfg, grid))  # every point validated before anything runs
     flush_notes(args)

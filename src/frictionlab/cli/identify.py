@@ -14,14 +14,19 @@ from ..studies.identification.experiments import EXPERIMENTS, IdentificationErro
 from .common import (
     UsageError,
     _add_config_args,
+    add_engine_args,
+    add_key_args,
+    add_stall_args,
+    check_engine_args,
     check_output_dir,
     check_output_path,
-    check_workers,
     emit_json,
     error_message,
     finite,
+    note_text,
     parse_sets,
     progress_bar,
+    safety_from_args,
 )
 
 __all__ = ["parse_bounds", "parse_weights", "register_cli"]
@@ -89,12 +94,23 @@ def _design_h(sets) -> float | None:
     return None
 
 
+#: How each command gives what a run log may lack (a ParamError's ``field``).
+_LOG_HINTS = {
+    "features:": {"design": "--design fast|slow", "h": "--set design.h=SECONDS"},
+    "--measured": {"design": "measure its features with 'frictionlab features --design "
+                             "fast|slow'", "h": "--set design.h=SECONDS"},
+}
+
+
 def _log_experiment(path: str, h: float | None, window: float | None = None,
                     design: str | None = None, what: str = "--measured") -> dict:
     from ..io.runlog import run_log_features
 
     try:
         return run_log_features(path, window=window, h=h, design=design)
+    except ParamError as exc:
+        hint = _LOG_HINTS[what].get(exc.field)
+        raise UsageError(f"{what} {exc}" + (f" ({hint})" if hint else "")) from None
     except ValueError as exc:
         raise UsageError(f"{what} {path}: {exc}") from None
 
@@ -190,11 +206,7 @@ def cmd_limit_cycle(args) -> int:
     weights = parse_weights(args.weights)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     check_output_path(args.report, (".json",), "--report")
-    check_workers(args.workers)
-    if args.dask is not None:
-        from ..studies.sweep import _check_dask_address
-
-        _check_dask_address(args.dask)
+    check_engine_args(args)
     if not 1 <= args.maxiter <= MAX_ITER:
         raise UsageError(f"--maxiter must be in 1..{MAX_ITER}, got {args.maxiter}")
     if not 2 <= args.popsize <= MAX_POPSIZE:
@@ -214,6 +226,7 @@ def cmd_limit_cycle(args) -> int:
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
                       evaluate=_never, stiction_above_coulomb=constrained)
+    finite("--search-duration", args.search_duration, 0.0)
     search_settings(args.duration, args.window, args.search_duration, args.search_window)
     err = sys.stderr
     print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
@@ -248,7 +261,7 @@ def cmd_limit_cycle(args) -> int:
     finally:
         signal.signal(signal.SIGTERM, previous)
     for w in result.warnings:
-        print(f"warning: {w}", file=err)
+        print(f"warning: {note_text(w)}", file=err)
     print(f"done in {result.seconds:.1f} s: {result.evaluations} parameter sets, "
           f"{result.generations} generations, cost {result.cost:.4g}", file=err)
     if args.plot:
@@ -260,7 +273,9 @@ def cmd_limit_cycle(args) -> int:
                  for i in range(len(experiments))]
         plot_limit_cycle_fit(result, trajs, args.plot, args.window)
     if args.report:
-        _write_report(args.report, result.to_json())
+        report = result.to_json()
+        report["warnings"] = [note_text(w) for w in report["warnings"]]
+        _write_report(args.report, report)
         print(f"full report: {args.report}", file=err)
     if args.json:
         emit_json({k: result.to_json()[k] for k in INTERFACE_FIELDS})
@@ -295,13 +310,8 @@ def _float_list(text: str, what: str) -> list[float]:
 def _limits(args):
     from ..realtime.experiment import Limits
 
-    try:
-        return Limits(max_speed=args.max_speed, max_travel=args.max_travel,
-                      max_u_da=args.max_u_da)
-    except ValueError as exc:
-        raise UsageError(str(exc).replace("limits.max_speed", "--max-speed")
-                         .replace("limits.max_travel", "--max-travel")
-                         .replace("limits.max_u_da", "--max-u-da")) from None
+    # a refused limit is a ParamError named after its option by _experiment_entry
+    return Limits(max_speed=args.max_speed, max_travel=args.max_travel, max_u_da=args.max_u_da)
 
 
 def _rig_options(args) -> dict:
@@ -337,6 +347,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
     from ..studies.identification.onrig import run_on_rig
     from .run import _RunSignals, interface_stats
 
+    safety = safety_from_args(args)  # a refused value exits 2 before the announcement
     err = sys.stderr
     lim = exp.limits
     if clock is None:
@@ -344,15 +355,6 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
               f"(limits: arm speed {lim.max_speed:g} rad/s, travel {lim.max_travel:g} rad, "
               f"|u_DA| {lim.max_u_da:g}); Ctrl-C stops it with the motor at zero",
               file=err)
-    from ..realtime import Safety
-
-    try:
-        safety = Safety(silent_periods=args.silent_periods,
-                        unread_limit=max(10, 5 * args.silent_periods),
-                        max_pause=args.max_pause)
-    except ValueError as exc:
-        raise UsageError(str(exc).replace("safety.silent_periods", "--silent-periods")
-                         .replace("safety.max_pause", "--max-pause")) from None
     tty = err.isatty() and not args.quiet
     last = [None]
 
@@ -498,7 +500,7 @@ def cmd_experiment(args) -> int:
             plots.plot_control_scaling(log, res, args.plot, title)
         else:
             raise UsageError(f"--plot: no figure for {name}")
-    warnings += res.get("warnings", [])
+    warnings += [note_text(w, _EXPERIMENT_OPTIONS) for w in res.get("warnings", [])]
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     out = dict(res)
@@ -583,9 +585,7 @@ def register_cli(sub) -> None:
                    help="plant friction model of the simulations (default: classical)")
     q.add_argument("--fit", required=True, metavar="KEY[,KEY...]",
                    help="keys to estimate, e.g. friction.coulomb,plant.omega0")
-    q.add_argument("--config", metavar="FILE", help="TOML file with parameter keys")
-    q.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="setting common to all experiments (repeatable)")
+    add_key_args(q, "all experiments")
     q.add_argument("--bounds", action="append", default=[], metavar="KEY=LO:HI",
                    help="search bounds of a fitted key (repeatable; defaults per key)")
     q.add_argument("--weights", action="append", default=[], metavar="FEATURE=W",
@@ -600,11 +600,7 @@ def register_cli(sub) -> None:
     q.add_argument("--search-window", type=float, default=None, metavar="S",
                    help="feature window of the global search (default: --window scaled "
                         "by --search-duration / --duration)")
-    q.add_argument("--workers", type=int, default=None,
-                   help="threads of the sweep engine (default: all cores; 1 = the "
-                        "calling thread); with --dask, the number of Dask workers")
-    q.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
-                   help="evaluate on a Dask cluster")
+    add_engine_args(q)
     q.add_argument("--allow-stiction-below-coulomb", action="store_true",
                    help="when friction.stiction and friction.coulomb (or their _negative "
                         "pair) are both fitted, also search stiction < Coulomb level (by "
@@ -683,14 +679,7 @@ def register_cli(sub) -> None:
                    help="stop when the arm is farther than this from its start (default 60)")
     g.add_argument("--max-u-da", type=float, default=0.5, metavar="U_DA",
                    help="largest |u_DA| commanded, u is clipped (default 0.5)")
-    g.add_argument("--silent-periods", type=int, default=2, metavar="N",
-                   help="stop (rig_silent) after N sample periods with nothing from the "
-                        "rig, or 5N (at least 10) ticks of late replies (default 2; as run's)")
-    g.add_argument("--max-pause", type=float, default=0.05, metavar="S",
-                   help="stop (paused) when the loop did not run for longer than S s "
-                        "(default 0.05; as run's)")
-    g.add_argument("--no-realtime", action="store_true",
-                   help="do not ask for SCHED_FIFO priority")
+    add_stall_args(g)
     g.add_argument("--hand", action="store_true",
                    help="angle-scales: let rig-sim (over UDP) play the operator's hand for "
                         "the laps it asks for")
@@ -708,7 +697,8 @@ _EXPERIMENT_OPTIONS = {"step": "--step", "hold": "--hold", "gain": "--gain",
                        "references": "--references", "levels": "--levels",
                        "max_amplitude": "--max-amplitude", "slide": "--slide",
                        "push": "--push", "coulomb_levels": "--coulomb-levels",
-                       "wait": "--wait"}
+                       "wait": "--wait", "limits.max_speed": "--max-speed",
+                       "limits.max_travel": "--max-travel", "limits.max_u_da": "--max-u-da"}
 
 
 def _experiment_entry(args) -> int:

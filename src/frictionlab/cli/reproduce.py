@@ -11,14 +11,15 @@ import os
 import sys
 import time
 
+from .common import UsageError, add_engine_args, check_engine_args, emit_json, progress_bar
+
 __all__ = ["register_cli"]
 
 
 def cmd_reproduce(args) -> int:
     """``frictionlab reproduce``."""
     from ..studies.reproduce import count_runs, interface_json, run, write_report
-    from ..studies.sweep import _check_dask_address, _get_dask
-    from .common import UsageError, check_workers, emit_json, progress_bar
+    from ..studies.sweep import _get_dask
 
     t0 = time.perf_counter()
     out = args.out
@@ -27,9 +28,8 @@ def cmd_reproduce(args) -> int:
     parent = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(parent):
         raise UsageError(f"--out {out}: folder {parent} does not exist")
-    check_workers(args.workers)
+    check_engine_args(args)
     if args.dask is not None:
-        _check_dask_address(args.dask)
         _get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any work
     os.makedirs(out, exist_ok=True)
     runs = count_runs()
@@ -73,11 +73,7 @@ def register_cli(sub) -> None:
                     "--out.")
     p.add_argument("--out", default="reproduction", metavar="DIR",
                    help="report folder, created if missing (default: ./reproduction)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="threads (default: all cores; 1 = the calling thread); with "
-                        "--dask local, the number of Dask workers")
-    p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
-                   help="run on Dask: start a LocalCluster, or join a running scheduler")
+    add_engine_args(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--json", action="store_true",
                    help='print one JSON object {"out", "seconds", "figures", "tables"}')

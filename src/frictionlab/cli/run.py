@@ -23,12 +23,14 @@ import sys
 from .common import (
     UsageError,
     _add_config_args,
+    add_stall_args,
     check_output_dir,
     config_from_args,
     emit_json,
     finite,
     flush_notes,
     hanging_start,
+    safety_from_args,
 )
 
 __all__ = ["interface_stats", "register_cli", "start_console"]
@@ -100,21 +102,12 @@ def register_cli(sub) -> None:
                    help="stop when |theta| exceeds this (default 0.35 rad)")
     p.add_argument("--start-tolerance", type=float, default=0.15, metavar="RAD",
                    help="start only if |theta| <= this (default 0.15 rad; no swing-up)")
-    p.add_argument("--silent-periods", type=int, default=2, metavar="N",
-                   help="stop (rig_silent, motor zeroed) after N consecutive sample periods "
-                        "with nothing from the rig, or 5N (at least 10) ticks whose replies "
-                        "all came too late (default 2; raise it only for a rig or host known "
-                        "to stall, e.g. an emulator on a loaded machine)")
-    p.add_argument("--max-pause", type=float, default=0.05, metavar="S",
-                   help="stop (paused, motor zeroed) when the loop did not run for longer "
-                        "than S seconds (a suspended process, a stalled host; default 0.05)")
+    add_stall_args(p)
     p.add_argument("--gain-transition", type=float, default=2.0, metavar="S",
                    help="new state-feedback gains (a design change while running) replace "
                         "the running ones linearly over S seconds, so a switch in mid-cycle "
                         "does not throw the pendulum past the angle limit; 0: at once "
                         "(default: 2)")
-    p.add_argument("--no-realtime", action="store_true",
-                   help="do not ask for SCHED_FIFO priority")
     p.add_argument("--prewarm-us", type=float, default=PREWARM_US, metavar="US",
                    help="wake US microseconds before each deadline, run the tick's code on "
                         f"scratch data and busy-wait to the deadline (default {PREWARM_US:g}; "
@@ -171,7 +164,7 @@ def register_cli(sub) -> None:
 
 
 def cmd_run(args) -> int:
-    from ..realtime import RealtimeController, Safety
+    from ..realtime import RealtimeController
     from ..realtime.clock import MonotonicClock
 
     if args.json and not args.headless:
@@ -184,18 +177,9 @@ def cmd_run(args) -> int:
         raise UsageError(f"--prewarm-us must be in [0, h/2), got {args.prewarm_us}")
     if not 0 <= args.port < 65536:
         raise UsageError(f"--port must be in 0..65535, got {args.port}")
-    try:
-        safety = Safety(angle_limit=args.angle_limit, start_tolerance=args.start_tolerance,
-                        gain_transition=args.gain_transition,
-                        silent_periods=args.silent_periods,
-                        unread_limit=max(10, 5 * args.silent_periods),
-                        max_pause=args.max_pause)
-    except ValueError as exc:
-        raise UsageError(str(exc).replace("safety.angle_limit", "--angle-limit")
-                         .replace("safety.start_tolerance", "--start-tolerance")
-                         .replace("safety.gain_transition", "--gain-transition")
-                         .replace("safety.silent_periods", "--silent-periods")
-                         .replace("safety.max_pause", "--max-pause")) from None
+    safety = safety_from_args(args, angle_limit=args.angle_limit,
+                              start_tolerance=args.start_tolerance,
+                              gain_transition=args.gain_transition)
     check_output_dir(args.log_dir, "--log-dir")
     flush_notes(args)
     with _RunSignals() as signals:

@@ -24,8 +24,8 @@ from ..studies.sweep import (
     MODES,
     STATUSES,
     SWINGUP_COLUMNS,
+    OutputMismatch,
     SweepFile,
-    _check_dask_address,
     _get_dask,
     _ident,
     iter_evaluate,
@@ -37,8 +37,9 @@ from ..studies.sweep import (
 from .common import (
     UsageError,
     _add_config_args,
+    add_engine_args,
+    check_engine_args,
     check_output_path,
-    check_workers,
     config_from_args,
     emit_json,
     finite,
@@ -264,11 +265,7 @@ def register_cli(sub) -> None:
                    help="simulated time per run in s (default: sim.duration = 40)")
     p.add_argument("--window", type=float, default=None,
                    help="analyse the last S seconds of each run (default: the last half)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="threads (default: all cores; 1 = the calling thread); with "
-                        "--dask local, the number of Dask workers")
-    p.add_argument("--dask", metavar="local|tcp://HOST:PORT", default=None,
-                   help="run on Dask: start a LocalCluster, or join a running scheduler")
+    add_engine_args(p)
     p.add_argument("--chunk-size", type=int, default=None,
                    help="parameter sets per task (default: at most 50 and a quarter of a "
                         "worker's share, smaller at the end)")
@@ -314,11 +311,9 @@ def _plan(args):
         except ValueError as exc:
             raise UsageError(f"--duration: {exc}") from None
     finite("--window", args.window, 0.0)
-    check_workers(args.workers)
+    check_engine_args(args)
     if args.chunk_size is not None and args.chunk_size < 1:
         raise UsageError(f"--chunk-size must be >= 1, got {args.chunk_size}")
-    if args.dask is not None:
-        _check_dask_address(args.dask)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     check_output_path(args.out, (".csv", ".parquet"), "--out")
     if args.resume and args.force:
@@ -335,7 +330,11 @@ def _plan(args):
         if not args.force:
             raise UsageError(f"--out {args.out} exists; use --resume to continue it or "
                              "--force to overwrite it")
-    old = out.load() if args.resume else []  # a file that does not match exits 2 here
+    try:
+        old = out.load() if args.resume else []  # a file that does not match exits 2 here
+    except OutputMismatch as exc:
+        raise UsageError(f"--resume: {exc} (use another --out, or --force to overwrite)"
+                         ) from None
     if args.dask is not None and points:
         _get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any output
     flush_notes(args)

@@ -25,6 +25,7 @@ from ..model.controller import COMPENSATOR_FIELDS as _MODEL_FIELDS
 from ..model.controller import COMPENSATORS, ERROR_SIGNALS
 from ..model.design import PRESETS, DesignSpec
 from ..model.friction import FrictionParams
+from ..model.params import ParamError
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -71,9 +72,12 @@ def _check(cls, name: str, value: float, prefix: str) -> float:
     """Construct ``cls`` with one field set; re-raise its ValueError with ``prefix``."""
     try:
         cls(**{name: value})
-    except ValueError as exc:
+    except ParamError as exc:
+        # named as the request names it: the error's field (design.omega0,
+        # friction.coulomb) becomes the panel's key (compensation.coulomb)
         msg = str(exc)
-        msg = re.sub(r"^(design|friction)\.", prefix, msg)
+        if msg.startswith(exc.field):
+            msg = prefix + name + msg[len(exc.field):]
         raise ValueError(msg) from None
     return value
 

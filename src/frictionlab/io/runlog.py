@@ -26,6 +26,7 @@ import numpy as np
 
 from ..model.design import PRESETS
 from ..model.limit_cycles import features
+from ..model.params import ParamError
 from .logs import log_warnings, read_log
 
 __all__ = ["MAX_SIDECAR_BYTES", "run_log_features"]
@@ -93,8 +94,10 @@ def run_log_features(path: str | Path, *, window: float | None = None,
 
     Raises
     ------
+    ParamError
+        No design (``field`` ``design``), or a ``.dat`` without a period (``h``).
     ValueError
-        Unreadable or malformed log, a ``.dat`` without a period, no design.
+        Unreadable or malformed log.
     """
     p = Path(path)
     if p.suffix not in (".csv", ".dat"):
@@ -108,17 +111,19 @@ def run_log_features(path: str | Path, *, window: float | None = None,
                          f"using {design} as asked")
         preset, sets = design, {}
     if preset is None:
-        raise ValueError(f"{p}: no sidecar ({p.with_suffix('.json').name}) names the run's "
-                         "design; give --design fast|slow")
+        raise ParamError("design", None, "fast or slow",
+                         f"{p}: no sidecar ({p.with_suffix('.json').name}) names the run's "
+                         "design; give its design, fast or slow")
     if h is None and meta is not None and isinstance(meta.get("h"), int | float):
         h = float(meta["h"])
     if h is None:
         if p.suffix == ".dat":
-            raise ValueError(f"{p}: a .dat has no time column and no sidecar gives the "
-                             "sampling period; give --set design.h=SECONDS")
+            raise ParamError("h", None, "(0, inf) s",
+                             f"{p}: a .dat has no time column and no sidecar gives the "
+                             "sampling period; give its sampling period h")
         h = 0.005
     if not (h > 0 and math.isfinite(h)):
-        raise ValueError(f"design.h must be > 0, got {h}")
+        raise ParamError("h", h, "(0, inf) s", f"{p}: design.h must be > 0, got {h}")
     if h != PRESETS[preset].h and "design.h" not in sets:
         sets["design.h"] = h
     sig = read_log(p, h)
@@ -132,7 +137,7 @@ def run_log_features(path: str | Path, *, window: float | None = None,
     t, theta, u, v = t[ok], theta[ok], sig["u"][ok], sig["arm_dot_m"][ok]
     span = float(t[-1] - t[0])
     if window is not None and window > span:
-        notes.append(f"--window {window:g} s is longer than the log ({span:g} s): "
+        notes.append(f"the window ({window:g} s) is longer than the log ({span:g} s): "
                      "using all of it")
         window = span
     stop = meta.get("stop_reason") if meta is not None else None

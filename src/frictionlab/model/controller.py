@@ -48,7 +48,9 @@ compensator from its parameters.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -60,6 +62,8 @@ from .friction import (
     COULOMB,
     LUGRE,
     P_BAND,
+    P_FC,
+    P_FS,
     STRIBECK,
     FrictionParams,
     friction_step,
@@ -78,9 +82,12 @@ __all__ = [
     "ERROR_SIGNALS",
     "Controller",
     "ControllerOutput",
+    "Gains",
     "check_compensator",
+    "compensator_levels",
     "compensator_params",
     "controller_step",
+    "gains_record",
     "reset_compensator",
 ]
 
@@ -115,9 +122,71 @@ COMPENSATOR_KINDS = tuple(COMPENSATOR_CODES)
 #: other than ``none``).
 COMPENSATORS = COMPENSATOR_KINDS[1:]
 
-G_L, G_K = 0, 4
-G_W0, G_G, G_ARMLEN, G_H, G_UMAX, G_COMP, G_ERR, G_FEEDNET = range(8, 16)
-NG = 16
+
+class Gains(NamedTuple):
+    """What the compiled controller step reads besides its state (a typed
+    record; :meth:`Controller.record`).
+
+    Attributes
+    ----------
+    l1, l2, l3, l4 : float
+        State feedback :math:`u_{fb} = -(l_1\\hat\\theta + l_2\\hat{\\dot\\theta}
+        + l_3\\hat\\Omega + l_4\\hat{\\dot\\Omega})` (the design's L).
+    k1, k2, k3, k4 : float
+        Observer gains: pendulum (k1, k2) and arm (k3, k4) (the design's K).
+    omega0, g, arm_length : float
+        The plant parameters the observers model (rad/s, m/s^2, m).
+    h : float
+        Sampling period (s).
+    u_max : float
+        Saturation of u (m/s^2).
+    compensator : int
+        Compensator code (:data:`COMPENSATOR_CODES`; 0 none).
+    error_signal : int
+        Index in :data:`ERROR_SIGNALS` of the LuGre observer's error e.
+    feed_net : float
+        1.0: the observers receive :math:`u - \\hat F` (module docstring), 0.0: u.
+    """
+
+    l1: float
+    l2: float
+    l3: float
+    l4: float
+    k1: float
+    k2: float
+    k3: float
+    k4: float
+    omega0: float
+    g: float
+    arm_length: float
+    h: float
+    u_max: float
+    compensator: int
+    error_signal: int
+    feed_net: float
+
+    @property
+    def feedback(self) -> np.ndarray:
+        """The state feedback L = (l1, l2, l3, l4)."""
+        return np.array(self[:4])
+
+    def with_feedback(self, L) -> Gains:
+        """These gains with the state feedback L replaced."""
+        return self._replace(l1=float(L[0]), l2=float(L[1]), l3=float(L[2]), l4=float(L[3]))
+
+    def linear(self, saturate: bool = True) -> Gains:
+        """These gains without compensator (the observers fed u) and, unless
+        ``saturate``, without the saturation of u: the linear loop."""
+        return self._replace(compensator=0, feed_net=0.0,
+                             u_max=self.u_max if saturate else math.inf)
+
+
+@jit
+def gains_record(row):
+    """The :class:`Gains` stored as the float row ``np.array(gains, dtype=float)``."""
+    return Gains(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8],
+                 row[9], row[10], row[11], row[12], int(row[13]), int(row[14]), row[15])
+
 
 #: Candidate error signals e for the LuGre compensator's observer, eq. (19):
 #: ``none`` (e = 0, the plain model driven by the measured velocity),
@@ -203,6 +272,18 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     return f
 
 
+@jit
+def compensator_levels(s, gp, cp):
+    """The Coulomb and stiction levels the compensator uses: the adaptive
+    compensator's estimates (state ``S_FC_HAT``, ``S_FS_HAT``), a fixed
+    compensator's own ``coulomb``/``stiction``, (0, 0) without compensation."""
+    if gp.compensator == ADAPTIVE:
+        return s[S_FC_HAT], s[S_FS_HAT]
+    if gp.compensator == 0:
+        return 0.0, 0.0
+    return cp[P_FC], cp[P_FS]
+
+
 def compensator_params(params: FrictionParams) -> np.ndarray:
     """The packed parameters a compensator runs with (:func:`compensator_force`).
 
@@ -232,8 +313,8 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     ----------
     s : ndarray (NS,)
         Controller state (see the module table).
-    gp : ndarray (NG,)
-        Packed gains (:meth:`Controller.pack`).
+    gp : Gains
+        Gains (:meth:`Controller.record`).
     cp : ndarray
         Packed compensator parameters.
     theta_m, arm_m, arm_dot_m : float
@@ -243,18 +324,17 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     -------
     (u, u_fb, F_hat) : applied control, feedback part, friction estimate.
     """
-    w0 = gp[G_W0]
-    h = gp[G_H]
+    w0 = gp.omega0
+    h = gp.h
     th_hat = s[S_X1]
     thd_hat = w0 * s[S_X2]
     arm_hat = s[S_ARM]
     armd_hat = s[S_ARMDOT]
-    u_fb = -(gp[G_L] * th_hat + gp[G_L + 1] * thd_hat + gp[G_L + 2] * arm_hat
-             + gp[G_L + 3] * armd_hat)
-    kind = int(gp[G_COMP])
+    u_fb = -(gp.l1 * th_hat + gp.l2 * thd_hat + gp.l3 * arm_hat + gp.l4 * armd_hat)
+    kind = gp.compensator
     f_hat = 0.0
     if kind != 0:
-        err = int(gp[G_ERR])
+        err = gp.error_signal
         e = 0.0
         if err == E_VEL_INNOV:
             e = arm_dot_m - armd_hat
@@ -265,20 +345,20 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
         elif err == E_ARM_ANGLE:
             e = arm_m
         if kind == ADAPTIVE:
-            f_hat = adaptive_force(s, cp, arm_dot_m, e, h, gp[G_ARMLEN], gp[G_UMAX])
+            f_hat = adaptive_force(s, cp, arm_dot_m, e, h, gp.arm_length, gp.u_max)
         else:
             f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
     u = u_fb + f_hat
-    umax = gp[G_UMAX]
+    umax = gp.u_max
     if u > umax:
         u = umax
     elif u < -umax:
         u = -umax
-    u_obs = u - f_hat if gp[G_FEEDNET] != 0.0 else u
-    x1n, x2n = pendulum_observer_step(s[S_X1], s[S_X2], theta_m, armd_hat, u_obs, gp[G_K],
-                                      gp[G_K + 1], w0, gp[G_G], h)
-    an, adn = arm_observer_step(arm_hat, armd_hat, arm_m, u_obs, gp[G_K + 2], gp[G_K + 3], h,
-                                gp[G_ARMLEN])
+    u_obs = u - f_hat if gp.feed_net != 0.0 else u
+    x1n, x2n = pendulum_observer_step(s[S_X1], s[S_X2], theta_m, armd_hat, u_obs, gp.k1,
+                                      gp.k2, w0, gp.g, h)
+    an, adn = arm_observer_step(arm_hat, armd_hat, arm_m, u_obs, gp.k3, gp.k4, h,
+                                gp.arm_length)
     s[S_X1] = x1n
     s[S_X2] = x2n
     s[S_ARM] = an
@@ -349,21 +429,17 @@ class Controller:
     def compensator_code(self) -> int:
         return COMPENSATOR_CODES[self.compensation]
 
-    def pack(self) -> tuple[np.ndarray, np.ndarray]:
-        """Packed (gains, compensator parameters) for the compiled step."""
+    def record(self) -> tuple[Gains, np.ndarray]:
+        """The compiled step's arguments: the :class:`Gains` record and the
+        compensator's packed parameters (:func:`compensator_params`)."""
         d = self.design
-        gp = np.zeros(NG)
-        gp[G_L:G_L + 4] = d.L
-        gp[G_K:G_K + 4] = d.K
-        gp[G_W0] = d.spec.omega0
-        gp[G_G] = d.g
-        gp[G_ARMLEN] = d.arm_length
-        gp[G_H] = d.spec.h
-        gp[G_UMAX] = self.u_max
-        gp[G_COMP] = self.compensator_code
-        gp[G_ERR] = ERROR_SIGNALS.index(self.error_signal)
-        gp[G_FEEDNET] = 1.0 if (self.feed_net and self.compensation != "none") else 0.0
-        return gp, compensator_params(self.compensation_params)
+        L = [float(x) for x in d.L]
+        K = [float(x) for x in d.K]
+        gains = Gains(*L, *K, float(d.spec.omega0), float(d.g), float(d.arm_length),
+                      float(d.spec.h), float(self.u_max), int(self.compensator_code),
+                      ERROR_SIGNALS.index(self.error_signal),
+                      1.0 if (self.feed_net and self.compensation != "none") else 0.0)
+        return gains, compensator_params(self.compensation_params)
 
     def init(self, theta0: float = 0.0) -> np.ndarray:
         """Initial state: the observers start at the first measured angle, at rest."""
@@ -374,7 +450,7 @@ class Controller:
     def step(self, state: np.ndarray, theta_m: float, arm_m: float, arm_dot_m: float):
         """One tick: ``(output, next_state)``; ``state`` is not modified."""
         s = np.array(state, dtype=float, copy=True)
-        gp, cp = self.pack()
+        gp, cp = self.record()
         w0 = self.design.spec.omega0
         est = (s[S_X1], w0 * s[S_X2], s[S_ARM], s[S_ARMDOT])
         u, u_fb, f_hat = controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m)

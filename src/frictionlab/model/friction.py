@@ -109,6 +109,7 @@ __all__ = [
     "drift_factor",
     "drifted_params",
     "friction_step",
+    "is_drifting",
     "lugre_dz",
     "lugre_force",
     "lugre_step_exact",
@@ -526,6 +527,13 @@ def drifted_params(p, t, out):
         for i in (P_FS, P_FC, P_FV, P_FSN, P_FCN, P_FVN):
             out[i] = p[i] * c
     return out
+
+
+@jit
+def is_drifting(p):
+    """Whether ``p`` has a drift with a resolved drift time (:func:`resolve_drift`;
+    an unresolved one, NaN, is ignored)."""
+    return p[P_DRIFT] != 0.0 and not np.isnan(p[P_DRIFT_TIME])
 
 
 def resolve_drift(p: np.ndarray, duration: float) -> np.ndarray:

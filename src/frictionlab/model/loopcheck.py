@@ -69,9 +69,6 @@ import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
 from .controller import (
-    G_COMP,
-    G_FEEDNET,
-    G_UMAX,
     NS,
     S_ARM,
     S_ARMDOT,
@@ -80,6 +77,7 @@ from .controller import (
     S_X2,
     S_ZHAT,
     Controller,
+    Gains,
     compensator_force,
     controller_step,
 )
@@ -196,13 +194,11 @@ class LoopCheck:
         }
 
 
-def _analysis_pack(controller: Controller, compensate: bool) -> tuple[np.ndarray, np.ndarray]:
-    gp, cp = controller.pack()
-    gp = gp.copy()
-    gp[G_UMAX] = math.inf  # the linear loop, without saturation
+def _analysis_pack(controller: Controller, compensate: bool) -> tuple[Gains, np.ndarray]:
+    gp, cp = controller.record()
+    gp = gp._replace(u_max=math.inf)  # the linear loop, without saturation
     if not compensate:
-        gp[G_COMP] = 0.0
-        gp[G_FEEDNET] = 0.0
+        gp = gp.linear()
     return gp, cp
 
 

@@ -78,8 +78,6 @@ import numpy as np
 
 from ._jit import jit
 from .controller import (
-    G_COMP,
-    G_FEEDNET,
     NS,
     S_ARM,
     S_ARMDOT,
@@ -207,7 +205,7 @@ class _Loop:
         self.h = cfg.design.h
         ctrl = make_controller(cfg)
         self.controller = ctrl
-        self.gp, self.cp = ctrl.pack()
+        self.gp, self.cp = ctrl.record()
         self.pp = cfg.plant.record()
         self.fkind = KINDS.index(cfg.friction_kind)
         self.fp = cfg.friction.pack()
@@ -330,9 +328,7 @@ def linear_loop(cfg: Config, eps: float = 1e-7) -> LinearLoop:
     """
     loop = _Loop(cfg)
     ku = cfg.plant.input_gain
-    gp = loop.gp.copy()
-    gp[G_COMP] = 0.0  # no compensator in the linear loop
-    gp[G_FEEDNET] = 0.0
+    gp = loop.gp.linear()  # no compensator in the linear loop
 
     def tick(Xl: np.ndarray, w: float) -> np.ndarray:
         X = np.zeros(NL)

@@ -66,6 +66,7 @@ __all__ = [
     "arm_from_raw",
     "arm_to_raw",
     "arm_zero",
+    "from_raw",
     "ideal_reading",
     "measure",
     "noise",
@@ -75,6 +76,7 @@ __all__ = [
     "sensor_record",
     "theta_from_raw",
     "theta_to_raw",
+    "to_raw",
     "unwrap",
     "velocity_from_raw",
     "velocity_to_raw",
@@ -140,15 +142,25 @@ def sensor_params(rig, quantization: float = 1.0, noise: float = 0.0, seed: int 
 
 
 @jit
-def theta_from_raw(y, scale, bias):
-    """Pendulum angle (rad) from the raw reading: ``scale (y + bias)``."""
-    return scale * (y + bias)
+def from_raw(r, scale, bias):
+    """SI value of a biased channel's raw reading ``r``: ``scale (r + bias)``
+    (App. B.5; the pendulum angle and the arm velocity)."""
+    return scale * (r + bias)
 
 
 @jit
-def theta_to_raw(theta, scale, bias):
-    """Raw pendulum reading (unwrapped) for the angle ``theta``."""
-    return theta / scale - bias
+def to_raw(value, scale, bias):
+    """Raw reading (unwrapped, unclipped) of a biased channel for the SI ``value``:
+    the inverse of :func:`from_raw`."""
+    return value / scale - bias
+
+
+#: Pendulum angle (rad) from its raw reading, and back (App. B.5).
+theta_from_raw = from_raw
+theta_to_raw = to_raw
+#: Arm velocity (rad/s) from its raw reading, and back (App. B.5).
+velocity_from_raw = from_raw
+velocity_to_raw = to_raw
 
 
 @jit
@@ -161,18 +173,6 @@ def arm_from_raw(x, x0, scale):
 def arm_to_raw(arm, scale, offset):
     """Raw arm reading (unwrapped) for the arm angle, ``offset`` the reading at 0."""
     return arm / scale + offset
-
-
-@jit
-def velocity_from_raw(v, scale, bias):
-    """Arm velocity (rad/s) from the raw reading: ``scale (v + bias)``."""
-    return scale * (v + bias)
-
-
-@jit
-def velocity_to_raw(arm_dot, scale, bias):
-    """Raw velocity reading (unclipped) for the arm velocity."""
-    return arm_dot / scale - bias
 
 
 @jit

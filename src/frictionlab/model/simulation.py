@@ -63,17 +63,14 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from .controller import (
-    ADAPTIVE,
     DEFAULT_ERROR_SIGNAL,
-    G_COMP,
     NS,
     S_ARMDOT,
-    S_FC_HAT,
-    S_FS_HAT,
     S_X1,
     S_X2,
     S_ZHAT,
     Controller,
+    compensator_levels,
     controller_step,
 )
 from .design import design as make_design
@@ -82,12 +79,10 @@ from .friction import (
     LUGRE,
     NONE,
     P_DRIFT,
-    P_DRIFT_TIME,
-    P_FC,
-    P_FS,
     P_K,
     drifted_params,
     friction_step,
+    is_drifting,
     resolve_drift,
 )
 from .plant import accelerations_sc
@@ -242,6 +237,32 @@ _plant_tick_inline = jit_inline(plant_tick.py_func)
 _measure_inline = jit_inline(measure.py_func)
 
 
+@jit_inline
+def record_tick(out, k, th_m, th_hat, thd_hat, u, arm_m, armd_m, arm_hat, armd_hat, f_hat,
+                z_hat, theta, x, fc_used, fs_used):
+    """Write tick ``k``'s signals into row k of ``out`` (columns :data:`COLUMNS`
+    but ``friction``, written after the plant step): the measurements and the
+    estimates the controller used, the plant state ``x`` with its angle given
+    as ``theta``, and the compensator's levels."""
+    out[k, 0] = th_m
+    out[k, 1] = th_hat
+    out[k, 2] = thd_hat
+    out[k, 3] = u
+    out[k, 4] = arm_m
+    out[k, 5] = armd_m
+    out[k, 6] = arm_hat
+    out[k, 7] = armd_hat
+    out[k, 8] = f_hat
+    out[k, 9] = z_hat
+    out[k, 10] = theta
+    out[k, 11] = x[1]
+    out[k, 12] = x[2]
+    out[k, 13] = x[3]
+    out[k, 14] = x[4]
+    out[k, 16] = fc_used
+    out[k, 17] = fs_used
+
+
 @jit
 def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
          fall_angle, out, record):
@@ -258,13 +279,9 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
     drift with a resolved drift time (:func:`frictionlab.model.friction.resolve_drift`;
     an unresolved one, NaN, is ignored).
     """
-    h = gp[11]
-    w0 = gp[8]
-    adaptive = gp[G_COMP] == ADAPTIVE
-    # the levels a fixed compensator uses (none: 0)
-    fc_fixed = cp[P_FC] if gp[G_COMP] != 0.0 else 0.0
-    fs_fixed = cp[P_FS] if gp[G_COMP] != 0.0 else 0.0
-    drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
+    h = gp.h
+    w0 = gp.omega0
+    drifting = is_drifting(fp)
     fpt = fp.copy()
     # an ideal noise-free sensor measures the true signals: its (inlined) reading
     # saves the call of measure every tick; the same values bit for bit
@@ -281,23 +298,9 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
         z_hat = s[S_ZHAT]
         u, _u_fb, f_hat = _controller_step_inline(s, gp, cp, th_m, arm_m, armd_m)
         if record:
-            out[k, 0] = th_m
-            out[k, 1] = th_hat
-            out[k, 2] = thd_hat
-            out[k, 3] = u
-            out[k, 4] = arm_m
-            out[k, 5] = armd_m
-            out[k, 6] = arm_hat
-            out[k, 7] = armd_hat
-            out[k, 8] = f_hat
-            out[k, 9] = z_hat
-            out[k, 10] = x[0]
-            out[k, 11] = x[1]
-            out[k, 12] = x[2]
-            out[k, 13] = x[3]
-            out[k, 14] = x[4]
-            out[k, 16] = s[S_FC_HAT] if adaptive else fc_fixed
-            out[k, 17] = s[S_FS_HAT] if adaptive else fs_fixed
+            fc_used, fs_used = compensator_levels(s, gp, cp)
+            record_tick(out, k, th_m, th_hat, thd_hat, u, arm_m, armd_m, arm_hat, armd_hat,
+                        f_hat, z_hat, x[0], x, fc_used, fs_used)
         if drifting:
             drifted_params(fp, (n0 + k) * h, fpt)
         f_mean, mem = _plant_tick_inline(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
@@ -517,7 +520,7 @@ def simulate_config(
     n = run_ticks(cfg, duration, record)
     h = cfg.design.h
     ctrl = controller or make_controller(cfg)
-    gp, cp = ctrl.pack()
+    gp, cp = ctrl.record()
     x = np.zeros(5)
     x[0] = cfg.sim.initial_angle
     s = ctrl.init(cfg.sim.initial_angle)

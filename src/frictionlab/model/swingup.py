@@ -110,7 +110,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import jit
-from .controller import G_UMAX, G_W0, NS, S_ARMDOT, S_X1, S_X2, Controller, controller_step
+from .controller import NS, S_ARMDOT, S_X1, S_X2, Controller, controller_step
 from .params import Validated, param
 
 __all__ = [
@@ -287,7 +287,7 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
         for i in range(s.shape[0]):
             s[i] = 0.0
         s[S_X1] = th_m
-        s[S_X2] = thd / gp[G_W0]
+        s[S_X2] = thd / gp.omega0
         s[S_ARMDOT] = arm_dot_m
     if phase == CAUGHT and w[W_PT] >= sp[P_SETTLE]:
         phase = BALANCING
@@ -296,7 +296,7 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == SWINGING:
         u = energy_law(th, thd, e, sp[P_K], sp[P_E0], sp[P_UMAX])
         u -= sp[P_KP] * arm_m + sp[P_KD] * arm_dot_m
-        umax = min(sp[P_UMAX], gp[G_UMAX])  # and the DAC range
+        umax = min(sp[P_UMAX], gp.u_max)  # and the DAC range
         u = min(max(u, -umax), umax)
         w[W_U] = u
         return u, u, 0.0
@@ -334,7 +334,7 @@ class SwingUp:
 
     def pack(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(gains, compensator parameters, swing-up parameters) for the compiled step."""
-        gp, cp = self.controller.pack()
+        gp, cp = self.controller.record()
         d = self.controller.design
         return gp, cp, self.params.pack(d.spec.omega0, d.g, d.spec.h)
 

@@ -92,9 +92,6 @@ from dataclasses import dataclass
 from ..model import sensor
 from ..model.controller import (
     ADAPTIVE,
-    G_COMP,
-    G_L,
-    G_W0,
     S_ARM,
     S_ARMDOT,
     S_X1,
@@ -145,6 +142,8 @@ STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_readin
                 "log_failed", "exception", "finished", "experiment_limit", "not_caught",
                 "arm_travel", "arm_speed")
 _NAN = math.nan
+#: The signals of a :class:`Sample` from ``theta_m`` to ``v`` in a tick without a reading.
+_NO_SIGNALS = (_NAN,) * 13
 _TWO_PI = 2.0 * math.pi
 _FMAX = sys.float_info.max
 _rt_warned = False
@@ -433,17 +432,15 @@ class Loop:
         exp_step = experiment.step if experiment is not None else None
         params = self.params
         gp, cp = params.gp, params.cp
-        w0 = gp[G_W0]
+        w0 = gp.omega0
         comp_flag = COMPENSATE if params.comp_enabled else 0
         ramp_n = round(safety.gain_transition / h)
         ramp_k = ramp_n  # ticks of the gain transition done (ramp_n: none under way)
         l_from = l_to = None
-        # the gains during a transition: written through gp_work, read by the
-        # controller through a read-only view (the compiled step's argument type is
-        # that of the read-only snapshots: nothing is compiled or loaded mid-run)
-        gp_work = gp.copy()
-        gp_ramp = gp_work.view()
-        gp_ramp.flags.writeable = False
+        # the gains during a transition: the target gains with L moved from l_from
+        # to l_to (Gains.with_feedback keeps the record's field types: the compiled
+        # step's argument type does not change, nothing is compiled mid-run)
+        gp_target = gp
         s = None
         swing = self.swingup is not None
         sp = self._sp
@@ -527,20 +524,9 @@ class Loop:
                 if unread >= unread_max:
                     raise _Stop("rig_silent", f"no timely reading for {unread} consecutive "
                                 "ticks (the rig's replies come too late)")
-                write(k, u_da_prev)  # hold u, keep the rig's watchdog fed
-                t_w = now()
-                if t_w > deadline + h_ns:
-                    self.overruns += 1
-                    flags |= OVERRUN
-                jit_add(late)
-                comp_add(t_w - wake - rig_ns)
-                rig_add(rig_ns)
-                smp = Sample(k, k * h, flags | NO_READING, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
-                             _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, u_da_prev, late / 1e3,
-                             (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
-                for sink in self.sinks:
-                    sink(smp)
-                self.ticks += 1
+                u_da = u_da_prev  # hold u, keep the rig's watchdog fed
+                flags |= NO_READING
+                signals = _NO_SIGNALS
             else:
                 silent = 0
                 unread = 0
@@ -618,7 +604,8 @@ class Loop:
                         if ramp_k == ramp_n:
                             gp = params.gp
                         else:
-                            gp_work[G_L:G_L + 4] = l_from + (ramp_k / ramp_n) * (l_to - l_from)
+                            gp = gp_target.with_feedback(
+                                l_from + (ramp_k / ramp_n) * (l_to - l_from))
                     if swing:
                         u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, theta, arm, arm_dot)
                         ph = w[W_PHASE]
@@ -653,46 +640,47 @@ class Loop:
                                 f"{(now() - deadline) / 1e6:.1f} ms after its deadline "
                                 f"(limit {safety.max_pause * 1e3:g} ms): the process was "
                                 "suspended or the host stalled; the reading is stale", r)
-                write(k, u_da)
-                t_w = now()
-                u_da_prev = u_da
                 commanded = True
-                if t_w > deadline + h_ns:
-                    self.overruns += 1
-                    flags |= OVERRUN
-                jit_add(late)
-                comp_add(t_w - wake - rig_ns)
-                rig_add(rig_ns)
-                smp = Sample(k, k * h, flags, theta, th_hat, thd_hat, u, arm, arm_dot, arm_hat,
-                             armd_hat, f_hat, z_hat, y, x, v, u_da, late / 1e3,
-                             (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
-                for sink in self.sinks:
-                    sink(smp)
-                self.ticks += 1
+                signals = (theta, th_hat, thd_hat, u, arm, arm_dot, arm_hat, armd_hat, f_hat,
+                           z_hat, y, x, v)
+            # ---- the tick's output and its record (with a reading or without) ----
+            write(k, u_da)
+            t_w = now()
+            u_da_prev = u_da
+            if t_w > deadline + h_ns:
+                self.overruns += 1
+                flags |= OVERRUN
+            jit_add(late)
+            comp_add(t_w - wake - rig_ns)
+            rig_add(rig_ns)
+            smp = Sample(k, k * h, flags, *signals, u_da, late / 1e3,
+                         (t_w - wake - rig_ns) / 1e3, rig_ns / 1e3)
+            for sink in self.sinks:
+                sink(smp)
+            self.ticks += 1
             # ---- between ticks ----
             if mailbox:
-                old_kind = gp[G_COMP]
+                old_kind = gp.compensator
                 old_cp = cp
                 applied = []
                 while mailbox:
                     applied.append(mailbox.popleft())
                 params = applied[-1][0]
                 self.params = params
-                l_now = gp[G_L:G_L + 4].copy()
+                l_now = gp.feedback
                 gp, cp = params.gp, params.cp
-                if ramp_n and s is not None and not (l_now == gp[G_L:G_L + 4]).all():
+                if ramp_n and s is not None and not (l_now == gp.feedback).all():
                     # move L from the gains in use (mid-transition too) to the new ones
-                    l_from, l_to = l_now, gp[G_L:G_L + 4].copy()
-                    gp_work[:] = gp
-                    gp_work[G_L:G_L + 4] = l_from
-                    gp = gp_ramp
+                    l_from, l_to = l_now, gp.feedback
+                    gp_target = gp
+                    gp = gp_target.with_feedback(l_from)
                     ramp_k = 0
                 else:
                     ramp_k = ramp_n
-                w0 = gp[G_W0]
+                w0 = gp.omega0
                 comp_flag = COMPENSATE if params.comp_enabled else 0
-                if s is not None and (gp[G_COMP] != old_kind or (
-                        gp[G_COMP] == ADAPTIVE and not (cp == old_cp).all())):
+                if s is not None and (gp.compensator != old_kind or (
+                        gp.compensator == ADAPTIVE and not (cp == old_cp).all())):
                     # a new compensator, or new starting values of the adaptive one:
                     # it starts afresh at the next tick
                     reset_compensator(s)

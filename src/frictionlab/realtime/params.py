@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import Config, ConfigError
-from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller
+from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller, Gains
 from ..model.design import PRESETS, Design, DesignSpec, design, preset
 from ..model.friction import FrictionParams
 from ..model.loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
@@ -127,8 +127,10 @@ class ControlParams:
     design : Design
         Gains L, K of the current spec.
     controller : Controller
-    gp, cp : ndarray
-        :meth:`Controller.pack` output (read-only).
+    gp : Gains
+        The controller's gains (:meth:`Controller.record`).
+    cp : ndarray
+        The compensator's packed parameters (read-only).
     """
 
     cfg: Config
@@ -138,7 +140,7 @@ class ControlParams:
     error_signal: str
     design: Design = field(repr=False)
     controller: Controller = field(repr=False)
-    gp: np.ndarray = field(repr=False)
+    gp: Gains = field(repr=False)
     cp: np.ndarray = field(repr=False)
 
     @classmethod
@@ -159,8 +161,7 @@ class ControlParams:
         d = design(spec, cfg.plant)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
                           error_signal=error_signal, u_max=cfg.rig.u_max)
-        gp, cp = ctrl.pack()
-        gp.flags.writeable = False
+        gp, cp = ctrl.record()
         cp.flags.writeable = False
         return cls(cfg, enabled, kind, dict(params), error_signal, d, ctrl, gp, cp)
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..config import Config
 from ..model._jit import _njit, jit, jit_parallel
-from ..model.controller import NS
+from ..model.controller import NS, gains_record
 from ..model.friction import KINDS, resolve_drift
 from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
 from ..model.plant import plant_record
@@ -85,12 +85,13 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     s = s0[i].copy()
     sp = sensor_record(sens[i])
     plant = plant_record(pp[i])
+    gains = gains_record(gp[i])
     n = nt[i]
     chunk = buf.shape[0]
     done, fell_code, mem, zero = 0, 0, 0.0, 0.0
     while done < n and fell_code == 0:
         m = min(chunk, n - done)
-        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], plant, fk[i], fp[i], gp[i],
+        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], plant, fk[i], fp[i], gains,
                                        cp[i], s, sp, done, zero, fall[i], buf, True)
         for k in range(d):
             sig[0, done + k] = buf[k, 0]
@@ -187,8 +188,8 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
     pp, fp, gp, cp, s0, sens = [], [], [], [], [], []
     for k, (cfg, ticks) in enumerate(zip(cfgs, durations, strict=True)):
         ctrl = make_controller(cfg)
-        g, c = ctrl.pack()
-        gp.append(g)
+        g, c = ctrl.record()
+        gp.append(np.array(g, dtype=float))  # gains_record reads it back
         cp.append(c)
         s0.append(ctrl.init(cfg.sim.initial_angle))
         pp.append(cfg.plant.record())

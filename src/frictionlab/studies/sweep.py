@@ -82,6 +82,7 @@ from ..model.limit_cycles import FEATURES
 __all__ = [
     "MODES",
     "STATUSES",
+    "OutputMismatch",
     "SweepFile",
     "auto_workers",
     "evaluate",
@@ -904,14 +905,32 @@ def columns(keys: Sequence[str], extra: Sequence[str] = ()) -> list[str]:
     return [*keys, *FEATURES, "status", "error", *extra]
 
 
-def _header_mismatch(path: str, found: Sequence[str], cols: Sequence[str]) -> ConfigError:
+class OutputMismatch(ConfigError):
+    """An existing output that this sweep cannot continue: its columns or the set-up
+    that produced it (its ``.meta.json``) are not this sweep's.  Write another file
+    or overwrite it (the command line names its options).
+
+    Attributes
+    ----------
+    path : str
+        The output.
+    field : str
+        What differs: ``"columns"``, or the set-up's field or key.
+    """
+
+    def __init__(self, path: str, field: str, message: str):
+        self.path, self.field = path, field
+        super().__init__(message)
+
+
+def _header_mismatch(path: str, found: Sequence[str], cols: Sequence[str]) -> OutputMismatch:
     """The error for an output whose columns are not this sweep's."""
-    hint = "use another --out, or --force to overwrite"
+    why = ""
     if sorted(found) == sorted(cols):
-        hint = ("the same columns in another order: the file was written by an earlier "
-                "frictionlab (status before the features); " + hint)
-    return ConfigError(f"{path} has columns {','.join(found)}; this sweep writes "
-                       f"{','.join(cols)} ({hint})")
+        why = (" (the same columns in another order: the file was written by an earlier "
+               "frictionlab, status before the features)")
+    return OutputMismatch(path, "columns", f"{path} has columns {','.join(found)}; this sweep "
+                                           f"writes {','.join(cols)}{why}")
 
 
 def _fmt(v: Any) -> str:
@@ -969,7 +988,8 @@ class SweepFile:
 
     def __init__(self, path: str, keys: Sequence[str], meta: dict, extra: Sequence[str] = ()):
         if not path.endswith((".csv", ".parquet")):
-            raise ConfigError(f"--out {path}: the extension must be .csv or .parquet")
+            raise ConfigValueError("path", path, ".csv or .parquet",
+                                   f"{path}: the extension must be .csv or .parquet")
         self.path = path
         self.keys = list(keys)
         self.cols = columns(keys, extra)
@@ -1014,9 +1034,9 @@ class SweepFile:
             raise ConfigError(f"{self.meta_path} is not a sweep's description (a JSON object)")
         for field in ("keys", "duration", "window"):
             if old.get(field) != self.meta.get(field):
-                raise ConfigError(
-                    f"--resume: {self.path} was produced with {field} = {old.get(field)!r}, "
-                    f"this sweep has {self.meta.get(field)!r} (use --force to start afresh)")
+                raise OutputMismatch(
+                    self.path, field, f"{self.path} was produced with {field} = "
+                    f"{old.get(field)!r}, this sweep has {self.meta.get(field)!r}")
         # compared as stored: a tuple value (design.gains) reads back as a list
         ob, nb = old.get("base"), json.loads(json.dumps(self.meta.get("base", {})))
         ob = ob if isinstance(ob, dict) else {}
@@ -1024,9 +1044,9 @@ class SweepFile:
             if k in self.keys:
                 continue
             if ob.get(k) != nb.get(k):
-                raise ConfigError(
-                    f"--resume: {self.path} was produced with {k} = {ob.get(k)!r}, "
-                    f"this sweep has {nb.get(k)!r} (use --force to start afresh)")
+                raise OutputMismatch(
+                    self.path, k, f"{self.path} was produced with {k} = {ob.get(k)!r}, "
+                    f"this sweep has {nb.get(k)!r}")
 
     def _read_journal(self) -> list[dict[str, Any]]:
         with open(self.journal, "rb") as fh:

@@ -22,10 +22,10 @@ import numpy as np
 
 from ..config import Config
 from ..model._jit import jit
-from ..model.controller import ADAPTIVE, G_COMP, S_FC_HAT, S_FS_HAT, Controller
-from ..model.friction import KINDS, P_DRIFT, P_DRIFT_TIME, P_FC, P_FS, drifted_params, resolve_drift
+from ..model.controller import Controller, compensator_levels
+from ..model.friction import KINDS, drifted_params, is_drifting, resolve_drift
 from ..model.sensor import measure
-from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick
+from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick, record_tick
 from ..model.swingup import (
     BALANCING,
     PHASES,
@@ -49,12 +49,9 @@ _OK, _FELL, _STOPPED = 0, 1, 2
 def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
                  fall_angle, out, phase_out):
     """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
-    h = gp[11]
-    w0 = gp[8]
-    adaptive = gp[G_COMP] == ADAPTIVE
-    fc_fixed = cp[P_FC] if gp[G_COMP] != 0.0 else 0.0
-    fs_fixed = cp[P_FS] if gp[G_COMP] != 0.0 else 0.0
-    drifting = fp[P_DRIFT] != 0.0 and not np.isnan(fp[P_DRIFT_TIME])
+    h = gp.h
+    w0 = gp.omega0
+    drifting = is_drifting(fp)
     fpt = fp.copy()
     mem = 0.0
     x0 = 0.0
@@ -64,23 +61,10 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, s
         est = (s[0], w0 * s[1], s[2], s[3], s[5])
         u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
         balancing = w[W_PHASE] >= 1.0 and w[W_PHASE] <= 2.0
-        out[k, 0] = th_m
-        out[k, 1] = est[0] if balancing else w[3]
-        out[k, 2] = est[1] if balancing else w[4]
-        out[k, 3] = u
-        out[k, 4] = arm_m
-        out[k, 5] = armd_m
-        out[k, 6] = est[2]
-        out[k, 7] = est[3]
-        out[k, 8] = f_hat
-        out[k, 9] = est[4]
-        out[k, 10] = wrap_angle(x[0])
-        out[k, 11] = x[1]
-        out[k, 12] = x[2]
-        out[k, 13] = x[3]
-        out[k, 14] = x[4]
-        out[k, 16] = s[S_FC_HAT] if adaptive else fc_fixed
-        out[k, 17] = s[S_FS_HAT] if adaptive else fs_fixed
+        fc_used, fs_used = compensator_levels(s, gp, cp)
+        record_tick(out, k, th_m, est[0] if balancing else w[3], est[1] if balancing else w[4],
+                    u, arm_m, armd_m, est[2], est[3], f_hat, est[4], wrap_angle(x[0]), x,
+                    fc_used, fs_used)
         phase_out[k] = w[W_PHASE]
         if drifting:
             drifted_params(fp, k * h, fpt)

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ...config import Config
+from ...io.notes import Note
 from ...model.params import ParamError, check_range
 from ...model.rig import RigScaling
 from ...model.sensor import measure
@@ -330,11 +331,11 @@ def analyse_stiction(log: Any, *, input_gain: float = 1.0, arm_length: float = 0
         else:
             # breakaway at the first level: u rose from 0 to it in one step
             step = level
-            warnings.append(
+            warnings.append(Note(
                 f"the arm broke away at the first level of the {name} staircase "
                 f"(u = {d * level:g}): the stiction is only known to be at most "
                 f"{input_gain * level:.4g}; reported as half of that.  Repeat with a "
-                "smaller --step")
+                "smaller staircase step", "step"))
         stiction = input_gain * (level - 0.5 * step)
         out[f"stiction_{name}"] = stiction
         out[f"breakaway_time_{name}"] = float(t[k])

@@ -105,6 +105,7 @@ relative standard error exceeds 50 % is reported as poorly determined.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -123,6 +124,7 @@ from ...config import (
     parse_assignment,
     valid_keys,
 )
+from ...io.notes import Note
 from ...model.limit_cycles import FEATURES
 
 __all__ = [
@@ -138,6 +140,15 @@ __all__ = [
     "fit_limit_cycle",
     "parse_experiments",
 ]
+
+def _refusal(field: str, value: Any, allowed: str, message: str,
+             *hints: str) -> ConfigValueError:
+    """A :class:`ConfigValueError` naming ``field`` and, as ``hints``, the other
+    arguments that would lift it (the command line names their options)."""
+    err = ConfigValueError(field, value, allowed, message)
+    err.hints = hints
+    return err
+
 
 #: Residual given to a feature of a run that fell, settled, or lacks the feature.
 PENALTY = 10.0
@@ -306,8 +317,9 @@ def default_bounds(key: str, current: float | None) -> tuple[float, float]:
     if key in DEFAULT_BOUNDS:
         return DEFAULT_BOUNDS[key]
     if current is None or current <= 0:
-        raise ConfigError(f"no default bounds for {key} (current value {current}); "
-                          f"give --bounds {key}=LO:HI")
+        raise ConfigValueError("bounds", key, "LO:HI of each fitted key without default "
+                               "bounds", f"no default search bounds for {key} (current value "
+                               f"{current}); give its bounds")
     meta = key_metadata(key)
     lo, hi = 0.5 * current, 2.0 * current
     if meta["lo"] is not None:
@@ -403,11 +415,7 @@ class LimitCycleProblem:
             raise ConfigError("no experiments to fit")
         self.experiments = list(experiments)
         self.keys = check_fit_keys(keys)
-        if not (duration > 0 and math.isfinite(duration)):
-            raise ConfigError(f"duration must be > 0 s, got {duration}")
-        if window is not None and not (0 < window <= duration):
-            raise ConfigError(f"window must be in (0, duration], got {window}")
-        self.duration, self.window = float(duration), window
+        self.duration, self.window = _run_length(duration, window)
         self.friction = friction
         self.workers, self.dask = workers, dask
         self._evaluate = evaluate or _sweep_evaluate
@@ -487,6 +495,16 @@ class LimitCycleProblem:
         self.nfev = 0
         self._cache: dict[tuple, tuple[np.ndarray, list[dict]]] = {}
 
+    def with_runs(self, duration: float, window: float | None) -> LimitCycleProblem:
+        """The same problem with runs of ``duration`` s analysed over their last
+        ``window`` s (the global search's shorter runs, :func:`search_settings`),
+        with its own evaluation count and cache."""
+        other = copy.copy(self)
+        other.duration, other.window = _run_length(duration, window)
+        other.nfev = 0
+        other._cache = {}
+        return other
+
     def _add_pair(self, ic: int, i_s: int) -> None:
         """Search only F_S >= F_C for keys ``ic`` (Coulomb) and ``i_s`` (stiction).
 
@@ -496,11 +514,13 @@ class LimitCycleProblem:
         """
         c_key, s_key = self.keys[ic], self.keys[i_s]
         if self.lo[ic] >= self.hi[i_s]:
-            raise ConfigError(
+            raise _refusal(
+                "bounds", {c_key: (self.lo[ic], self.hi[ic]), s_key: (self.lo[i_s], self.hi[i_s])},
+                "bounds that leave some stiction >= Coulomb level",
                 f"bounds of {c_key} ({self.lo[ic]:g}:{self.hi[ic]:g}) and {s_key} "
                 f"({self.lo[i_s]:g}:{self.hi[i_s]:g}) leave no stiction >= Coulomb level; "
-                "widen --bounds or fit without the constraint "
-                "(--allow-stiction-below-coulomb)")
+                "widen them or fit without the constraint",
+                "stiction_above_coulomb")
         self.hi[ic] = min(self.hi[ic], self.hi[i_s])
         self.lo[i_s] = max(self.lo[i_s], self.lo[ic])
         self.pairs.append((ic, i_s))
@@ -830,22 +850,33 @@ def _max_runs(prob: LimitCycleProblem, maxiter: int, popsize: int) -> int:
     return len(prob.experiments) * (members * (maxiter + 1) + polish)
 
 
+def _run_length(duration: float, window: float | None) -> tuple[float, float | None]:
+    """``(duration, window)`` of a fit's runs, checked: duration > 0, window in
+    (0, duration] or None."""
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ConfigError(f"duration must be > 0 s, got {duration}")
+    if window is not None and not (0 < window <= duration):
+        raise ConfigError(f"window must be in (0, duration], got {window}")
+    return float(duration), window
+
+
 def search_settings(duration: float, window: float | None, search_duration: float | None,
                     search_window: float | None) -> tuple[float, float | None]:
     """Run length and window of the global search (see :func:`fit_limit_cycle`).
 
     Raises
     ------
-    ConfigError
-        A search duration that is not positive, or a search window outside
-        (0, search duration].
+    ConfigValueError
+        A search duration that is not positive (``field`` ``search_duration``),
+        or a search window outside (0, search duration] (``search_window``).
     """
     if search_duration is None:
         s_duration = float(duration)
     else:
         s_duration = float(search_duration)
         if not (s_duration > 0 and math.isfinite(s_duration)):
-            raise ConfigError(f"--search-duration must be > 0 s, got {search_duration}")
+            raise ConfigValueError("search_duration", search_duration, "(0, inf) s",
+                                   f"search_duration must be > 0 s, got {search_duration}")
     if search_window is not None:
         s_window: float | None = float(search_window)
     elif window is None or search_duration is None:
@@ -853,8 +884,9 @@ def search_settings(duration: float, window: float | None, search_duration: floa
     else:
         s_window = window * s_duration / duration
     if s_window is not None and not (0 < s_window <= s_duration):
-        raise ConfigError(f"--search-window must be in (0, {s_duration:g}] s (the search "
-                          f"duration), got {s_window:g}")
+        raise ConfigValueError("search_window", s_window, f"(0, {s_duration:g}] s",
+                               f"search_window must be in (0, {s_duration:g}] s (the search "
+                               f"duration), got {s_window:g}")
     return s_duration, s_window
 
 
@@ -934,10 +966,7 @@ def fit_limit_cycle(
     search = prob
     s_duration, s_window = search_settings(duration, window, search_duration, search_window)
     if (s_duration, s_window) != (prob.duration, prob.window):
-        search = LimitCycleProblem(experiments, keys, friction=friction, sets=sets,
-                                   bounds=bounds, weights=weights, duration=s_duration,
-                                   window=s_window, evaluate=evaluate, workers=prob.workers,
-                                   dask=dask, stiction_above_coulomb=stiction_above_coulomb)
+        search = prob.with_runs(s_duration, s_window)
     report = progress or (lambda stage, f, c: None)
 
     def cost_vec(xt: np.ndarray) -> np.ndarray:
@@ -1010,17 +1039,18 @@ def fit_limit_cycle(
     for ic, i_s in prob.pairs:
         if p[i_s] - p[ic] <= tol * (prob.hi[i_s] - prob.lo[i_s]):
             at_constraint.add(i_s)
-            warnings.append(
+            warnings.append(Note(
                 f"{prob.keys[i_s]} = {prob.keys[ic]} = {p[ic]:.4g}: the estimate is at the "
                 "constraint stiction >= Coulomb level, which the fit enforces (the "
-                "unconstrained optimum may lie below it); --allow-stiction-below-coulomb "
-                "lifts it")
+                "unconstrained optimum may lie below it); fitting without the constraint "
+                "lifts it", "stiction_above_coulomb"))
     for i, (k, v, lo, hi) in enumerate(zip(prob.keys, p, prob.lo, prob.hi, strict=True)):
         if i in at_constraint:
             continue
         if v <= lo + tol * (hi - lo) or v >= hi - tol * (hi - lo):
-            warnings.append(f"{k} = {v:.4g} is at its search bound [{lo:g}, {hi:g}]: "
-                            "widen --bounds or treat the estimate with care")
+            warnings.append(Note(f"{k} = {v:.4g} is at its search bound [{lo:g}, {hi:g}]: "
+                                 "widen its bounds or treat the estimate with care",
+                                 "bounds"))
     for i, row in enumerate(rows):
         if row.get("status") != "limit_cycle":
             warnings.append(f"experiment {prob.experiments[i].label!r}: the fitted "
