@@ -61,6 +61,7 @@ from .friction import (
     CLASSICAL,
     COULOMB,
     LUGRE,
+    P_BAND,
     P_FC,
     P_FS,
     STRIBECK,
@@ -291,7 +292,9 @@ def compensator_params(params: FrictionParams) -> np.ndarray:
     ``zero_velocity_band`` (Sec. 5.2) is not a compensator setting and is
     set to 0, so that with :math:`\\varepsilon = 0` only v = 0 counts as rest.
     """
-    return dataclasses.replace(params, zero_velocity_band=0.0).pack()
+    p = params.pack()
+    p[P_BAND] = 0.0  # (not a replaced, re-validated copy: a sweep packs every set)
+    return p
 
 
 def reset_compensator(s: np.ndarray) -> None:
