@@ -300,7 +300,8 @@ def compensator_params(params: FrictionParams) -> np.ndarray:
     ``zero_velocity_band`` (Sec. 5.2) is not a compensator setting and is
     set to 0, so that with :math:`\\varepsilon = 0` only v = 0 counts as rest.
     """
-    return dataclasses.replace(params, zero_velocity_band=0.0).pack()
+    # (not a replaced, re-validated copy: a sweep packs every set)
+    return params.pack(zero_velocity_band=0.0)
 
 
 def reset_compensator(s: np.ndarray) -> None:

@@ -245,8 +245,13 @@ class FrictionParams(Validated):
                                        observer_gain=7.0)
         return base
 
-    def pack(self) -> np.ndarray:
-        """Packed float64 vector read by the compiled force laws."""
+    def pack(self, zero_velocity_band: float | None = None) -> np.ndarray:
+        """Packed float64 vector read by the compiled force laws.
+
+        ``zero_velocity_band``, when given, replaces the field's value
+        without a validated copy (the compensators' 0,
+        :func:`frictionlab.model.controller.compensator_params`).
+        """
         p = np.zeros(NP)
         p[P_FS] = self.stiction
         p[P_FC] = self.coulomb
@@ -255,7 +260,8 @@ class FrictionParams(Validated):
         p[P_S0] = self.sigma0
         p[P_S1] = self.sigma1
         p[P_K] = self.observer_gain
-        p[P_BAND] = self.zero_velocity_band
+        p[P_BAND] = (self.zero_velocity_band if zero_velocity_band is None
+                     else zero_velocity_band)
         p[P_EPS] = self.hysteresis
         p[P_FSN] = self.stiction if self.stiction_negative is None else self.stiction_negative
         p[P_FCN] = self.coulomb if self.coulomb_negative is None else self.coulomb_negative
