@@ -43,7 +43,9 @@ def cli():
 #: (marker ``realtime``: scripts/test runs them after the rest, two at a time).
 REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
                     "tests/test_rig_experiments_udp.py",
-                    "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop")
+                    "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop",
+                    "tests/test_console.py::test_a_first_session_loads_nothing_while_the_loop_runs",
+                    "tests/test_console.py::test_idle_connections_cannot_lock_the_operator_out")
 #: Real-time tests that must have the machine to themselves within the suite (marker
 #: ``alone``: scripts/test runs them last, one at a time): a browser beside a console
 #: (chromium takes a CPU of its own while it renders) and a timing statistic compared

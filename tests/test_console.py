@@ -733,7 +733,7 @@ import json, queue, re, sys, threading, urllib.error, urllib.request
 from websockets.sync.client import connect
 from frictionlab.config import build_config
 from frictionlab.console import serve
-from frictionlab.realtime import RealtimeController
+from frictionlab.realtime import RealtimeController, Safety
 from frictionlab.realtime import loop as loop_mod
 
 ticking = threading.Event()
@@ -776,8 +776,11 @@ class Out:
         pass
 
 
+# slack for a stalled host (lockstep: a stall pauses the simulated plant too; a wide
+# angle limit and pause): what is tested is what the server threads load, not the stops
 ctl = RealtimeController(build_config("fast", "classical"), "sim", log_dir=sys.argv[1],
-                         realtime=False, duration=120.0)
+                         realtime=False, duration=120.0, sim_lockstep=True,
+                         safety=Safety(angle_limit=1.2, max_pause=0.5))
 server = threading.Thread(target=serve, args=(ctl, "127.0.0.1", 0), kwargs={"out": Out()},
                           daemon=True)  # a failing session ends the process, not hangs it
 server.start()
@@ -1005,7 +1008,9 @@ def test_idle_connections_cannot_lock_the_operator_out(tmp_path):
     answer, refusals close their connection, idle and trickling connections are closed
     after the head timeout, and Exit ends the server."""
     token = "a-long-enough-token"
-    served = _Served(tmp_path, "--token", token)
+    # slack for a stalled host: what is tested is the server's answers, not the loop's stops
+    served = _Served(tmp_path, "--token", token, "--sim-lockstep", "--angle-limit", "1.2",
+                     "--max-pause", "0.5")
     idle = []
     try:
         served.wait_loop_time(0.5, token)
@@ -1125,3 +1130,26 @@ def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
         st = client.get("/api/status").json()
         assert st["stop_reason"] == "finished" and st["experiment"]["progress"] == 1.0
     ctl.close()
+
+
+@pytest.mark.parametrize("exc, code", [
+    ("state", 409),
+    ("rig", 502),
+    ("rig_closed", 502),  # a rig failure that says "closed" is still the rig's
+])
+def test_a_refused_start_is_answered_by_the_error_s_class_not_its_text(
+        app_and_controller, monkeypatch, exc, code):
+    from frictionlab.realtime.api import ControllerStateError
+    from frictionlab.realtime.rigs import RigError
+
+    client, ctl, _ = app_and_controller
+    errors = {"state": ControllerStateError("the controller is closed"),
+              "rig": RigError("no answer from the rig"),
+              "rig_closed": RigError("the rig closed the connection")}
+
+    def start(*args, **kwargs):
+        raise errors[exc]
+
+    monkeypatch.setattr(ctl, "start", start)
+    r = client.post("/api/start", json={})
+    assert r.status_code == code and r.json()["detail"] == str(errors[exc])
