@@ -321,13 +321,37 @@ def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, 
     n = len(t)
     if n < 3:
         return empty_code, vals, 0
-    m = t >= t[n - 1] - span - 1e-12
-    tw = t[m]
-    yw = y[m]
-    finite = np.isfinite(yw)
-    if not finite.all():
-        tw = tw[finite]
-        yw = yw[finite]
+    # the window: the samples with t >= t[-1] - span; for increasing t (every
+    # run's) a tail of the arrays, taken as views (no copies)
+    thr = t[n - 1] - span - 1e-12
+    j = n
+    while j > 0 and t[j - 1] >= thr:
+        j -= 1
+    tail = True
+    for i in range(j):
+        if t[i] >= thr:
+            tail = False
+            break
+    if tail:
+        tw = t[j:]
+        yw = y[j:]
+        uw = u[j:] if len(u) > 0 else u
+        vw = v[j:] if len(v) > 0 else v
+    else:
+        m = t >= thr
+        tw = t[m]
+        yw = y[m]
+        uw = u[m] if len(u) > 0 else u
+        vw = v[m] if len(v) > 0 else v
+    finite = True
+    for x in yw:
+        if not np.isfinite(x):
+            finite = False
+            break
+    if not finite:
+        keep = np.isfinite(yw)
+        tw = tw[keep]
+        yw = yw[keep]
         if len(yw) < 3:
             return empty_code, vals, 0
     if noise > 0.0 and len(yw) >= smooth:
@@ -336,9 +360,9 @@ def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, 
         yw = _moving_average(yw, smooth)
     ptp = yw.max() - yw.min()
     if len(u) > 0:
-        vals[4] = _abs_max(u[m])
+        vals[4] = _abs_max(uw)
     if len(v) > 0:
-        vals[5] = _abs_max(v[m])
+        vals[5] = _abs_max(vw)
     vals[6] = ptp
     hyst = max(0.02 * 0.5 * ptp, 3.0 * noise)
     up_t, up_i, _dn_t, dn_i = _crossings_kernel(tw, yw, hyst)

@@ -105,19 +105,28 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     if done < 3:
         codes[i] = 2 if fell else 1
         return
-    t = np.arange(done) * h[i]
+    hi = h[i]
+    last = (done - 1) * hi  # the times are np.arange(done) * h
     w = win[i]
     if np.isnan(w):
-        span = 0.5 * (t[done - 1] - t[0])
+        span = 0.5 * (last - 0.0)
     elif fell:
         span = w
     else:
-        span = min(w, t[done - 1])
+        span = min(w, last)
     if not span > 0:
         codes[i] = _BAD_WINDOW
         return
-    code, fv, cyc = _features_kernel(t, sig[0, :done], sig[1, :done], sig[2, :done], span, fell,
-                                     sp.noise, REL_PROMINENCE, SETTLE_TOL, SMOOTH)
+    # only the window's samples (and at least 3) go to the features: the same
+    # window, without the times and copies of the samples before it
+    thr = last - span - 1e-12
+    lo = done
+    while lo > 0 and (lo - 1) * hi >= thr:
+        lo -= 1
+    lo = min(lo, done - 3)
+    t = np.arange(lo, done) * hi
+    code, fv, cyc = _features_kernel(t, sig[0, lo:done], sig[1, lo:done], sig[2, lo:done], span,
+                                     fell, sp.noise, REL_PROMINENCE, SETTLE_TOL, SMOOTH)
     codes[i] = code
     vals[i, :] = fv
     cycles[i] = cyc
