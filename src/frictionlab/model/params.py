@@ -170,14 +170,27 @@ def _param_fields(cls: type) -> tuple[tuple[str, Any], ...]:
     return tuple((f.name, f.metadata) for f in dataclasses.fields(cls) if "doc" in f.metadata)
 
 
+@functools.cache
+def _range_checks(cls: type) -> tuple[tuple[Any, ...], ...]:
+    """``(name, metadata, lo, hi, lo_open, hi_open, plain)`` of the ``param`` fields of
+    a dataclass (``plain``: a scalar, not an integer), looked up once per class."""
+    return tuple((name, m, m["lo"], m["hi"], m["lo_open"], m["hi_open"],
+                  not m.get("length") and not m["integer"])
+                 for name, m in _param_fields(cls))
+
+
 class Validated:
     """Mixin: validate every ``param`` field of a frozen dataclass on construction."""
 
     _prefix = ""  # config-key prefix used in error messages, e.g. "plant."
 
     def __post_init__(self) -> None:
-        for fname, meta in _param_fields(type(self)):
+        for fname, meta, lo, hi, lo_open, hi_open, plain in _range_checks(type(self)):
             value = getattr(self, fname)
+            if plain and type(value) is float and value - value == 0.0 and (
+                    lo is None or value > lo or (value == lo and not lo_open)) and (
+                    hi is None or value < hi or (value == hi and not hi_open)):
+                continue  # check_range's usual case (a sweep validates every set's fields)
             name = f"{self._prefix}{fname}"
             if value is None:
                 if meta["optional"]:
