@@ -121,6 +121,7 @@ __all__ = [
     "steady_bristle",
     "stribeck_curve",
     "stribeck_level",
+    "stribeck_magnitude",
     "stribeck_weight",
     "viscous_force",
     "with_levels",
@@ -301,22 +302,35 @@ def _sgn(x):
 
 
 @jit
-def stribeck_weight(v, p):
-    """The Stribeck decay :math:`e^{-(v/v_S)^2}`: the share of the stiction
-    excess :math:`F_S - F_C` left at velocity ``v`` (eq. 18's g(v))."""
-    r = v / p[P_VS]
+def _stribeck_decay(v, vs):
+    r = v / vs
     return np.exp(-r * r)
 
 
 @jit
+def stribeck_magnitude(v, fc, fs, vs):
+    """The Stribeck curve :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (eq. 18's
+    :math:`\\sigma_0 g(v)`) from its three numbers: the one implementation, for a
+    velocity or (from Python) an array of them."""
+    return fc + (fs - fc) * _stribeck_decay(v, vs)
+
+
+@jit
+def stribeck_weight(v, p):
+    """The Stribeck decay :math:`e^{-(v/v_S)^2}`: the share of the stiction
+    excess :math:`F_S - F_C` left at velocity ``v`` (eq. 18's g(v))."""
+    return _stribeck_decay(v, p[P_VS])
+
+
+@jit
 def stribeck_level(v, p):
-    """Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (direction-dependent):
-    the one implementation of the Stribeck curve (eq. 18's :math:`\\sigma_0 g(v)`)."""
+    """Stribeck level :func:`stribeck_magnitude` with the levels of ``v``'s
+    direction (the asymmetric variant's negative levels for v < 0)."""
     if v >= 0.0:
         fs, fc = p[P_FS], p[P_FC]
     else:
         fs, fc = p[P_FSN], p[P_FCN]
-    return fc + (fs - fc) * stribeck_weight(v, p)
+    return stribeck_magnitude(v, fc, fs, p[P_VS])
 
 
 @jit
