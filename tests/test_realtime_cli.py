@@ -436,13 +436,15 @@ def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
     import resource
 
     def limit():
-        resource.setrlimit(resource.RLIMIT_FSIZE, (150_000, 150_000))
+        # about 280 rows of CSV (1.4 s): the run lasts no longer than the test needs
+        resource.setrlimit(resource.RLIMIT_FSIZE, (40_000, 40_000))
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # numba's cache writes too
 
     host, port = rig_sim
     proc = subprocess.run([*CLI, "run", "--headless", "--duration", "60", "--json",
                            "--backend", f"udp://{host}:{port}", "--angle-limit", "1.2",
-                           "--silent-periods", "40", "--max-pause", "0.5",
+                           # a rig silent for 0.5 s (a stalled host) tolerated, as a pause
+                           "--silent-periods", "100", "--max-pause", "0.5",
                            "--log-dir", str(tmp_path)],
                           capture_output=True, text=True, timeout=120, preexec_fn=limit)
     assert proc.returncode == 1, proc.stderr
