@@ -133,7 +133,7 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     host, port = rig_sim
     # a wide angle limit: a pause of this shared machine must not end the run early
     proc = popen(["run", "--headless", "--duration", "60", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "100",
                   "--max-pause", "0.5", "--log-dir", str(tmp_path)],
                  stdout=subprocess.DEVNULL)
     try:
@@ -174,7 +174,7 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
 def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "100",
                   "--max-pause", "0.5", "--log-dir", str(tmp_path)])
     try:
         wait_running(tmp_path, proc)
@@ -366,7 +366,7 @@ def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp
 def test_ctrl_z_stops_the_run_then_suspends(tmp_path, rig_sim):
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "100",
                   "--max-pause", "0.5", "--log-dir", str(tmp_path)])
     try:
         csv, _ = wait_running(tmp_path, proc)
