@@ -86,3 +86,19 @@ def test_pairwise_sum_is_numpys_sum_bit_for_bit():
     for n in (0, 1, 7, 8, 9, 127, 128, 129, 255, 1000, 4099):
         a = rng.standard_normal(n) * 10.0 ** rng.integers(-3, 4, n)
         assert _pairwise_sum(a) == a.sum()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_sets_that_change_the_shared_sections_get_their_own_rows(threads):
+    """Points that change the plant, the compensator, the sensor or the design
+    between points that do not (the packing reuses the rows of unchanged
+    sections) give each run's features exactly as single runs do."""
+    base = build_config("fast", "classical", "lugre",
+                        sets=[("friction.zero_velocity_band", 0.03)])
+    pts = [{}, {"friction.coulomb": 1.2}, {"compensation.coulomb": 1.2},
+           {"compensation.coulomb": 1.2}, {"plant.input_gain": 0.9}, {},
+           {"sim.noise": 0.002}, {"design.h": 0.004}, {"friction.coulomb": 1.7}]
+    rows = batch.evaluate_rows(base, pts, 2.0, None, threads=threads)
+    for p, row in zip(pts, rows, strict=True):
+        feats, status = _single_row(base.with_values(p), 2.0, None)
+        assert row["status"] == status and {k: row[k] for k in FEATURES} == feats, p

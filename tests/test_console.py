@@ -1130,3 +1130,26 @@ def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
         st = client.get("/api/status").json()
         assert st["stop_reason"] == "finished" and st["experiment"]["progress"] == 1.0
     ctl.close()
+
+
+@pytest.mark.parametrize("exc, code", [
+    ("state", 409),
+    ("rig", 502),
+    ("rig_closed", 502),  # a rig failure that says "closed" is still the rig's
+])
+def test_a_refused_start_is_answered_by_the_error_s_class_not_its_text(
+        app_and_controller, monkeypatch, exc, code):
+    from frictionlab.realtime.api import ControllerStateError
+    from frictionlab.realtime.rigs import RigError
+
+    client, ctl, _ = app_and_controller
+    errors = {"state": ControllerStateError("the controller is closed"),
+              "rig": RigError("no answer from the rig"),
+              "rig_closed": RigError("the rig closed the connection")}
+
+    def start(*args, **kwargs):
+        raise errors[exc]
+
+    monkeypatch.setattr(ctl, "start", start)
+    r = client.post("/api/start", json={})
+    assert r.status_code == code and r.json()["detail"] == str(errors[exc])

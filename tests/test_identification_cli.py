@@ -222,6 +222,7 @@ def test_stiction_with_one_staircase_level_warns(capsys):
     assert r["stiction"] == pytest.approx(0.25)
     assert err.count("warning: the arm broke away at the first level") == 2
     assert len(r["warnings"]) == 2
+    assert all(w.endswith("smaller staircase step (--step)") for w in r["warnings"])
 
 
 @pytest.mark.parametrize("argv, match", [

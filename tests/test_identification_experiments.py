@@ -71,6 +71,8 @@ def test_stiction_staircase_broken_at_its_first_level_is_an_upper_bound():
     assert r["stiction_negative"] == pytest.approx(0.25)
     assert len(r["warnings"]) == 2
     assert all("first level" in w and "at most 0.5" in w for w in r["warnings"])
+    # it names the argument that addresses it, never a command-line option
+    assert all(w.hints == ("step",) and "--" not in w for w in r["warnings"])
     # the Coulomb runs (30-90 % of the breakaway u) still count
     assert _close(r["coulomb"], 0.08, 0.05)
 

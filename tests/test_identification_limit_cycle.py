@@ -459,3 +459,21 @@ def test_search_settings_default_and_validation():
         with pytest.raises(ConfigError, match=field) as info:
             search_settings(30.0, 20.0, *bad)
         assert info.value.field == field and "--" not in str(info.value)
+
+
+def test_the_fit_takes_the_problem_s_keywords_and_refuses_others():
+    """fit_limit_cycle passes the problem's keywords to LimitCycleProblem (written
+    once there): they act, and a misspelt one is refused."""
+    exps = parse_experiments(BELOW)
+    keys = ["friction.coulomb", "friction.stiction"]
+    seen = []
+
+    def spy(base, points, **kw):
+        seen.append((kw["duration"], kw["window"], kw["workers"]))
+        return _linear_rows(base, points, **kw)
+
+    res = fit_limit_cycle(exps, keys, evaluate=spy, maxiter=1, popsize=2, duration=4.0,
+                          window=2.0, workers=1, stiction_above_coulomb=False)
+    assert res.constraints == [] and set(seen) == {(4.0, 2.0, 1)}
+    with pytest.raises(TypeError):
+        fit_limit_cycle(exps, keys, evaluate=spy, maxiter=1, popsize=2, windw=2.0)

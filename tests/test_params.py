@@ -4,6 +4,8 @@ import dataclasses
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from frictionlab.config import (
     ConfigError,
@@ -17,7 +19,7 @@ from frictionlab.config import (
 )
 from frictionlab.model.design import DesignSpec
 from frictionlab.model.friction import FrictionParams
-from frictionlab.model.params import ParamError
+from frictionlab.model.params import ParamError, check_range
 from frictionlab.model.plant import PlantParams
 
 
@@ -230,6 +232,30 @@ def test_interface_keys_exist():
         "sim.substeps", "sim.noise", "sim.seed",
     ]:
         assert k in keys, k
+
+
+_BOUND = st.one_of(st.none(), st.sampled_from([-1.0, 0.0, 0.5, 2.0]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from(
+    [-1.0, 0.0, 0.5, 2.0, math.inf, -math.inf])), _BOUND, _BOUND, st.booleans(), st.booleans())
+def test_check_range_accepts_exactly_the_values_in_the_range(value, lo, hi, lo_open, hi_open):
+    """check_range (with its fast path for floats) returns a float exactly when it
+    lies in the range, ends open or closed as asked (an infinite value only on an
+    unbounded side), and otherwise raises naming the field."""
+    inside = (not math.isnan(value)
+              and (lo is None or value > lo or (value == lo and not lo_open))
+              and (hi is None or value < hi or (value == hi and not hi_open))
+              and not (math.isinf(value) and ((value < 0 and lo is not None)
+                                              or (value > 0 and hi is not None))))
+    if inside:
+        got = check_range("x", value, lo, hi, lo_open=lo_open, hi_open=hi_open)
+        assert type(got) is float and got == value
+    else:
+        with pytest.raises(ParamError) as err:
+            check_range("x", value, lo, hi, lo_open=lo_open, hi_open=hi_open)
+        assert err.value.field == "x"
 
 
 @pytest.mark.parametrize("kw, field", [({"friction_kind": "sand"}, "friction"),

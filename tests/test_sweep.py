@@ -656,3 +656,38 @@ def test_engine_imports_no_cli_plotting_or_terminal_code():
                            timeout=120)
     assert probe.returncode == 0, probe.stderr
     assert probe.stdout.strip() == "[]"
+
+
+def test_thread_backend_runs_the_next_chunk_while_the_caller_takes_the_rows(monkeypatch):
+    """The thread backend starts chunk k + 1 before it yields chunk k's rows (the
+    cores compute while the caller writes), and the rows are those of one chunk
+    at a time, in order, equal to a single batch's."""
+    import threading
+
+    from frictionlab.studies import batch
+
+    real_run = batch.run
+    started = {}
+
+    def logged_run(b, threads=1):
+        started.setdefault(b.points[0]["friction.coulomb"], threading.Event()).set()
+        return real_run(b, threads)
+
+    monkeypatch.setattr(batch, "run", logged_run)
+    base = build_config("fast", "classical")
+    values = (1.2, 1.4, 1.6, 1.8)
+    for c in values:
+        started[c] = threading.Event()
+    pts = [{"friction.coulomb": c} for c in values]
+    got = []
+    for k, (idx, rows) in enumerate(sweep_module.iter_evaluate(
+            base, pts, duration=0.5, workers=2, chunk_size=1)):
+        assert idx == [k] and len(rows) == 1
+        if k + 1 < len(values):
+            # the next chunk runs although this one's rows are not yet taken (a
+            # backend that started it only after the yield would never set this;
+            # the timeout only bounds a failing run)
+            assert started[values[k + 1]].wait(60)
+        got.extend(rows)
+    monkeypatch.setattr(batch, "run", real_run)
+    assert got == batch.evaluate_rows(base, pts, 0.5, None, threads=2)

@@ -15,19 +15,19 @@ from pathlib import Path
 
 import numpy as np
 
-from frictionlab.compensation import COMPENSATORS, compare, tune
-from frictionlab.compensation_cli import plot_before_after
+from frictionlab.cli.compensate import plot_before_after
 from frictionlab.config import build_config
-from frictionlab.controller import ERROR_SIGNALS, Controller
-from frictionlab.design import design as make_design
-from frictionlab.friction import (
+from frictionlab.model.controller import ERROR_SIGNALS, Controller
+from frictionlab.model.design import design as make_design
+from frictionlab.model.friction import (
     P_K,
     FrictionParams,
     lugre_force,
     lugre_step_exact,
     stribeck_curve,
 )
-from frictionlab.simulation import simulate_config
+from frictionlab.model.simulation import simulate_config
+from frictionlab.studies.compensation import COMPENSATORS, compare, tune
 
 FIG = Path(__file__).resolve().parent.parent / "figures"
 DUR, WIN = 30.0, 15.0

@@ -14,8 +14,8 @@ from __future__ import annotations
 import dataclasses
 
 from frictionlab.config import Config, build_config
-from frictionlab.friction import P_K, FrictionParams
-from frictionlab.simulation import run_features
+from frictionlab.model.friction import P_K, FrictionParams
+from frictionlab.model.simulation import run_features
 
 DURATION = 40.0
 SIGMA0 = (50.0, 100.0, 200.0)

@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from frictionlab.config import build_config
-from frictionlab.limit_cycles import FEATURES, features
-from frictionlab.periodic import orbit_trajectory, periodic_orbit
-from frictionlab.predict import describing_function, plot_prediction, predict
-from frictionlab.simulation import run_features, simulate_config
+from frictionlab.model.limit_cycles import FEATURES, features
+from frictionlab.model.periodic import orbit_trajectory, periodic_orbit
+from frictionlab.model.simulation import run_features, simulate_config
+from frictionlab.studies.predict import describing_function, plot_prediction, predict
 
 FIG = Path(__file__).resolve().parent.parent / "figures"
 LONG, WINDOW = 300.0, 200.0

@@ -61,7 +61,7 @@ import control
 import numpy as np
 
 from .config import Config, build_config
-from .model.friction import COULOMB, KINDS, LUGRE, NONE, P_EPS, friction_step, lugre_dz, lugre_force
+from .model.friction import COULOMB, KINDS, LUGRE, NONE, friction_step, lugre_dz, lugre_force
 from .model.plant import ARM, ARM_DOT, THETA, Z, rhs
 
 __all__ = ["INPUTS", "OUTPUTS", "STATES", "linearize", "to_control"]
@@ -118,11 +118,11 @@ def to_control(config: Config | None = None) -> control.NonlinearIOSystem:
     cfg = _config(config)
     kind = KINDS.index(cfg.friction_kind)
     fp = cfg.friction.pack()
-    if kind == COULOMB and fp[P_EPS] > 0.0:
+    if kind == COULOMB and cfg.friction.hysteresis > 0.0:
         raise ValueError(
-            f"friction.hysteresis = {fp[P_EPS]:g}: the Coulomb relay with hysteresis has a "
-            "memory a continuous-time system cannot hold; use friction.hysteresis=0 (the "
-            "ideal relay) or the sampled simulator")
+            f"friction.hysteresis = {cfg.friction.hysteresis:g}: the Coulomb relay with "
+            "hysteresis has a memory a continuous-time system cannot hold; use "
+            "friction.hysteresis=0 (the ideal relay) or the sampled simulator")
     plant = cfg.plant
     ku = plant.input_gain
     states = (*STATES, "z") if kind == LUGRE else STATES

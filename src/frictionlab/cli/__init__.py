@@ -31,8 +31,8 @@ from ..config import (
 from . import compensate, identify, predict, reproduce, run, sweep
 from .common import (
     UsageError,
-    _add_config_args,
     _Parser,
+    add_config_args,
     check_output_path,
     config_from_args,
     emit_json,
@@ -183,7 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     p = sub.add_parser("design", help="state-feedback and observer gains (Sec. 2.2-2.4)")
-    _add_config_args(p, friction=False)
+    add_config_args(p, friction=False)
     p.add_argument("--method", choices=("closed_form", "numeric"), default="closed_form",
                    help="Appendix C closed form or numerical pole placement "
                         "(default: %(default)s)")
@@ -191,7 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("simulate", help="closed-loop simulation and limit-cycle features")
-    _add_config_args(p)
+    add_config_args(p)
     p.add_argument("--duration", type=float, default=None,
                    help="simulated time in s (default: sim.duration = 40)")
     p.add_argument("--window", type=float, default=None,

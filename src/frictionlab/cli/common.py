@@ -107,7 +107,8 @@ _clean = json_safe  # the one sanitiser (frictionlab.io.jsonsafe)
 OPTIONS = {"vary": "--vary", "mode": "--mode", "dask": "--dask", "backend": "--backend",
            "token": "--token", "fit": "--fit", "weights": "--weights", "bounds": "--bounds",
            "search_duration": "--search-duration", "search_window": "--search-window",
-           "stiction_above_coulomb": "--allow-stiction-below-coulomb"}
+           "stiction_above_coulomb": "--allow-stiction-below-coulomb",
+           "duration": "--duration", "window": "--window"}
 
 
 def _hinted(obj, options: dict[str, str] = OPTIONS) -> str:
@@ -180,7 +181,7 @@ def emit_json(obj) -> None:
     sys.stdout.flush()
 
 
-def _add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
+def add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
     p.add_argument("--design", choices=("fast", "slow"), default="fast",
                    help="design preset of Sec. 2.4 (eqs. 13-16), applied before --set "
                         "(default: %(default)s)")

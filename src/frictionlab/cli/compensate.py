@@ -15,7 +15,7 @@ import time
 from ..config import COMPENSATOR_KINDS, SimParams
 from .common import (
     UsageError,
-    _add_config_args,
+    add_config_args,
     add_engine_args,
     check_engine_args,
     check_output_path,
@@ -96,7 +96,7 @@ def register_cli(sub) -> None:
                     "compensation none; report both runs' limit-cycle features and chatter "
                     "(sign reversals per second of the friction estimate, u roughness) and "
                     "the reduction of the peak-to-peak.")
-    _add_config_args(c)
+    add_config_args(c)
     c.set_defaults(compensation="lugre")
     c.add_argument("--duration", type=float, default=30.0,
                    help="simulated time in s (default 30)")
@@ -112,7 +112,7 @@ def register_cli(sub) -> None:
                     "measured pendulum angle and its control chatter (sign reversals per "
                     "second of the friction estimate); report the best score peak_to_peak * "
                     "(1 + W * reversals/s), with the reduction against no compensation.")
-    _add_config_args(t)
+    add_config_args(t)
     t.set_defaults(compensation="lugre")
     t.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
                    help="values of a compensation.* key (list or START:STOP:N); repeatable; "

@@ -13,7 +13,7 @@ from ..model.params import ParamError
 from ..studies.identification.experiments import EXPERIMENTS, IdentificationError
 from .common import (
     UsageError,
-    _add_config_args,
+    add_config_args,
     add_engine_args,
     add_key_args,
     add_stall_args,
@@ -178,11 +178,11 @@ INTERFACE_FIELDS = ("estimate", "stderr", "residuals", "cost")
 
 
 def _write_report(path: str, obj: dict) -> None:
-    from .common import _clean
+    from ..io.jsonsafe import json_safe
 
     try:
         with open(path, "w") as fh:
-            json.dump(_clean(obj), fh, indent=1)
+            json.dump(json_safe(obj), fh, indent=1)
             fh.write("\n")
     except OSError as exc:
         raise UsageError(f"cannot write --report {path}: {exc.strerror}") from None
@@ -637,7 +637,7 @@ def register_cli(sub) -> None:
                      help="run the experiment on a rig through the real-time loop (the loop "
                           "of `frictionlab run`: same timing, safety and logging), then "
                           "analyse its log")
-    _add_config_args(e, friction=False)
+    add_config_args(e, friction=False)
     e.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default=None,
                    help="friction of the simulated rig (default: classical; lugre for "
                         "stribeck)")

@@ -49,7 +49,7 @@ def cmd_predict(args) -> int:
 
 def register_cli(sub) -> None:
     """Add ``predict`` to the ``frictionlab`` subcommands."""
-    from .common import _add_config_args
+    from .common import add_config_args
 
     p = sub.add_parser(
         "predict",
@@ -58,7 +58,7 @@ def register_cli(sub) -> None:
                     "orbit (a fixed point of the sampled loop's period map, with its features "
                     "and Floquet multipliers) and the describing function of the friction "
                     "against the linearised loop (docs/predict.md).")
-    _add_config_args(p)
+    add_config_args(p)
     p.add_argument("--plot", metavar="FILE",
                    help="draw the Nyquist curve with -1/N(A) and the orbit to FILE.png")
     p.add_argument("--json", action="store_true", help="print one JSON object")

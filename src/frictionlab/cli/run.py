@@ -22,7 +22,7 @@ import sys
 
 from .common import (
     UsageError,
-    _add_config_args,
+    add_config_args,
     add_stall_args,
     check_output_dir,
     config_from_args,
@@ -97,7 +97,7 @@ def register_cli(sub) -> None:
                    help="csv: the .dat/.csv pair and the JSON sidecar (default); parquet: "
                         "also a .parquet table of the CSV's columns for the run and every "
                         "recording, written when each ends (docs/logs.md)")
-    _add_config_args(p)
+    add_config_args(p)
     p.add_argument("--angle-limit", type=float, default=0.35, metavar="RAD",
                    help="stop when |theta| exceeds this (default 0.35 rad)")
     p.add_argument("--start-tolerance", type=float, default=0.15, metavar="RAD",
@@ -132,7 +132,7 @@ def register_cli(sub) -> None:
                    help=f"UDP port (default {DEFAULT_RIG_PORT}; 0 picks a free one)")
     p.add_argument("--serial", metavar="DEVICE", default=None,
                    help="serve on a serial device instead of UDP")
-    _add_config_args(p, friction=False)
+    add_config_args(p, friction=False)
     from ..config import PLANT_FRICTION_KINDS
 
     p.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",

@@ -36,7 +36,7 @@ from ..studies.sweep import (
 )
 from .common import (
     UsageError,
-    _add_config_args,
+    add_config_args,
     add_engine_args,
     check_engine_args,
     check_output_path,
@@ -254,7 +254,7 @@ def register_cli(sub) -> None:
         description="Run the closed loop for every parameter set and reduce each run to its "
                     "limit-cycle features (the thesis's Tables 2-7).  Rows are written to "
                     "--out as they complete; --resume continues an interrupted sweep.")
-    _add_config_args(p)
+    add_config_args(p)
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
                    help="values of a key: a list V1,V2,... or START:STOP:N (N evenly spaced "
                         "values, both ends included); repeatable")

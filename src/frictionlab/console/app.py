@@ -61,6 +61,7 @@ from starlette.background import BackgroundTask
 from starlette.staticfiles import StaticFiles
 
 from ..io.jsonsafe import json_safe
+from ..realtime.api import ControllerStateError
 from ..realtime.params import ChangeError, UnsafeChange
 from .models import (
     CompensationRequest,
@@ -548,7 +549,7 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
             else:
                 controller.start(swing_up=swing_up)
         except RuntimeError as exc:  # includes RigError
-            code = 409 if "already running" in str(exc) or "closed" in str(exc) else 502
+            code = 409 if isinstance(exc, ControllerStateError) else 502
             raise _error(code, str(exc)) from None
         except ValueError as exc:
             raise _error(409, str(exc)) from None
@@ -640,7 +641,7 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
         try:
             console.run_experiment(exp)
         except RuntimeError as exc:  # includes RigError
-            code = 409 if "already running" in str(exc) or "closed" in str(exc) else 502
+            code = 409 if isinstance(exc, ControllerStateError) else 502
             raise _error(code, str(exc)) from None
         return {"ok": True, "status": full_status()}
 

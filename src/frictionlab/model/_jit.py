@@ -90,16 +90,17 @@ def jit(fn) -> Kernel:
     return Kernel(fn)
 
 
+def jit_inline(fn) -> Kernel:
+    """As :func:`jit`, with numba's ``inline="always"``: compiled into each
+    compiled caller (for small dispatchers on the hot path).  LLVM does not
+    inline a large kernel such as a step of the closed loop, and calling one
+    costs its arguments (an array is seven words) every tick;
+    ``jit_inline(step.py_func)`` is the same law as a second kernel that a hot
+    loop calls instead of ``step``."""
+    return Kernel(fn, inline=True)
+
+
 def jit_parallel(fn) -> Kernel:
     """As :func:`jit`, with numba's ``parallel=True`` (``prange`` loops run on
     numba's threads) and ``nogil=True``; compiled on first use."""
     return Kernel(fn, parallel=True)
-
-
-def jit_inline(fn) -> Kernel:
-    """As :func:`jit`, inlined by numba into every compiled caller (numba's
-    ``inline="always"``).  LLVM does not inline a large kernel such as a step of
-    the closed loop, and calling one costs its arguments (an array is seven
-    words) every time; ``jit_inline(step.py_func)`` is the same law as a second
-    kernel that a hot loop calls instead of ``step``."""
-    return Kernel(fn, inline=True)

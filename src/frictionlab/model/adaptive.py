@@ -105,19 +105,7 @@ from __future__ import annotations
 import math
 
 from ._jit import jit
-from .friction import (
-    P_ABW,
-    P_ADEAD,
-    P_ADIST,
-    P_AGAIN,
-    P_AINNOV,
-    P_AMAX,
-    P_AMIN,
-    P_FC,
-    P_FS,
-    stribeck_weight,
-    viscous_force,
-)
+from .friction import adaptation_settings, levels, stribeck_weight, viscous_force
 from .params import ParamError
 
 __all__ = [
@@ -231,12 +219,11 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_l
     (status, fc, fs, v_hat, slide)
         The new status, estimates, this tick's predicted velocity and slid distance.
     """
-    lo = p[P_AMIN]
-    hi = p[P_AMAX]
+    gain, lam, dead, max_innov, lo, hi, distance = adaptation_settings(p)
     if status == 0.0 or not (math.isfinite(fc) and math.isfinite(fs)):
         v0 = v if math.isfinite(v) else 0.0
-        return (float(A_ADAPTING), min(max(p[P_FC], lo), hi), min(max(p[P_FS], lo), hi), v0,
-                0.0)
+        fc0, fs0 = levels(p)
+        return (float(A_ADAPTING), min(max(fc0, lo), hi), min(max(fs0, lo), hi), v0, 0.0)
     # after a bad signal ``slide`` is -1: the next interval starts at a reading
     # that was not trusted, so it does not adapt either
     if not (math.isfinite(v_hat) and math.isfinite(v_prev)):
@@ -245,7 +232,6 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_l
     # the Stribeck curve of friction.stribeck_curve in its linear-in-(F_C, F_S) form
     phc, phs = regressor(v_prev, p)
     f_model = fc * phc + fs * phs + viscous_force(v_prev, p)
-    lam = p[P_ABW]
     pred = v_hat + h * ((u_prev - f_model) / arm_len + lam * (v_prev - v_hat))
     if not math.isfinite(v):
         return float(A_BAD), fc, fs, pred, -1.0
@@ -254,17 +240,16 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_l
     innov = v - pred
     if abs(u_prev) >= u_max:
         return float(A_SATURATED), fc, fs, pred, slide
-    if not abs(innov) <= p[P_AINNOV]:
+    if not abs(innov) <= max_innov:
         return float(A_BAD), fc, fs, pred, -1.0
-    dead = p[P_ADEAD]
     if abs(v_prev) < dead or abs(v) < dead or v * v_prev <= 0.0:
         return float(A_STUCK), fc, fs, pred, 0.0
     if slide < 0.0:
         return float(A_PRESLIDING), fc, fs, pred, 0.0
     slide += 0.5 * h * (abs(v) + abs(v_prev))
-    if slide < p[P_ADIST]:
+    if slide < distance:
         return float(A_PRESLIDING), fc, fs, pred, slide
-    step = p[P_AGAIN] * h * innov
+    step = gain * h * innov
     fc = min(max(fc - step * phc, lo), hi)
     fs = min(max(fs - step * phs, lo), hi)
     return float(A_ADAPTING), fc, fs, pred, slide

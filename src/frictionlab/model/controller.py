@@ -54,18 +54,17 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .adaptive import adaptation_step, check_gains
 from .design import Design
 from .friction import (
     CLASSICAL,
     COULOMB,
     LUGRE,
-    P_FC,
-    P_FS,
     STRIBECK,
     FrictionParams,
     friction_step,
+    levels,
     with_levels,
 )
 from .observers import arm_observer_step, pendulum_observer_step
@@ -86,6 +85,7 @@ __all__ = [
     "compensator_levels",
     "compensator_params",
     "controller_step",
+    "estimates",
     "gains_record",
     "reset_compensator",
 ]
@@ -271,6 +271,15 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     return f
 
 
+@jit_inline
+def estimates(s, gp):
+    """The estimates the controller state ``s`` holds before its tick:
+    :math:`(\\hat\\theta, \\hat{\\dot\\theta}, \\hat\\Omega,
+    \\hat{\\dot\\Omega}, \\hat z)` (rad, rad/s, rad, rad/s, the LuGre
+    compensator's bristle)."""
+    return s[S_X1], gp.omega0 * s[S_X2], s[S_ARM], s[S_ARMDOT], s[S_ZHAT]
+
+
 @jit
 def compensator_levels(s, gp, cp):
     """The Coulomb and stiction levels the compensator uses: the adaptive
@@ -280,7 +289,7 @@ def compensator_levels(s, gp, cp):
         return s[S_FC_HAT], s[S_FS_HAT]
     if gp.compensator == 0:
         return 0.0, 0.0
-    return cp[P_FC], cp[P_FS]
+    return levels(cp)
 
 
 def compensator_params(params: FrictionParams) -> np.ndarray:
@@ -291,7 +300,8 @@ def compensator_params(params: FrictionParams) -> np.ndarray:
     ``zero_velocity_band`` (Sec. 5.2) is not a compensator setting and is
     set to 0, so that with :math:`\\varepsilon = 0` only v = 0 counts as rest.
     """
-    return dataclasses.replace(params, zero_velocity_band=0.0).pack()
+    # (not a replaced, re-validated copy: a sweep packs every set)
+    return params.pack(zero_velocity_band=0.0)
 
 
 def reset_compensator(s: np.ndarray) -> None:

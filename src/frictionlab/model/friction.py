@@ -104,22 +104,28 @@ __all__ = [
     "NoFriction",
     "Stribeck",
     "Viscous",
+    "adaptation_settings",
     "classical_force",
     "coulomb_relay",
     "drift_factor",
     "drifted_params",
     "friction_step",
     "is_drifting",
+    "levels",
     "lugre_dz",
     "lugre_force",
     "lugre_step_exact",
     "make_model",
+    "observer_gain",
     "resolve_drift",
+    "steady_bristle",
     "stribeck_curve",
     "stribeck_level",
+    "stribeck_magnitude",
     "stribeck_weight",
     "viscous_force",
     "with_levels",
+    "without_drift",
 ]
 
 #: Integer codes of the friction models (index = code).
@@ -240,8 +246,13 @@ class FrictionParams(Validated):
                                        observer_gain=7.0)
         return base
 
-    def pack(self) -> np.ndarray:
-        """Packed float64 vector read by the compiled force laws."""
+    def pack(self, zero_velocity_band: float | None = None) -> np.ndarray:
+        """Packed float64 vector read by the compiled force laws.
+
+        ``zero_velocity_band``, when given, replaces the field's value
+        without a validated copy (the compensators' 0,
+        :func:`frictionlab.model.controller.compensator_params`).
+        """
         p = np.zeros(NP)
         p[P_FS] = self.stiction
         p[P_FC] = self.coulomb
@@ -250,7 +261,8 @@ class FrictionParams(Validated):
         p[P_S0] = self.sigma0
         p[P_S1] = self.sigma1
         p[P_K] = self.observer_gain
-        p[P_BAND] = self.zero_velocity_band
+        p[P_BAND] = (self.zero_velocity_band if zero_velocity_band is None
+                     else zero_velocity_band)
         p[P_EPS] = self.hysteresis
         p[P_FSN] = self.stiction if self.stiction_negative is None else self.stiction_negative
         p[P_FCN] = self.coulomb if self.coulomb_negative is None else self.coulomb_negative
@@ -290,22 +302,35 @@ def _sgn(x):
 
 
 @jit
-def stribeck_weight(v, p):
-    """The Stribeck decay :math:`e^{-(v/v_S)^2}`: the share of the stiction
-    excess :math:`F_S - F_C` left at velocity ``v`` (eq. 18's g(v))."""
-    r = v / p[P_VS]
+def _stribeck_decay(v, vs):
+    r = v / vs
     return np.exp(-r * r)
 
 
 @jit
+def stribeck_magnitude(v, fc, fs, vs):
+    """The Stribeck curve :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (eq. 18's
+    :math:`\\sigma_0 g(v)`) from its three numbers: the one implementation, for a
+    velocity or (from Python) an array of them."""
+    return fc + (fs - fc) * _stribeck_decay(v, vs)
+
+
+@jit
+def stribeck_weight(v, p):
+    """The Stribeck decay :math:`e^{-(v/v_S)^2}`: the share of the stiction
+    excess :math:`F_S - F_C` left at velocity ``v`` (eq. 18's g(v))."""
+    return _stribeck_decay(v, p[P_VS])
+
+
+@jit
 def stribeck_level(v, p):
-    """Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` (direction-dependent):
-    the one implementation of the Stribeck curve (eq. 18's :math:`\\sigma_0 g(v)`)."""
+    """Stribeck level :func:`stribeck_magnitude` with the levels of ``v``'s
+    direction (the asymmetric variant's negative levels for v < 0)."""
     if v >= 0.0:
         fs, fc = p[P_FS], p[P_FC]
     else:
         fs, fc = p[P_FSN], p[P_FCN]
-    return fc + (fs - fc) * stribeck_weight(v, p)
+    return stribeck_magnitude(v, fc, fs, p[P_VS])
 
 
 @jit
@@ -534,6 +559,40 @@ def is_drifting(p):
     """Whether ``p`` has a drift with a resolved drift time (:func:`resolve_drift`;
     an unresolved one, NaN, is ignored)."""
     return p[P_DRIFT] != 0.0 and not np.isnan(p[P_DRIFT_TIME])
+
+
+def without_drift(p: np.ndarray) -> np.ndarray:
+    """A copy of ``p`` without drift (the plant at its starting levels)."""
+    q = p.copy()
+    q[P_DRIFT] = 0.0
+    return q
+
+
+@jit_inline
+def levels(p):
+    """``(F_C, F_S)``, the Coulomb and stiction levels for v >= 0."""
+    return p[P_FC], p[P_FS]
+
+
+@jit_inline
+def observer_gain(p):
+    """The observer gain k of eq. (19)."""
+    return p[P_K]
+
+
+@jit_inline
+def adaptation_settings(p):
+    """The adaptive compensator's law settings (:mod:`frictionlab.model.adaptive`):
+    ``(gain, bandwidth, deadband, max_innovation, min, max, distance)``, the
+    ``adaptation_*`` fields."""
+    return (p[P_AGAIN], p[P_ABW], p[P_ADEAD], p[P_AINNOV], p[P_AMIN], p[P_AMAX], p[P_ADIST])
+
+
+@jit
+def steady_bristle(v, p):
+    """The bristle deflection of steady sliding at ``v``, :math:`z = s(v)\\,
+    \\mathrm{sgn}(v)/\\sigma_0` (eq. 18 with :math:`\\dot z = 0`)."""
+    return math.copysign(1.0, v) * stribeck_level(v, p) / p[P_S0]
 
 
 def resolve_drift(p: np.ndarray, duration: float) -> np.ndarray:

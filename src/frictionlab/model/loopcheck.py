@@ -81,7 +81,7 @@ from .controller import (
     compensator_force,
     controller_step,
 )
-from .friction import P_S0, stribeck_curve, stribeck_level
+from .friction import steady_bristle, stribeck_curve
 from .plant import PlantParams, linearize, rhs, zoh
 
 __all__ = [
@@ -250,7 +250,7 @@ def loop_matrices(controller: Controller, plant: PlantParams | None = None,
     v = float(arm_speed)
     if v != 0.0:
         s0[S_RELAY] = math.copysign(1.0, v)
-        s0[S_ZHAT] = math.copysign(1.0, v) * stribeck_level(v, cp) / cp[P_S0]
+        s0[S_ZHAT] = steady_bristle(v, cp)
     x0 = np.array([0.0, 0.0, 0.0, v])
     c0 = s0[states]
     n_x, n = 4, 4 + len(states)

@@ -53,6 +53,10 @@ def check_range(field: str, value: Any, lo: float | None = None, hi: float | Non
                 integer: bool = False) -> float:
     """Check a number against ``[lo, hi]`` (open ends as asked); return it as float
     (int when ``integer``).  Raises :class:`ParamError` naming ``field``."""
+    if type(value) is float and not integer and value - value == 0.0 and (
+            lo is None or value > lo or (value == lo and not lo_open)) and (
+            hi is None or value < hi or (value == hi and not hi_open)):
+        return value  # the usual case, a finite float inside the range, at once
     # the range's text is built only for an error (a sweep validates every field
     # of every parameter set)
     def allowed() -> str:

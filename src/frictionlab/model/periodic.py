@@ -87,7 +87,7 @@ from .controller import (
     S_ZHAT,
     controller_step,
 )
-from .friction import KINDS, LUGRE, NONE, P_DRIFT, VISCOUS
+from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
 from .limit_cycles import LimitCycleFeatures, _crossings, features
 from .sensor import arm_zero, reading
 from .simulation import (
@@ -208,8 +208,8 @@ class _Loop:
         self.gp, self.cp = ctrl.record()
         self.pp = cfg.plant.record()
         self.fkind = KINDS.index(cfg.friction_kind)
-        self.fp = cfg.friction.pack()
-        self.fp[P_DRIFT] = 0.0  # periodic orbits of the plant at its starting levels
+        # periodic orbits of the plant at its starting levels
+        self.fp = without_drift(cfg.friction.pack())
         self.sensor = make_sensor(cfg)._replace(noise=0.0)
         self.x0 = arm_zero(self.sensor)
         self.substeps, self.ratio = cfg.substeps, cfg.pendulum_ratio

@@ -65,24 +65,20 @@ from ._jit import jit, jit_inline
 from .controller import (
     DEFAULT_ERROR_SIGNAL,
     NS,
-    S_ARMDOT,
-    S_X1,
-    S_X2,
-    S_ZHAT,
     Controller,
     compensator_levels,
     controller_step,
+    estimates,
 )
 from .design import design as make_design
 from .friction import (
     KINDS,
     LUGRE,
     NONE,
-    P_DRIFT,
-    P_K,
     drifted_params,
     friction_step,
     is_drifting,
+    observer_gain,
     resolve_drift,
 )
 from .plant import accelerations_sc
@@ -168,7 +164,7 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     th, thd, arm, ad, z = x[0], x[1], x[2], x[3], x[4]
     sn = np.sin(th)
     cs = np.cos(th)
-    kgain = fp[P_K] if fkind == LUGRE else 0.0
+    kgain = observer_gain(fp) if fkind == LUGRE else 0.0
     done = 0
     while done < substeps:
         m = min(ratio, substeps - done)
@@ -280,7 +276,6 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
     an unresolved one, NaN, is ignored).
     """
     h = gp.h
-    w0 = gp.omega0
     drifting = is_drifting(fp)
     fpt = fp.copy()
     # an ideal noise-free sensor measures the true signals: its (inlined) reading
@@ -291,11 +286,7 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
             th_m, arm_m, armd_m, x0 = ideal_reading(x[0], x[2], x[3], n0 + k == 0, x0)
         else:
             th_m, arm_m, armd_m, x0 = _measure_inline(sp, x[0], x[2], x[3], n0 + k, x0)
-        th_hat = s[S_X1]
-        thd_hat = w0 * s[S_X2]
-        arm_hat = s[2]
-        armd_hat = s[S_ARMDOT]
-        z_hat = s[S_ZHAT]
+        th_hat, thd_hat, arm_hat, armd_hat, z_hat = estimates(s, gp)
         u, _u_fb, f_hat = _controller_step_inline(s, gp, cp, th_m, arm_m, armd_m)
         if record:
             fc_used, fs_used = compensator_levels(s, gp, cp)
@@ -427,7 +418,7 @@ class SimulatedPlant:
         # (``duration``, default sim.duration)
         self._fp = resolve_drift(cfg.friction.pack(),
                                  cfg.sim.duration if duration is None else duration)
-        self._drifting = bool(self._fp[P_DRIFT] != 0.0)
+        self._drifting = bool(is_drifting(self._fp))
         self._fpt = self._fp.copy()
         self._substeps = cfg.substeps
         self._ratio = cfg.pendulum_ratio

@@ -26,11 +26,16 @@ from .params import ControlParams
 from .rigs import Rig, open_rig, parse_backend
 from .samples import Subscription
 
-__all__ = ["GC_POLICY", "RealtimeController"]
+__all__ = ["GC_POLICY", "ControllerStateError", "RealtimeController"]
 
 GC_POLICY = ("gc.freeze() + gc.disable() during the run; the loop runs gc.collect(0) every "
              "1 s, gc.collect(1) every 10 s, gc.collect(2) every 60 s, after a tick's output")
 _SWITCH_INTERVAL = 2e-4
+
+
+class ControllerStateError(RuntimeError):
+    """A start refused because of the controller's state (closed, or already
+    running), not because of the rig (:class:`~frictionlab.realtime.rigs.RigError`)."""
 
 
 class RealtimeController:
@@ -198,9 +203,9 @@ class RealtimeController:
         swing_up = self.swing_up if swing_up is None else bool(swing_up)
         with self._lock:
             if self._closed:
-                raise RuntimeError("the controller is closed")
+                raise ControllerStateError("the controller is closed")
             if self.running:
-                raise RuntimeError("the controller is already running")
+                raise ControllerStateError("the controller is already running")
             self._stop_asked = None
             experiment = experiment if experiment is not None else self.experiment
             self.run_experiment = experiment

@@ -186,15 +186,26 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
     fall = np.empty(n)
     win = np.full(n, np.nan if window is None else float(window))
     pp, fp, gp, cp, s0, sens = [], [], [], [], [], []
+    # the controller, plant and sensor rows depend on these sections only; a
+    # sweep's points share them (with_values keeps the sections it does not
+    # change, the very objects), so they are packed once per run of equal ones
+    last_key: tuple = ()
     for k, (cfg, ticks) in enumerate(zip(cfgs, durations, strict=True)):
-        ctrl = make_controller(cfg)
-        g, c = ctrl.record()
-        gp.append(np.array(g, dtype=float))  # gains_record reads it back
-        cp.append(c)
-        s0.append(ctrl.init(cfg.sim.initial_angle))
-        pp.append(cfg.plant.record())
+        key = (cfg.design, cfg.plant, cfg.compensation_kind, cfg.compensation, cfg.rig,
+               cfg.sim)
+        if len(last_key) != len(key) or any(a is not b for a, b in zip(key, last_key, strict=True)):
+            ctrl = make_controller(cfg)
+            g, c = ctrl.record()
+            shared = (np.array(g, dtype=float),  # gains_record reads it back
+                      c, ctrl.init(cfg.sim.initial_angle), cfg.plant.record(),
+                      np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
+            last_key = key
+        gp.append(shared[0])
+        cp.append(shared[1])
+        s0.append(shared[2])
+        pp.append(shared[3])
+        sens.append(shared[4])
         fp.append(resolve_drift(cfg.friction.pack(), ticks * cfg.design.h))
-        sens.append(np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
         x0[k] = cfg.sim.initial_angle
         nt[k] = ticks
         sub[k] = cfg.substeps

@@ -684,7 +684,9 @@ def _thread_chunks(base: Config, pts: list[dict[str, Any]], duration: float | No
 
     The compiled batch releases the GIL, so the next chunk is packed (its
     configurations built and validated, in Python) while the current one
-    runs on a helper thread.
+    runs on a helper thread, and it is started before the current chunk's
+    rows are yielded: the cores compute while the caller writes the rows
+    (closing the generator early waits for that one chunk).
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -695,13 +697,15 @@ def _thread_chunks(base: Config, pts: list[dict[str, Any]], duration: float | No
         return idx, sub, batch.prepare(base, sub, duration, window)
 
     with ThreadPoolExecutor(1, thread_name_prefix="frictionlab-batch") as ex:
-        nxt = packed(chunks[0])
+        cur = packed(chunks[0])
+        fut = ex.submit(batch.run, cur[2], threads)
         for k in range(len(chunks)):
-            idx, sub, b = nxt
-            fut = ex.submit(batch.run, b, threads)
-            if k + 1 < len(chunks):
-                nxt = packed(chunks[k + 1])
+            idx, sub, b = cur
+            nxt = packed(chunks[k + 1]) if k + 1 < len(chunks) else None
             fut.result()
+            if nxt is not None:
+                fut = ex.submit(batch.run, nxt[2], threads)
+                cur = nxt
             yield list(idx), batch.rows(b, sub)
 
 

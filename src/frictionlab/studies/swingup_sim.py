@@ -22,7 +22,7 @@ import numpy as np
 
 from ..config import Config
 from ..model._jit import jit
-from ..model.controller import Controller, compensator_levels
+from ..model.controller import Controller, compensator_levels, estimates
 from ..model.friction import KINDS, drifted_params, is_drifting, resolve_drift
 from ..model.sensor import measure
 from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick, record_tick
@@ -50,7 +50,6 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, s
                  fall_angle, out, phase_out):
     """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
     h = gp.h
-    w0 = gp.omega0
     drifting = is_drifting(fp)
     fpt = fp.copy()
     mem = 0.0
@@ -58,7 +57,7 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, s
     for k in range(n_ticks):
         th_m, arm_m, armd_m, x0 = measure(sens, x[0], x[2], x[3], k, x0)
         th_m = wrap_angle(th_m)
-        est = (s[0], w0 * s[1], s[2], s[3], s[5])
+        est = estimates(s, gp)
         u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
         balancing = w[W_PHASE] >= 1.0 and w[W_PHASE] <= 2.0
         fc_used, fs_used = compensator_levels(s, gp, cp)

@@ -42,6 +42,7 @@ import numpy as np
 
 from ...config import Config
 from ...io.notes import Note
+from ...model.friction import stribeck_magnitude
 from ...model.params import ParamError, check_range
 from ...model.rig import RigScaling
 from ...model.sensor import measure
@@ -414,8 +415,8 @@ def stribeck_model(v: np.ndarray, coulomb: float, stiction: float, viscous: floa
                    stribeck_velocity: float) -> np.ndarray:
     r"""Steady-state friction magnitude at speed :math:`|v|` (the curve of eq. 18):
     :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2} + F_v|v|`."""
-    a = np.abs(v)
-    return coulomb + (stiction - coulomb) * np.exp(-(a / stribeck_velocity) ** 2) + viscous * a
+    a = np.abs(np.asarray(v, dtype=float))
+    return stribeck_magnitude(a, coulomb, stiction, stribeck_velocity) + viscous * a
 
 
 def _steady_points(t, u, v, chunk: float, v_min: float) -> np.ndarray:

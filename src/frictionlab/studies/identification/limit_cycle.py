@@ -854,9 +854,11 @@ def _run_length(duration: float, window: float | None) -> tuple[float, float | N
     """``(duration, window)`` of a fit's runs, checked: duration > 0, window in
     (0, duration] or None."""
     if not (duration > 0 and math.isfinite(duration)):
-        raise ConfigError(f"duration must be > 0 s, got {duration}")
+        raise ConfigValueError("duration", duration, "(0, inf) s",
+                               f"duration must be > 0 s, got {duration}")
     if window is not None and not (0 < window <= duration):
-        raise ConfigError(f"window must be in (0, duration], got {window}")
+        raise ConfigValueError("window", window, f"(0, {duration:g}] s",
+                               f"window must be in (0, duration], got {window}")
     return float(duration), window
 
 
@@ -894,33 +896,27 @@ def fit_limit_cycle(
     experiments: Sequence[Experiment],
     keys: Sequence[str],
     *,
-    friction: str = "classical",
-    sets: Sequence[Any] = (),
-    bounds: Mapping[str, tuple[float, float]] | None = None,
-    weights: Mapping[str, float] | None = None,
-    duration: float = 30.0,
-    window: float | None = 20.0,
-    workers: int | None = None,
-    dask: str | None = None,
     seed: int = 0,
     maxiter: int = 40,
     popsize: int = 8,
     rel_step: float = 0.01,
-    evaluate: Evaluator | None = None,
     progress: Callable[[str, float], None] | None = None,
-    stiction_above_coulomb: bool = True,
     search_duration: float | None = None,
     search_window: float | None = None,
+    **problem: Any,
 ) -> FitResult:
     """Fit parameter keys to measured limit-cycle features (see the module docstring).
 
     Parameters
     ----------
-    experiments, keys, friction, sets, bounds, weights, duration, window,
-    dask, evaluate, stiction_above_coulomb
+    experiments, keys
         See :class:`LimitCycleProblem`.
-    workers : int, optional
-        Workers of the sweep engine.  ``None`` (without ``dask``): chosen
+    **problem
+        The problem's keywords, as :class:`LimitCycleProblem` takes them
+        (written once, there): ``friction``, ``sets``, ``bounds``,
+        ``weights``, ``duration`` (30 s), ``window`` (20 s), ``evaluate``,
+        ``workers``, ``dask``, ``stiction_above_coulomb``.  ``workers``
+        ``None`` (without ``dask``, the default): chosen
         once for the whole fit by :func:`frictionlab.studies.sweep.auto_workers`
         from the fit's largest number of runs (all cores unless the whole
         fit is under about half a second of serial work), not per
@@ -955,16 +951,14 @@ def fit_limit_cycle(
         raise ConfigError(f"maxiter must be >= 1 and popsize >= 2, got {maxiter}, {popsize}")
     if not 1e-5 <= rel_step <= 0.2:
         raise ConfigError(f"rel_step must be in [1e-5, 0.2], got {rel_step}")
-    prob = LimitCycleProblem(experiments, keys, friction=friction, sets=sets, bounds=bounds,
-                             weights=weights, duration=duration, window=window,
-                             evaluate=evaluate, workers=workers, dask=dask,
-                             stiction_above_coulomb=stiction_above_coulomb)
-    if workers is None and dask is None:
+    prob = LimitCycleProblem(experiments, keys, **problem)
+    if prob.workers is None and prob.dask is None:
         from ..sweep import auto_workers
 
-        prob.workers = auto_workers(prob.base, _max_runs(prob, maxiter, popsize), duration)
+        prob.workers = auto_workers(prob.base, _max_runs(prob, maxiter, popsize), prob.duration)
     search = prob
-    s_duration, s_window = search_settings(duration, window, search_duration, search_window)
+    s_duration, s_window = search_settings(prob.duration, prob.window, search_duration,
+                                           search_window)
     if (s_duration, s_window) != (prob.duration, prob.window):
         search = prob.with_runs(s_duration, s_window)
     report = progress or (lambda stage, f, c: None)
