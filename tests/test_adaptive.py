@@ -25,9 +25,6 @@ from frictionlab.model.adaptive import (
     regressor,
 )
 from frictionlab.model.controller import (
-    S_ADAPT,
-    S_FC_HAT,
-    S_FS_HAT,
     controller_step,
 )
 from frictionlab.model.friction import (
@@ -258,13 +255,13 @@ def test_controller_step_freezes_the_estimates_on_an_injected_nan_and_recovers()
     s = ctrl.init(0.0)
     for k in range(50):
         controller_step(s, gp, cp, 0.0, 0.0, 1.0 + 0.01 * k)
-    before = s[S_FC_HAT], s[S_FS_HAT]
+    before = s.fc_hat, s.fs_hat
     controller_step(s, gp, cp, 0.0, 0.0, math.nan)
-    assert s[S_ADAPT] == A_BAD and (s[S_FC_HAT], s[S_FS_HAT]) == before
+    assert s.adapt == A_BAD and (s.fc_hat, s.fs_hat) == before
     for _ in range(5):
         controller_step(s, gp, cp, 0.0, 0.0, 1.5)
-    assert np.all(np.isfinite(s[[S_FC_HAT, S_FS_HAT]]))
-    assert 0.05 <= s[S_FC_HAT] <= 6.0
+    assert np.all(np.isfinite([s.fc_hat, s.fs_hat]))
+    assert 0.05 <= s.fc_hat <= 6.0
 
 
 def test_controller_output_reports_the_adapted_levels():

@@ -125,15 +125,14 @@ def test_compensators_estimate_their_model_in_steady_sliding(compensator, v):
 
 
 def test_compensators_run_the_model_law_with_their_own_parameters(compensator):
-    """Bit for bit, a fixed compensator's estimate is ``friction_step`` of its
-    model kind with :func:`compensator_params`."""
-    if compensator.kind == "adaptive":
-        pytest.skip("the adaptive levels change every step; covered by test_adaptive")
-    code = compensator.code
-    p = compensator_params(compensator.params)
+    """Bit for bit, a compensator's estimate is ``friction_step`` of the law it
+    reports (its model kind with :func:`compensator_params`, the adaptive one's
+    with the levels it adapted to in that step)."""
     state = compensator.init()
-    law_state = 0.0
-    for v, u_fb, e in ((0.3, 0.5, 0.02), (0.01, 1.0, 0.0), (-2.0, 0.0, -0.1)):
-        f, state = compensator.step(state, v, u_fb=u_fb, e=e)
-        f_law, law_state = friction_step(code, p, law_state, v, u_fb, H, e)
-        assert f == f_law
+    for v, u_fb, e in ((0.3, 0.5, 0.02), (0.01, 1.0, 0.0), (-2.0, 0.0, -0.1), (1.4, 0.2, 0.3)):
+        f, new = compensator.step(state, v, u_fb=u_fb, e=e)
+        code, p, _ = compensator.law(new)
+        f_law, law_state = friction_step(code, p, compensator.law(state)[2], v, u_fb, H, e)
+        assert f == f_law and law_state == compensator.law(new)[2]
+        state = new
+

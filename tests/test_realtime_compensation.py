@@ -161,7 +161,6 @@ def test_a_glitched_velocity_reading_does_not_move_the_adapted_levels(tmp_path):
     on the sample that starts at it: the adapted levels do not move, and the run goes
     on to its end."""
     from frictionlab.model.adaptive import A_ADAPTING, A_BAD, A_PRESLIDING, A_STUCK
-    from frictionlab.model.controller import S_ADAPT, S_FC_HAT, S_FS_HAT
     from frictionlab.realtime.rigs import SimRig
 
     cfg = build_config("fast", "lugre", "adaptive",
@@ -175,8 +174,8 @@ def test_a_glitched_velocity_reading_does_not_move_the_adapted_levels(tmp_path):
             r = super().sample(k, deadline_ns)
             s = self.ctl._loop.state
             if s is not None:  # the controller state after tick k - 1
-                self.trace[k] = s[[S_ADAPT, S_FC_HAT, S_FS_HAT]].copy()
-                if self.glitch_at is None and k >= 400 and s[S_ADAPT] == A_ADAPTING:
+                self.trace[k] = np.array([s.adapt, s.fc_hat, s.fs_hat])
+                if self.glitch_at is None and k >= 400 and s.adapt == A_ADAPTING:
                     self.glitch_at = k
                     r = r._replace(v=r.v + 3.0 / self.scaling.velocity_scale)
             return r

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from frictionlab.config import ConfigError, build_config
-from frictionlab.model.controller import S_RELAY, S_ZHAT, controller_step
+from frictionlab.model.controller import controller_step
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime import loop as loop_mod
 from frictionlab.realtime.loop import Loop
@@ -175,8 +175,8 @@ def _replay_u(samples, params_at):
     for smp in samples:
         q = params_at(smp.k)
         if q.gp != p.gp and q.comp_kind != p.comp_kind:
-            s[S_RELAY] = 0.0
-            s[S_ZHAT] = 0.0
+            s.relay = 0.0
+            s.z_hat = 0.0
         p = q
         u, _, _ = controller_step(s, p.gp, p.cp, smp.theta_m, smp.arm_m, smp.arm_dot_m)
         out.append(u)

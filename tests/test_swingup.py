@@ -11,7 +11,7 @@ import pytest
 
 from frictionlab.cli import main
 from frictionlab.config import ConfigError, build_config
-from frictionlab.model.controller import S_ARM, S_X1, S_X2
+from frictionlab.model.controller import state_vector
 from frictionlab.model.plant import accelerations
 from frictionlab.model.swingup import (
     BALANCING,
@@ -139,11 +139,11 @@ def test_handover_initialises_the_observers_from_the_measurement():
     assert out.phase == "caught"
     # the balancing observers started at the measurement (and took one predictor step)
     h = cfg.design.h
-    assert s2[S_X1] == pytest.approx(0.2 + h * w2[4], abs=0.01)
-    assert s2[S_X2] * cfg.design.omega0 == pytest.approx(w2[4], abs=0.5)
-    assert s2[S_ARM] == pytest.approx(h * 0.3, abs=0.01)  # relative to the catch position
+    assert s2.x1 == pytest.approx(0.2 + h * w2[4], abs=0.01)
+    assert s2.x2 * cfg.design.omega0 == pytest.approx(w2[4], abs=0.5)
+    assert s2.arm == pytest.approx(h * 0.3, abs=0.01)  # relative to the catch position
     assert w2[5] == pytest.approx(1.5, rel=0.01)  # arm reference offset: the catch position
-    assert np.all(state[1] == 0.0)  # step does not modify its input
+    assert np.all(state_vector(state[1]) == 0.0)  # step does not modify its input
 
 
 def test_swingup_step_compiled_equals_the_step_method():

@@ -94,8 +94,8 @@ Safety
   when the control was saturated over the interval (the applied
   acceleration is not what the law assumes on a rig).
 
-The law's state lives in the controller's state vector (entries ``S_VHAT``,
-``S_VPREV``, ``S_FC_HAT``, ``S_FS_HAT``, ``S_ADAPT`` of
+The law's state lives in the controller's state record (fields ``v_hat``,
+``v_prev``, ``fc_hat``, ``fs_hat``, ``adapt`` of
 :mod:`frictionlab.model.controller`), so the simulator and the 200 Hz loop run it
 as part of the same compiled :func:`~frictionlab.model.controller.controller_step`.
 """
@@ -116,7 +116,7 @@ __all__ = [
     "regressor",
 ]
 
-#: Meaning of the adaptation status (controller state ``S_ADAPT``), index = code.
+#: Meaning of the adaptation status (controller state field ``adapt``), index = code.
 ADAPT_STATES = ("off", "adapting", "stuck", "presliding", "bad_signal", "saturated")
 A_OFF, A_ADAPTING, A_STUCK, A_PRESLIDING, A_BAD, A_SATURATED = range(6)
 

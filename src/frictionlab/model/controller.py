@@ -16,33 +16,38 @@ receive the applied u.  With compensation the applied signal is
 rather than u, which would make them predict an acceleration the
 compensation spends on friction.
 
-Controller state (explicit, a float64 vector)
----------------------------------------------
+Controller state (explicit, a numpy structured record of float64 fields)
+-------------------------------------------------------------------------
+:data:`STATE_DTYPE`; compiled code and Python read and set it by field name
+(``s.x1``); numba passes the record by reference, so the compiled step
+updates it in place.
+
 ====  =============  ==================================================
-idx   name           meaning
+pos   field          meaning
 ====  =============  ==================================================
-0     ``S_X1``       pendulum observer :math:`\hat\theta` (rad)
-1     ``S_X2``       pendulum observer :math:`\hat{\dot\theta}/\omega_0`
-2     ``S_ARM``      arm observer :math:`\hat\Omega` (rad)
-3     ``S_ARMDOT``   arm observer :math:`\hat{\dot\Omega}` (rad/s)
-4     ``S_RELAY``    compensator relay state (Coulomb) or stick flag
-5     ``S_ZHAT``     compensator LuGre bristle estimate :math:`\hat z`
-6     ``S_FHAT``     last friction estimate :math:`\hat F` (m/s^2)
-7     ``S_U``        last applied u (m/s^2)
-8     ``S_VHAT``     adaptive law: predicted arm velocity (rad/s)
-9     ``S_VPREV``    adaptive law: last measured arm velocity (rad/s)
-10    ``S_FC_HAT``   adaptive law: estimated Coulomb level (m/s^2)
-11    ``S_FS_HAT``   adaptive law: estimated stiction level (m/s^2)
-12    ``S_ADAPT``    adaptive law: status (:data:`frictionlab.model.adaptive.ADAPT_STATES`;
+0     ``x1``         pendulum observer :math:`\hat\theta` (rad)
+1     ``x2``         pendulum observer :math:`\hat{\dot\theta}/\omega_0`
+2     ``arm``        arm observer :math:`\hat\Omega` (rad)
+3     ``arm_dot``    arm observer :math:`\hat{\dot\Omega}` (rad/s)
+4     ``relay``      compensator relay state (Coulomb) or stick flag
+5     ``z_hat``      compensator LuGre bristle estimate :math:`\hat z`
+6     ``f_hat``      last friction estimate :math:`\hat F` (m/s^2)
+7     ``u``          last applied u (m/s^2)
+8     ``v_hat``      adaptive law: predicted arm velocity (rad/s)
+9     ``v_prev``     adaptive law: last measured arm velocity (rad/s)
+10    ``fc_hat``     adaptive law: estimated Coulomb level (m/s^2)
+11    ``fs_hat``     adaptive law: estimated stiction level (m/s^2)
+12    ``adapt``      adaptive law: status (:data:`frictionlab.model.adaptive.ADAPT_STATES`;
                      0 = not started: the next tick starts it)
-13    ``S_SLIDE``    adaptive law: distance slid since the arm last stopped (rad)
+13    ``slide``      adaptive law: distance slid since the arm last stopped (rad)
 ====  =============  ==================================================
 
 Compensator ``adaptive``: the LuGre observer run with the levels that the
 law of :mod:`frictionlab.model.adaptive` estimates from the applied u and the
 measured arm velocity (one tick of the law, then the observer, in the same
-compiled step).  Zeroing entries 4 and 5 and 8-13 (:func:`reset_compensator`) restarts a
-compensator from its parameters.
+compiled step).  Zeroing the fields ``relay``, ``z_hat`` and ``v_hat`` to
+``slide`` (:func:`reset_compensator`) restarts a compensator from its
+parameters.
 """
 
 from __future__ import annotations
@@ -78,6 +83,9 @@ __all__ = [
     "COMPENSATOR_KINDS",
     "DEFAULT_ERROR_SIGNAL",
     "ERROR_SIGNALS",
+    "NS",
+    "STATE_DTYPE",
+    "STATE_FIELDS",
     "Controller",
     "ControllerOutput",
     "Gains",
@@ -85,9 +93,16 @@ __all__ = [
     "compensator_levels",
     "compensator_params",
     "controller_step",
+    "copy_state",
     "estimates",
     "gains_record",
+    "new_state",
     "reset_compensator",
+    "state_index",
+    "state_record",
+    "state_vector",
+    "state_view",
+    "zero_state",
 ]
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}
@@ -106,9 +121,77 @@ COMPENSATOR_FIELDS = {
                  "sigma1_velocity", "observer_gain", "viscous_negative"} | _ADAPT,
 }
 
-S_X1, S_X2, S_ARM, S_ARMDOT, S_RELAY, S_ZHAT, S_FHAT, S_U = range(8)
-S_VHAT, S_VPREV, S_FC_HAT, S_FS_HAT, S_ADAPT, S_SLIDE = range(8, 14)
-NS = 14
+#: Fields of the controller state, in their storage order (see the module table).
+STATE_FIELDS = ("x1", "x2", "arm", "arm_dot", "relay", "z_hat", "f_hat", "u",
+                "v_hat", "v_prev", "fc_hat", "fs_hat", "adapt", "slide")
+#: The controller state's record type: one float64 per field of :data:`STATE_FIELDS`.
+STATE_DTYPE = np.dtype([(name, np.float64) for name in STATE_FIELDS], align=True)
+#: Number of floats in a controller state (its size as a float vector).
+NS = len(STATE_FIELDS)
+#: The compensator's fields (:func:`reset_compensator` zeroes them).
+_COMPENSATOR_STATE = ("relay", "z_hat", "v_hat", "v_prev", "fc_hat", "fs_hat", "adapt", "slide")
+
+
+def new_state(**values: float) -> np.record:
+    """A zeroed controller state record (fields set from ``values``), backed
+    by its own one-element array: compiled code updates it in place."""
+    s = np.zeros(1, STATE_DTYPE).view(np.recarray)[0]
+    for name, value in values.items():
+        setattr(s, name, value)
+    return s
+
+
+def copy_state(s) -> np.record:
+    """An independent copy of a controller state record."""
+    arr = np.zeros(1, STATE_DTYPE)
+    arr[0] = s
+    return arr.view(np.recarray)[0]
+
+
+def state_vector(s) -> np.ndarray:
+    """The controller state as a float vector (fields in :data:`STATE_FIELDS` order)."""
+    return np.array(s.tolist(), dtype=float)
+
+
+def state_index(name: str) -> int:
+    """Position of field ``name`` in :func:`state_vector` (and in :func:`state_view`'s vector)."""
+    return STATE_FIELDS.index(name)
+
+
+@jit_inline
+def state_view(x):
+    """The controller state record stored in the float vector ``x``
+    (:data:`NS` contiguous floats, :data:`STATE_FIELDS` order), by reference:
+    setting a field writes ``x``.  Compiled code only."""
+    return x.view(STATE_DTYPE)[0]
+
+
+@jit_inline
+def zero_state(s):
+    """Zero every field of the controller state record ``s`` in place (compiled
+    code too)."""
+    s.x1 = 0.0
+    s.x2 = 0.0
+    s.arm = 0.0
+    s.arm_dot = 0.0
+    s.relay = 0.0
+    s.z_hat = 0.0
+    s.f_hat = 0.0
+    s.u = 0.0
+    s.v_hat = 0.0
+    s.v_prev = 0.0
+    s.fc_hat = 0.0
+    s.fs_hat = 0.0
+    s.adapt = 0.0
+    s.slide = 0.0
+
+
+def state_record(x) -> np.record:
+    """The controller state record stored in the float64 vector ``x`` (:data:`NS`
+    contiguous floats, :data:`STATE_FIELDS` order), by reference: setting a
+    field, here or in compiled code, writes ``x``.  (Python side of
+    :func:`state_view`; pass a copy for an independent record.)"""
+    return np.asarray(x, dtype=np.float64).view(STATE_DTYPE).view(np.recarray)[0]
 
 #: Compensator code of ``adaptive`` (after the friction model codes).
 ADAPTIVE = 6
@@ -209,18 +292,18 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
     The compensators are the plant's friction laws
     (:func:`frictionlab.model.friction.friction_step`) run with the
     compensator's own parameters on the measured arm velocity: ``COULOMB``
-    the relay (state ``S_RELAY``), ``STRIBECK`` the classical model's
+    the relay (state ``relay``  ), ``STRIBECK`` the classical model's
     implementation form of Sec. 6.2 (the external force it balances inside
     the band is the feedback signal ``u_fb``; memoryless), ``LUGRE`` the
-    observer of eq. (19) over the sample (state ``S_ZHAT``).
+    observer of eq. (19) over the sample (state ``z_hat`` ).
 
     Parameters
     ----------
     kind : int
         Compensator code (0 none, ``COULOMB``, ``STRIBECK`` for the classical
         implementation form, ``LUGRE``).
-    s : ndarray
-        Controller state (relay and bristle entries are updated in place).
+    s : record of :data:`STATE_DTYPE`
+        Controller state (fields ``relay`` and ``z_hat`` are updated in place).
     cp : ndarray
         The compensator's packed friction parameters
         (:func:`compensator_params`).
@@ -237,10 +320,10 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
     if kind == CLASSICAL:
         kind = STRIBECK
     if kind == LUGRE:
-        f, s[S_ZHAT] = friction_step(LUGRE, cp, s[S_ZHAT], v, u_fb, h, e)
+        f, s.z_hat = friction_step(LUGRE, cp, s.z_hat, v, u_fb, h, e)
         return f
     if kind == COULOMB:
-        f, s[S_RELAY] = friction_step(COULOMB, cp, s[S_RELAY], v, u_fb, h, e)
+        f, s.relay = friction_step(COULOMB, cp, s.relay, v, u_fb, h, e)
         return f
     if kind == STRIBECK:
         f, _ = friction_step(STRIBECK, cp, 0.0, v, u_fb, h, e)
@@ -253,21 +336,21 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     """The ``adaptive`` compensator's estimate for the coming sample.
 
     One tick of :func:`frictionlab.model.adaptive.adaptation_step` (its state in
-    ``s``, with the last applied u in ``S_U``), then the LuGre observer of
+    ``s``, with the last applied u in ``u``  ), then the LuGre observer of
     eq. (19) (:func:`frictionlab.model.friction.friction_step`) with the adapted
     levels (both directions) in place of the compensator's
     ``coulomb``/``stiction``.  Updates ``s`` in place.
     """
-    st, fc, fs, vh, slide = adaptation_step(s[S_ADAPT], s[S_FC_HAT], s[S_FS_HAT], s[S_VHAT],
-                                            s[S_VPREV], s[S_SLIDE], s[S_U], v, cp, h,
+    st, fc, fs, vh, slide = adaptation_step(s.adapt, s.fc_hat, s.fs_hat, s.v_hat,
+                                            s.v_prev, s.slide, s.u, v, cp, h,
                                             arm_len, u_max)
-    s[S_SLIDE] = slide
-    s[S_ADAPT] = st
-    s[S_FC_HAT] = fc
-    s[S_FS_HAT] = fs
-    s[S_VHAT] = vh
-    s[S_VPREV] = v
-    f, s[S_ZHAT] = friction_step(LUGRE, with_levels(cp, fc, fs), s[S_ZHAT], v, 0.0, h, e)
+    s.slide = slide
+    s.adapt = st
+    s.fc_hat = fc
+    s.fs_hat = fs
+    s.v_hat = vh
+    s.v_prev = v
+    f, s.z_hat = friction_step(LUGRE, with_levels(cp, fc, fs), s.z_hat, v, 0.0, h, e)
     return f
 
 
@@ -277,16 +360,16 @@ def estimates(s, gp):
     :math:`(\\hat\\theta, \\hat{\\dot\\theta}, \\hat\\Omega,
     \\hat{\\dot\\Omega}, \\hat z)` (rad, rad/s, rad, rad/s, the LuGre
     compensator's bristle)."""
-    return s[S_X1], gp.omega0 * s[S_X2], s[S_ARM], s[S_ARMDOT], s[S_ZHAT]
+    return s.x1, gp.omega0 * s.x2, s.arm, s.arm_dot, s.z_hat
 
 
 @jit
 def compensator_levels(s, gp, cp):
     """The Coulomb and stiction levels the compensator uses: the adaptive
-    compensator's estimates (state ``S_FC_HAT``, ``S_FS_HAT``), a fixed
+    compensator's estimates (state ``fc_hat``  , ``fs_hat``  ), a fixed
     compensator's own ``coulomb``/``stiction``, (0, 0) without compensation."""
     if gp.compensator == ADAPTIVE:
-        return s[S_FC_HAT], s[S_FS_HAT]
+        return s.fc_hat, s.fs_hat
     if gp.compensator == 0:
         return 0.0, 0.0
     return levels(cp)
@@ -304,21 +387,20 @@ def compensator_params(params: FrictionParams) -> np.ndarray:
     return params.pack(zero_velocity_band=0.0)
 
 
-def reset_compensator(s: np.ndarray) -> None:
+def reset_compensator(s: np.record) -> None:
     """Zero the compensator's entries of a controller state (relay, bristle,
     adaptive law): the next tick starts the compensator afresh."""
-    s[S_RELAY] = 0.0
-    s[S_ZHAT] = 0.0
-    s[S_VHAT:S_SLIDE + 1] = 0.0
+    for name in _COMPENSATOR_STATE:
+        setattr(s, name, 0.0)
 
 
 @jit
 def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
-    """One controller tick; updates the state vector ``s`` in place.
+    """One controller tick; updates the state record ``s`` in place.
 
     Parameters
     ----------
-    s : ndarray (NS,)
+    s : record of :data:`STATE_DTYPE`
         Controller state (see the module table).
     gp : Gains
         Gains (:meth:`Controller.record`).
@@ -333,10 +415,10 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     """
     w0 = gp.omega0
     h = gp.h
-    th_hat = s[S_X1]
-    thd_hat = w0 * s[S_X2]
-    arm_hat = s[S_ARM]
-    armd_hat = s[S_ARMDOT]
+    th_hat = s.x1
+    thd_hat = w0 * s.x2
+    arm_hat = s.arm
+    armd_hat = s.arm_dot
     u_fb = -(gp.l1 * th_hat + gp.l2 * thd_hat + gp.l3 * arm_hat + gp.l4 * armd_hat)
     kind = gp.compensator
     f_hat = 0.0
@@ -362,16 +444,16 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     elif u < -umax:
         u = -umax
     u_obs = u - f_hat if gp.feed_net != 0.0 else u
-    x1n, x2n = pendulum_observer_step(s[S_X1], s[S_X2], theta_m, armd_hat, u_obs, gp.k1,
+    x1n, x2n = pendulum_observer_step(s.x1, s.x2, theta_m, armd_hat, u_obs, gp.k1,
                                       gp.k2, w0, gp.g, h)
     an, adn = arm_observer_step(arm_hat, armd_hat, arm_m, u_obs, gp.k3, gp.k4, h,
                                 gp.arm_length)
-    s[S_X1] = x1n
-    s[S_X2] = x2n
-    s[S_ARM] = an
-    s[S_ARMDOT] = adn
-    s[S_FHAT] = f_hat
-    s[S_U] = u
+    s.x1 = x1n
+    s.x2 = x2n
+    s.arm = an
+    s.arm_dot = adn
+    s.f_hat = f_hat
+    s.u = u
     return u, u_fb, f_hat
 
 
@@ -448,23 +530,22 @@ class Controller:
                       1.0 if (self.feed_net and self.compensation != "none") else 0.0)
         return gains, compensator_params(self.compensation_params)
 
-    def init(self, theta0: float = 0.0) -> np.ndarray:
-        """Initial state: the observers start at the first measured angle, at rest."""
-        s = np.zeros(NS)
-        s[S_X1] = theta0
-        return s
+    def init(self, theta0: float = 0.0) -> np.record:
+        """Initial state (a :data:`STATE_DTYPE` record): the observers start
+        at the first measured angle, at rest."""
+        return new_state(x1=theta0)
 
-    def step(self, state: np.ndarray, theta_m: float, arm_m: float, arm_dot_m: float):
+    def step(self, state: np.record, theta_m: float, arm_m: float, arm_dot_m: float):
         """One tick: ``(output, next_state)``; ``state`` is not modified."""
-        s = np.array(state, dtype=float, copy=True)
+        s = copy_state(state)
         gp, cp = self.record()
         w0 = self.design.spec.omega0
-        est = (s[S_X1], w0 * s[S_X2], s[S_ARM], s[S_ARMDOT])
+        est = (s.x1, w0 * s.x2, s.arm, s.arm_dot)
         u, u_fb, f_hat = controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m)
-        adapted = ((float(s[S_FC_HAT]), float(s[S_FS_HAT])) if self.compensation == "adaptive"
+        adapted = ((float(s.fc_hat), float(s.fs_hat)) if self.compensation == "adaptive"
                    else (float("nan"), float("nan")))
         out = ControllerOutput(float(u), float(u_fb), float(f_hat), *map(float, est),
-                               float(s[S_ZHAT]), *adapted)
+                               float(s.z_hat), *adapted)
         return out, s
 
 

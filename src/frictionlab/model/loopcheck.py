@@ -69,17 +69,14 @@ import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
 from .controller import (
-    NS,
-    S_ARM,
-    S_ARMDOT,
-    S_RELAY,
-    S_X1,
-    S_X2,
-    S_ZHAT,
     Controller,
     Gains,
     compensator_force,
     controller_step,
+    new_state,
+    state_index,
+    state_record,
+    state_vector,
 )
 from .friction import steady_bristle, stribeck_curve
 from .plant import PlantParams, linearize, rhs, zoh
@@ -111,7 +108,7 @@ VERDICTS = ("unstable", "compensator_unstable", "saturating", "ok")
 #: has neutral modes at exactly 1, e.g. a constant bristle offset).
 _TOL = 1e-6
 #: Controller states that are linear dynamic states (the relay is discrete).
-_PEND_ARM = (S_X1, S_X2, S_ARM, S_ARMDOT)
+_PEND_ARM = tuple(state_index(name) for name in ("x1", "x2", "arm", "arm_dot"))
 
 
 @dataclass(frozen=True)
@@ -238,19 +235,19 @@ def loop_matrices(controller: Controller, plant: PlantParams | None = None,
     gp, cp = _analysis_pack(controller, compensate)
     states = list(_PEND_ARM)
     if compensate and controller.compensation in ("lugre", "adaptive"):
-        states.append(S_ZHAT)
+        states.append(state_index("z_hat"))
     # sliding: the arm's friction is the compensator's own steady-state friction (its
     # premise), a static function of the speed; its slope enters the arm
     slope = (_steady_slope(controller, cp, arm_speed) if compensate and arm_speed != 0.0
              else 0.0)
     Phi, gam = _sampled_plant(plant, controller.design.spec.h, float(slope))
 
-    s0 = np.zeros(NS)
-    s0[S_ARMDOT] = arm_speed
     v = float(arm_speed)
+    rec0 = new_state(arm_dot=arm_speed)
     if v != 0.0:
-        s0[S_RELAY] = math.copysign(1.0, v)
-        s0[S_ZHAT] = steady_bristle(v, cp)
+        rec0.relay = math.copysign(1.0, v)
+        rec0.z_hat = steady_bristle(v, cp)
+    s0 = state_vector(rec0)
     x0 = np.array([0.0, 0.0, 0.0, v])
     c0 = s0[states]
     n_x, n = 4, 4 + len(states)
@@ -259,7 +256,8 @@ def loop_matrices(controller: Controller, plant: PlantParams | None = None,
         s = s0.copy()
         s[states] = c0 + dc
         x = x0 + dx
-        u, _, _ = controller_step(s, gp, cp, x[0] + w[0], x[2] + w[1], x[3] + w[2])
+        u, _, _ = controller_step(state_record(s), gp, cp, x[0] + w[0], x[2] + w[1],
+                                  x[3] + w[2])
         return np.concatenate([Phi @ dx + gam * u, s[states] - c0]), u
 
     M = np.zeros((n, n))
@@ -311,11 +309,10 @@ def _steady_slope(controller: Controller, cp: np.ndarray, v: float) -> float:
     dv = 1e-6 * max(1.0, abs(v))
     if controller.compensation in ("lugre", "adaptive"):
         return (stribeck_curve(v + dv, cp) - stribeck_curve(v - dv, cp)) / (2 * dv)
-    s = np.zeros(NS)
-    s[S_RELAY] = math.copysign(1.0, v)
     code, h = controller.compensator_code, controller.design.spec.h
-    hi = compensator_force(code, s.copy(), cp, v + dv, 0.0, 0.0, h)
-    lo = compensator_force(code, s.copy(), cp, v - dv, 0.0, 0.0, h)
+    relay = math.copysign(1.0, v)
+    hi = compensator_force(code, new_state(relay=relay), cp, v + dv, 0.0, 0.0, h)
+    lo = compensator_force(code, new_state(relay=relay), cp, v - dv, 0.0, 0.0, h)
     return (hi - lo) / (2 * dv)
 
 

@@ -79,13 +79,11 @@ import numpy as np
 from ._jit import jit
 from .controller import (
     NS,
-    S_ARM,
-    S_ARMDOT,
-    S_RELAY,
-    S_X1,
-    S_X2,
-    S_ZHAT,
     controller_step,
+    state_index,
+    state_record,
+    state_vector,
+    state_view,
 )
 from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
 from .limit_cycles import LimitCycleFeatures, _crossings, features
@@ -118,6 +116,11 @@ I_S = NX_PLANT  # first controller entry
 I_MEM = NX_PLANT + NS
 NL = I_MEM + 1
 
+
+def _entries(*fields: str) -> list[int]:
+    """Positions in the loop state of the named controller-state fields."""
+    return [I_S + state_index(name) for name in fields]
+
 # return codes of the section kernel
 R_OK, R_FELL, R_NO_RETURN = 0, 1, 2
 
@@ -137,7 +140,7 @@ def loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp):
     :func:`frictionlab.model.simulation.simulate_config` does.
     """
     x = X[:NX_PLANT]
-    s = X[I_S:I_MEM]
+    s = state_view(X[I_S:I_MEM])
     th_m, arm_m, armd_m, _ = reading(sp, x[0], x[2], x[3], False, x0)
     u, _u_fb, _f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
     _f, mem = _plant_step(x, u, X[I_MEM], substeps, ratio, h, pp, fkind, fp)
@@ -223,7 +226,7 @@ class _Loop:
         """The simulator's initial loop state (``sim.initial_angle``, at rest)."""
         X = np.zeros(NL)
         X[0] = self.cfg.sim.initial_angle
-        X[I_S:I_MEM] = self.controller.init(self.cfg.sim.initial_angle)
+        X[I_S:I_MEM] = state_vector(self.controller.init(self.cfg.sim.initial_angle))
         return X
 
     def record(self, X: np.ndarray, n: int) -> np.ndarray:
@@ -238,11 +241,11 @@ class _Loop:
 
     def free_indices(self) -> np.ndarray:
         """Continuous loop-state entries that vary on the section (theta excluded)."""
-        idx = [1, 2, 3, I_S + S_X1, I_S + S_X2, I_S + S_ARM, I_S + S_ARMDOT]
+        idx = [1, 2, 3, *_entries("x1", "x2", "arm", "arm_dot")]
         if self.fkind == LUGRE:
             idx += [4, I_MEM]
         if self.controller.compensation in ("lugre", "adaptive"):
-            idx.append(I_S + S_ZHAT)
+            idx += _entries("z_hat")
         return np.array(sorted(idx))
 
     def mirror(self, X: np.ndarray) -> np.ndarray:
@@ -308,7 +311,7 @@ class LinearLoop:
 
 
 #: Loop-state entries of the linear loop's state (plant, then observers).
-_LIN_IDX = np.array([0, 1, 2, 3, I_S + S_X1, I_S + S_X2, I_S + S_ARM, I_S + S_ARMDOT])
+_LIN_IDX = np.array([0, 1, 2, 3, *_entries("x1", "x2", "arm", "arm_dot")])
 
 
 def linear_loop(cfg: Config, eps: float = 1e-7) -> LinearLoop:
@@ -336,7 +339,7 @@ def linear_loop(cfg: Config, eps: float = 1e-7) -> LinearLoop:
         # one tick with the input w added to the controller's u: run the
         # controller, then the plant with u + w / k_u, through the same kernels
         x = X[:NX_PLANT]
-        s = X[I_S:I_MEM]
+        s = state_record(X[I_S:I_MEM])
         u, _, _ = controller_step(s, gp, loop.cp, x[0], x[2], x[3])
         _plant_step(x, u + w / ku, 0.0, loop.substeps, loop.ratio, loop.h, loop.pp, NONE,
                     loop.fp)
@@ -441,7 +444,8 @@ def _interp_crossing(before, after, fkind):
     X[0] = 0.0
     # relay states do not interpolate: take the nearer tick's
     near = after if a >= 0.5 else before
-    X[I_S + S_RELAY] = near[I_S + S_RELAY]
+    (i_relay,) = _entries("relay")
+    X[i_relay] = near[i_relay]
     if fkind != LUGRE:
         X[I_MEM] = near[I_MEM]
     return X, a
@@ -739,7 +743,7 @@ def orbit_trajectory(cfg: Config, state: np.ndarray, duration: float) -> Traject
 def _trajectory(loop: _Loop, state: np.ndarray, duration: float) -> Trajectory:
     n = max(1, round(duration / loop.h))
     x = np.array(state[:NX_PLANT], dtype=float)
-    s = np.array(state[I_S:I_MEM], dtype=float)
+    s = state_record(np.array(state[I_S:I_MEM], dtype=float))
     out = np.zeros((n, NC))
     done, status, _, _ = _run(x, float(state[I_MEM]), n, loop.substeps, loop.ratio, loop.pp,
                               loop.fkind, loop.fp, loop.gp, loop.cp, s, loop.sensor, 1,

@@ -64,7 +64,7 @@ import numpy as np
 from ._jit import jit, jit_inline
 from .controller import (
     DEFAULT_ERROR_SIGNAL,
-    NS,
+    STATE_DTYPE,
     Controller,
     compensator_levels,
     controller_step,
@@ -515,7 +515,7 @@ def simulate_config(
     x = np.zeros(5)
     x[0] = cfg.sim.initial_angle
     s = ctrl.init(cfg.sim.initial_angle)
-    assert s.shape == (NS,)
+    assert s.dtype == STATE_DTYPE
     out = np.zeros((n, NC)) if record else np.zeros((1, NC))
     sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)

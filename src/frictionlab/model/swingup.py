@@ -110,7 +110,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import jit
-from .controller import NS, S_ARMDOT, S_X1, S_X2, Controller, controller_step
+from .controller import Controller, controller_step, copy_state, new_state, zero_state
 from .params import Validated, param
 
 __all__ = [
@@ -224,8 +224,8 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     ----------
     w : ndarray (NW,)
         Swing-up state (module table).
-    s : ndarray (NS,)
-        The balancing controller's state (:mod:`frictionlab.model.controller`),
+    s : record
+        The balancing controller's state record (:mod:`frictionlab.model.controller`),
         initialised here at a catch.
     gp, cp : ndarray
         The balancing controller's packed gains and compensator parameters.
@@ -284,11 +284,10 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
         w[W_CATCH] = w[W_T] - 1.0
         w[W_NCATCH] += 1.0
         w[W_OFF] = arm_m
-        for i in range(s.shape[0]):
-            s[i] = 0.0
-        s[S_X1] = th_m
-        s[S_X2] = thd / gp.omega0
-        s[S_ARMDOT] = arm_dot_m
+        zero_state(s)
+        s.x1 = th_m
+        s.x2 = thd / gp.omega0
+        s.arm_dot = arm_dot_m
     if phase == CAUGHT and w[W_PT] >= sp[P_SETTLE]:
         phase = BALANCING
         w[W_PT] = 0.0
@@ -338,17 +337,17 @@ class SwingUp:
         d = self.controller.design
         return gp, cp, self.params.pack(d.spec.omega0, d.g, d.spec.h)
 
-    def init(self, theta0: float = math.pi) -> tuple[np.ndarray, np.ndarray]:
+    def init(self, theta0: float = math.pi) -> tuple[np.ndarray, np.record]:
         """Initial ``(w, s)``: swinging, the observer at the first measured angle, at rest."""
         w = np.zeros(NW)
         w[W_TH] = wrap_angle(float(theta0))
         w[W_CATCH] = -1.0
-        return w, np.zeros(NS)
+        return w, new_state()
 
     def step(self, state, theta_m: float, arm_m: float, arm_dot_m: float):
         """One tick: ``(output, next_state)``; ``state`` (w, s) is not modified."""
         w = np.array(state[0], dtype=float, copy=True)
-        s = np.array(state[1], dtype=float, copy=True)
+        s = copy_state(state[1])
         gp, cp, sp = self.pack()
         u, _, _ = swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m)
         out = SwingUpOutput(float(u), PHASES[int(w[W_PHASE])], float(w[W_E]), float(w[W_TH]),

@@ -16,7 +16,6 @@ from pathlib import Path
 
 from ..config import Config
 from ..model.adaptive import ADAPT_STATES
-from ..model.controller import S_ADAPT, S_FC_HAT, S_FS_HAT
 from ..model.rig import RigScaling
 from .clock import MonotonicClock
 from .datalog import LogWriter, link_no_clobber, writer_identity
@@ -525,9 +524,9 @@ class RealtimeController:
         out = {"start": {"coulomb": start.coulomb, "stiction": start.stiction},
                "coulomb": start.coulomb, "stiction": start.stiction, "status": "off"}
         s = loop.state if loop is not None else None
-        if s is not None and s[S_ADAPT] > 0:
-            out.update(coulomb=float(s[S_FC_HAT]), stiction=float(s[S_FS_HAT]),
-                       status=ADAPT_STATES[int(s[S_ADAPT])])
+        if s is not None and s.adapt > 0:
+            out.update(coulomb=float(s.fc_hat), stiction=float(s.fs_hat),
+                       status=ADAPT_STATES[int(s.adapt)])
         return out
 
     def _plant_friction(self) -> str | None:

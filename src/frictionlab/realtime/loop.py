@@ -92,12 +92,8 @@ from dataclasses import dataclass
 from ..model import sensor
 from ..model.controller import (
     ADAPTIVE,
-    S_ARM,
-    S_ARMDOT,
-    S_X1,
-    S_X2,
-    S_ZHAT,
     controller_step,
+    copy_state,
     reset_compensator,
 )
 from ..model.params import Validated, param
@@ -464,7 +460,7 @@ class Loop:
                 if now() < deadline:
                     # bring the tick's code and data back into the caches (see docstring)
                     if s is not None:
-                        controller_step(s.copy(), gp, cp, theta, arm, arm_dot)
+                        controller_step(copy_state(s), gp, cp, theta, arm, arm_dot)
                     rig_warm()
                     spin_until(deadline)
             else:
@@ -594,11 +590,11 @@ class Loop:
                                 math.remainder(theta, _TWO_PI)) <= angle_limit)):
                         raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
                                     f"{angle_limit} rad", r)
-                    th_hat = s[S_X1]
-                    thd_hat = w0 * s[S_X2]
-                    arm_hat = s[S_ARM]
-                    armd_hat = s[S_ARMDOT]
-                    z_hat = s[S_ZHAT]
+                    th_hat = s.x1
+                    thd_hat = w0 * s.x2
+                    arm_hat = s.arm
+                    armd_hat = s.arm_dot
+                    z_hat = s.z_hat
                     if ramp_k < ramp_n:
                         ramp_k += 1
                         if ramp_k == ramp_n:

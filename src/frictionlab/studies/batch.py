@@ -41,7 +41,7 @@ import numpy as np
 
 from ..config import Config
 from ..model._jit import _njit, jit, jit_parallel
-from ..model.controller import NS, gains_record
+from ..model.controller import NS, gains_record, state_vector, state_view
 from ..model.friction import KINDS, resolve_drift
 from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
 from ..model.plant import plant_record
@@ -82,7 +82,7 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     """
     x = np.zeros(5)
     x[0] = x0[i]
-    s = s0[i].copy()
+    s = state_view(s0[i].copy())  # the controller state record, on a copy of row i
     sp = sensor_record(sens[i])
     plant = plant_record(pp[i])
     gains = gains_record(gp[i])
@@ -197,7 +197,8 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
             ctrl = make_controller(cfg)
             g, c = ctrl.record()
             shared = (np.array(g, dtype=float),  # gains_record reads it back
-                      c, ctrl.init(cfg.sim.initial_angle), cfg.plant.record(),
+                      c, state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
+                      cfg.plant.record(),
                       np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
             last_key = key
         gp.append(shared[0])

@@ -87,17 +87,12 @@ from ..model.controller import (
     COMPENSATORS,
     DEFAULT_ERROR_SIGNAL,
     ERROR_SIGNALS,
-    NS,
-    S_RELAY,
-    S_SLIDE,
-    S_U,
-    S_VHAT,
-    S_ZHAT,
     adaptive_force,
     compensator_force,
     compensator_params,
+    new_state,
 )
-from ..model.friction import FrictionParams
+from ..model.friction import LUGRE, FrictionParams, with_levels
 from ..model.rig import RigScaling
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
@@ -144,8 +139,8 @@ class CompensatorState:
     adaptation : tuple of float
         The adaptive law's state (``adaptive`` only): predicted and last
         measured arm velocity, the estimated F_C and F_S, the status code and
-        the distance slid (the controller's entries ``S_VHAT`` ...
-        ``S_SLIDE``); empty before the first step.
+        the distance slid (the controller state's fields ``v_hat`` ...
+        ``slide``); empty before the first step.
     """
 
     relay: float = 0.0
@@ -197,6 +192,15 @@ class Compensator:
         """Initial state: relay undecided, bristle at ``z_hat`` (default relaxed)."""
         return CompensatorState(0.0, float(z_hat), 0.0)
 
+    def law(self, state: CompensatorState) -> tuple[int, np.ndarray, float]:
+        """The friction law this compensator runs as of ``state``: ``(code, p,
+        law_state)`` such that its estimate of a step from a state ``prev`` to
+        ``state`` is ``friction_step(code, p, law(prev)[2], v, u_fb, h, e)``
+        (:func:`frictionlab.model.friction.friction_step`): its model kind, its
+        packed parameters (the adaptive one's with its levels as of ``state``)
+        and the law's memory (the relay, else the bristle)."""
+        return self.code, self._cp, state.relay if self.kind == "coulomb" else state.z_hat
+
     def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0,
              e: float = 0.0) -> tuple[float, CompensatorState]:
         """Friction estimate for the coming sample.
@@ -219,12 +223,10 @@ class Compensator:
             ``F_hat`` in m/s^2 (added to u).  For LuGre it is the mean of
             eq. (19)'s :math:`\\hat F` over the sample with v held.
         """
-        s = np.zeros(NS)
-        s[S_RELAY] = state.relay
-        s[S_ZHAT] = state.z_hat
+        s = new_state(relay=state.relay, z_hat=state.z_hat)
         f = float(compensator_force(self.code, s, self._cp, float(v), float(u_fb), float(e),
                                     float(self.h)))
-        return f, CompensatorState(float(s[S_RELAY]), float(s[S_ZHAT]), f)
+        return f, CompensatorState(float(s.relay), float(s.z_hat), f)
 
 
 @dataclass(frozen=True)
@@ -280,16 +282,28 @@ class AdaptiveCompensator(LuGreCompensator):
         """Friction estimate for the coming sample: one tick of the adaptation law
         (with ``u_prev``, the control applied over the last sample), then the
         observer with the adapted levels.  See :meth:`Compensator.step`."""
-        s = np.zeros(NS)
-        s[S_ZHAT] = state.z_hat
+        s = new_state(z_hat=state.z_hat, u=u_prev)
         if state.adaptation:
-            s[S_VHAT:S_SLIDE + 1] = state.adaptation
-        s[S_U] = u_prev
+            for name, value in zip(_ADAPTATION_FIELDS, state.adaptation, strict=True):
+                setattr(s, name, value)
         f = float(adaptive_force(s, self._cp, float(v), float(e), float(self.h),
                                  float(self.arm_length), float(self.u_max)))
-        return f, CompensatorState(0.0, float(s[S_ZHAT]), f,
-                                   tuple(float(x) for x in s[S_VHAT:S_SLIDE + 1]))
+        return f, CompensatorState(0.0, float(s.z_hat), f,
+                                   tuple(float(getattr(s, name)) for name in _ADAPTATION_FIELDS))
 
+    def law(self, state: CompensatorState) -> tuple[int, np.ndarray, float]:
+        """LuGre with the levels the adaptation had reached by ``state`` (both
+        directions); see :meth:`Compensator.law`."""
+        fc = fs = None
+        if state.adaptation:
+            named = dict(zip(_ADAPTATION_FIELDS, state.adaptation, strict=True))
+            fc, fs = named["fc_hat"], named["fs_hat"]
+        p = self._cp if fc is None else with_levels(self._cp, fc, fs)
+        return LUGRE, p, state.z_hat
+
+
+#: The controller state's fields of the adaptive law (:class:`CompensatorState.adaptation`).
+_ADAPTATION_FIELDS = ("v_hat", "v_prev", "fc_hat", "fs_hat", "adapt", "slide")
 
 _CLASSES = {"coulomb": CoulombCompensator, "classical": ClassicalCompensator,
             "lugre": LuGreCompensator, "adaptive": AdaptiveCompensator}
