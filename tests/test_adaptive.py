@@ -190,6 +190,7 @@ def test_adaptation_freezes_in_presliding_and_when_saturated():
     assert st == A_ADAPTING and (fc, fs) != (1.5, 2.3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("factor, grows", [(0.9, False), (1.1, True)])
 def test_discrete_stability_bound(factor, grows):
     """Arm sliding at a constant 6 rad/s (|phi| = 1): the error of the law's

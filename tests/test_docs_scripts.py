@@ -16,6 +16,7 @@ def test_there_are_scripts():
     assert len(SCRIPTS) >= 4
 
 
+@pytest.mark.slow  # a script's imports (plotting, compiled kernels): up to seconds
 @pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: p.name)
 def test_a_docs_script_imports_what_exists(path):
     ns = runpy.run_path(str(path), run_name="docs_script_under_test")

@@ -45,6 +45,7 @@ def test_stribeck_curve_closed_form(v, fs, fc, fv, vs):
 
 
 @settings(max_examples=200, deadline=None)
+@pytest.mark.slow
 @given(v=st.floats(-20, 20), fe=st.floats(-20, 20), fs=levels, fc=levels,
        band=st.floats(0, 0.1), kind=st.sampled_from(["viscous", "coulomb", "classical",
                                                      "stribeck"]))

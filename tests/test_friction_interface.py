@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from frictionlab.model.controller import COMPENSATORS, compensator_params
+from frictionlab.model.controller import COMPENSATORS
 from frictionlab.model.friction import (
     KINDS,
     MODELS,

@@ -133,7 +133,7 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     host, port = rig_sim
     # a wide angle limit: a pause of this shared machine must not end the run early
     proc = popen(["run", "--headless", "--duration", "60", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "100",
                   "--max-pause", "0.5", "--log-dir", str(tmp_path)],
                  stdout=subprocess.DEVNULL)
     try:
@@ -174,7 +174,7 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
 def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "100",
                   "--max-pause", "0.5", "--log-dir", str(tmp_path)])
     try:
         wait_running(tmp_path, proc)
@@ -366,7 +366,7 @@ def test_a_signal_during_the_handshake_ends_the_run_with_only_a_zero_command(tmp
 def test_ctrl_z_stops_the_run_then_suspends(tmp_path, rig_sim):
     host, port = rig_sim
     proc = popen(["run", "--headless", "--duration", "60", "--json", "--backend",
-                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "40",
+                  f"udp://{host}:{port}", "--angle-limit", "1.2", "--silent-periods", "100",
                   "--max-pause", "0.5", "--log-dir", str(tmp_path)])
     try:
         csv, _ = wait_running(tmp_path, proc)
@@ -436,13 +436,15 @@ def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
     import resource
 
     def limit():
-        resource.setrlimit(resource.RLIMIT_FSIZE, (150_000, 150_000))
+        # about 280 rows of CSV (1.4 s): the run lasts no longer than the test needs
+        resource.setrlimit(resource.RLIMIT_FSIZE, (40_000, 40_000))
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # numba's cache writes too
 
     host, port = rig_sim
     proc = subprocess.run([*CLI, "run", "--headless", "--duration", "60", "--json",
                            "--backend", f"udp://{host}:{port}", "--angle-limit", "1.2",
-                           "--silent-periods", "40", "--max-pause", "0.5",
+                           # a rig silent for 0.5 s (a stalled host) tolerated, as a pause
+                           "--silent-periods", "100", "--max-pause", "0.5",
                            "--log-dir", str(tmp_path)],
                           capture_output=True, text=True, timeout=120, preexec_fn=limit)
     assert proc.returncode == 1, proc.stderr

@@ -20,6 +20,7 @@ from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
 NOISY = ["sim.quantization=1", "sim.noise=0.002", "sim.seed=11", "sim.initial_angle=0.05"]
 
 
+@pytest.mark.slow
 def test_noise_stream_is_standard_normal_and_a_function_of_seed_sample_channel():
     z = np.array([[S.noise(7, n, c) for c in range(3)] for n in range(20000)])
     assert abs(z.mean()) < 0.02 and abs(z.std() - 1.0) < 0.02
