@@ -62,10 +62,12 @@ def stop(proc):
 
 
 #: Slack for a loaded 2-core test machine: the rig-sim process or the loop not scheduled
-#: for 10 ms or more stops a run as rig_silent or paused, as it should on a rig.  What is
+#: for 10 ms or more stops a run as rig_silent or paused, as it should on a rig (the
+#: rig's replies were seen 2-18 ms late for seconds beside another real-time test: half
+#: a second either way, as for the other real-time tests, docs/development.md).  What is
 #: tested here is the experiments, not those stops (tests/test_realtime_*): the runs get
 #: slack, and a run a stalled host stopped anyway is repeated, up to twice.
-SLACK = ("--silent-periods", "40", "--max-pause", "0.5")
+SLACK = ("--silent-periods", "100", "--max-pause", "0.5")
 LOAD_STOPS = ("stopped before it finished: rig_silent", "stopped before it finished: paused")
 
 

@@ -279,7 +279,7 @@ def test_run_headless_swing_up_against_rig_sim_started_hanging_over_udp(tmp_path
         for _attempt in range(3):
             run = subprocess.run([*cli, "run", "--headless", "--swing-up", "--duration", "8",
                                   "--json", "--backend", f"udp://{info['host']}:{info['port']}",
-                                  "--silent-periods", "40", "--max-pause", "0.5",
+                                  "--silent-periods", "100", "--max-pause", "0.5",
                                   "--log-dir", str(tmp_path)],
                                  capture_output=True, text=True, timeout=120)
             if not any(f"stopped: {r}" in run.stderr for r in ("paused", "rig_silent")):
