@@ -29,7 +29,7 @@ jitter p99 < 1 ms, missed <= 0.05 %, no unaccounted stall > 50 ms, compute
 p99 < 200 us, 0 dropped log samples.
 
 The last printed line is one JSON object: ``{"runs": [...], "targets":
-{...}, "all_targets_met": bool}``; each run holds the INTERFACE fields
+{...}, "all_targets_met": bool}``; each run holds the fields of `run --json`
 (``ticks``, ``missed``, ``overruns``, ``jitter_ms``, ``compute_us``,
 ``stop_reason``, ``log``) and the figures above.
 

@@ -26,7 +26,7 @@ from frictionlab.realtime.datalog import read_csv_log, read_sidecar
 from frictionlab.realtime.rigsim import send_control
 from frictionlab.realtime.samples import MISSED, STOP
 
-INTERFACE_KEYS = {"ticks", "missed", "overruns", "jitter_ms", "compute_us", "stop_reason", "log"}
+RUN_JSON_KEYS = {"ticks", "missed", "overruns", "jitter_ms", "compute_us", "stop_reason", "log"}
 CLI = [sys.executable, "-m", "frictionlab"]
 
 
@@ -106,7 +106,7 @@ def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     st = json.loads(out.stdout)
-    assert set(st) == INTERFACE_KEYS
+    assert set(st) == RUN_JSON_KEYS
     assert set(st["jitter_ms"]) == {"p50", "p99", "max"} and set(st["compute_us"]) == {
         "p50", "p99"}
     assert st["stop_reason"] == "duration" and st["ticks"] + st["missed"] == 2000
@@ -185,7 +185,7 @@ def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
             proc.kill()
     assert proc.returncode == 0, stderr
     st = json.loads(stdout)
-    assert set(st) == INTERFACE_KEYS and st["stop_reason"] == "signal"
+    assert set(st) == RUN_JSON_KEYS and st["stop_reason"] == "signal"
     log = read_csv_log(st["log"])
     assert int(log["flags"][-1]) & STOP and log["u_da"][-1] == 0.0
     meta = json.loads(Path(st["log"]).with_suffix(".json").read_text())

@@ -174,7 +174,7 @@ MAX_ITER, MAX_POPSIZE = 100_000, 1000
 
 #: The fields of ``identify limit-cycle --json`` (docs/cli.md); the rest of
 #: :meth:`FitResult.to_json` goes to ``--report FILE.json``.
-INTERFACE_FIELDS = ("estimate", "stderr", "residuals", "cost")
+PUBLIC_FIELDS = ("estimate", "stderr", "residuals", "cost")
 
 
 def _write_report(path: str, obj: dict) -> None:
@@ -278,7 +278,7 @@ def cmd_limit_cycle(args) -> int:
         _write_report(args.report, report)
         print(f"full report: {args.report}", file=err)
     if args.json:
-        emit_json({k: result.to_json()[k] for k in INTERFACE_FIELDS})
+        emit_json({k: result.to_json()[k] for k in PUBLIC_FIELDS})
     else:
         print("estimate:")
         for k, v in result.estimate.items():
