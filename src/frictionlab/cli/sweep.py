@@ -72,10 +72,17 @@ def _key_cell(v: Any) -> str:
 
 def _one_table(rows: Sequence[Mapping[str, Any]], keys: Sequence[str]) -> str:
     with_status = any(r["status"] != "limit_cycle" for r in rows)
-    head = [*keys, *(h for _, h in TABLE_HEADERS)] + (["status"] if with_status else [])
+    swing_up = any("caught" in r for r in rows)
+    head = ([*keys, *(h for _, h in TABLE_HEADERS)] + (["caught", "catch time"] if swing_up
+                                                         else [])
+            + (["status"] if with_status else []))
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for r in rows:
         cells = [_key_cell(r[k]) for k in keys] + [_cell(r[f]) for f, _ in TABLE_HEADERS]
+        if swing_up:
+            caught = r.get("caught")
+            cells += ["-" if caught is None else ("yes" if caught else "no"),
+                      _cell(r.get("catch_time"))]
         if with_status:
             cells.append(r["status"])
         lines.append("| " + " | ".join(cells) + " |")
@@ -106,7 +113,8 @@ def markdown_table(rows: Sequence[Mapping[str, Any]],
     """Markdown table(s) shaped like the thesis's Tables 2-7 (one parameter per table).
 
     Columns: the varied key(s), peak1, peak2, valley, T, max(u), max(Ω̇)
-    (three significant digits; ``-`` where undefined), plus ``status`` when
+    (three significant digits; ``-`` where undefined), plus ``caught`` and
+    ``catch time`` (s) for a sweep with ``--swing-up`` and ``status`` when
     some row is not a limit cycle.  In ``oat`` mode with several keys, one
     table per key (blank line between), each with its own key column only.
 
