@@ -220,6 +220,29 @@ def test_loop_runs_the_simulators_swing_up_tick_for_tick(tmp_path):
     np.testing.assert_array_equal((flags & CAUGHT_FLAG) != 0, phase == 1)
 
 
+def test_a_design_change_mid_swing_reaches_the_swing_up(tmp_path):
+    """The swing-up's observer and energy use the design's omega_0: a change of it
+    while swinging is in effect for the swing-up from the same tick as for the
+    balancing controller."""
+    from frictionlab.model.swingup import P_W0
+    from frictionlab.realtime import FakeClock, RealtimeController
+
+    cfg = build_config("fast", "classical", sets=[HANGING])
+    clock = FakeClock()
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=clock, duration=0.5,
+                             realtime=False, manage_gc=False, sim_lockstep=True,
+                             swing_up=True)
+    seen = {}
+    t0 = clock.now_ns()
+    clock.call_at(t0 + round(0.2e9), lambda: seen.update(
+        fut=ctl.submit({"set": {"design.omega0": 6.3}}, confirm=True)))
+    st = ctl.run()
+    assert st["stop_reason"] == "duration" and st["swing_up"]["phase"] == "swinging"
+    assert seen["fut"].result(timeout=0) is not None  # applied during the run
+    assert ctl._loop.params.gp.omega0 == 6.3
+    assert ctl._loop._sp[P_W0] == 6.3
+
+
 @pytest.mark.parametrize("limit,reason", [("swingup.time_limit=1", "not_caught"),
                                           ("swingup.arm_limit=0.5", "arm_travel")])
 def test_loop_swing_up_stops_with_its_reason_and_zeroes_the_motor(tmp_path, limit, reason):

@@ -663,6 +663,9 @@ class Loop:
                     applied.append(mailbox.popleft())
                 params = applied[-1][0]
                 self.params = params
+                if swing:
+                    # the swing-up's observer and energy use the design's omega_0 too
+                    sp = self._sp = SwingUp(params.controller, self.swingup).pack()[2]
                 l_now = gp.feedback
                 gp, cp = params.gp, params.cp
                 if ramp_n and s is not None and not (l_now == gp.feedback).all():
