@@ -261,15 +261,15 @@ def test_hello_resets_the_rig_s_command_sequence(cfg):
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
 def test_a_non_finite_u_stops_in_the_tick_that_computes_it(cfg, tmp_path, monkeypatch, bad):
-    real_step = loop_mod.controller_step
+    real_step = loop_mod.controller_step_rows
     calls = []
 
-    def step(s, gp, cp, theta, arm, arm_dot):
-        u, u_fb, f_hat = real_step(s, gp, cp, theta, arm, arm_dot)
+    def step(x, g, cp, theta, arm, arm_dot):
+        u, u_fb, f_hat = real_step(x, g, cp, theta, arm, arm_dot)
         calls.append(u)
         return (bad if len(calls) == 300 else u), u_fb, f_hat
 
-    monkeypatch.setattr(loop_mod, "controller_step", step)
+    monkeypatch.setattr(loop_mod, "controller_step_rows", step)
     emu, tx, stats = run(cfg, tmp_path)
     assert stats["stop_reason"] == "nonfinite_u" and repr(bad) in stats["stop_detail"]
     # the controller ran once before the loop (compilation), then once per tick

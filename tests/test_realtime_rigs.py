@@ -149,6 +149,56 @@ def test_a_host_pause_during_the_wait_is_not_a_silent_rig(cfg, pause_ms):
         assert rig.late_replies == 1
 
 
+class _LaggingTransport(DirectTransport):
+    """While ``lag`` is set the rig's replies are held back (a rig process the host does
+    not schedule); ``release`` delivers them all, oldest first."""
+
+    def __init__(self, emulator, clock):
+        super().__init__(emulator, clock)
+        self.lag = False
+        self.held: list[bytes] = []
+
+    def send(self, data):
+        super().send(data)
+        if self.lag:
+            self.held.extend(self._replies)
+            self._replies.clear()
+
+    def release(self):
+        self._replies.extend(self.held)
+        self.held = []
+
+
+@pytest.mark.parametrize("behind", [3, 200, 1000])
+def test_replies_late_by_as_many_ticks_as_the_loop_tolerates_are_dropped_as_late(cfg, behind):
+    # the loop lets up to Safety.unread_limit (at most 1000) ticks pass without a timely
+    # reading: the replies to all of them, arriving late, are late replies, not a broken rig
+    clock = FakeClock()
+    emu = RigEmulator(cfg, clock)
+    transport = _LaggingTransport(emu, clock)
+    rig = FramedRig(transport, "direct", clock=clock)
+    rig.open()
+    transport.lag = True
+    for k in range(behind):
+        assert rig.sample(k, clock.now_ns() + 2_500_000) is None
+    transport.lag = False
+    transport.release()
+    assert rig.sample(behind, clock.now_ns() + 2_500_000) is not None
+    assert rig.late_replies == behind
+
+
+def test_a_reply_older_than_any_request_the_rig_remembers_is_a_bad_reading(cfg):
+    clock = FakeClock()
+    emu = RigEmulator(cfg, clock)
+    transport = _LaggingTransport(emu, clock)
+    rig = FramedRig(transport, "direct", clock=clock)
+    rig.open()
+    assert rig.sample(0, clock.now_ns() + 2_500_000) is not None
+    emu.control({"cmd": "fault", "seq_offset": -1})  # the rig repeats an answered number
+    with pytest.raises(BadReading, match="duplicated or stale"):
+        rig.sample(1, clock.now_ns() + 2_500_000)
+
+
 def test_a_silent_rig_still_times_out_after_a_pause(cfg):
     clock = FakeClock()
     emu = RigEmulator(cfg, clock)

@@ -276,7 +276,12 @@ def test_swingup_step_is_the_same_function_in_both_runners():
     import frictionlab.realtime.loop as loop
     from frictionlab.studies import swingup_sim as sim
 
-    assert loop.swingup_step is swingup_step is sim.swingup_step
+    from frictionlab.model.swingup import swingup_step_rows
+
+    # the loop calls it through its float-row form, which calls the very same step
+    assert sim.swingup_step is swingup_step
+    assert loop.swingup_step_rows is swingup_step_rows
+    assert "swingup_step" in swingup_step_rows.py_func.__code__.co_names
 
 
 @pytest.mark.slow

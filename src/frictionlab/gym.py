@@ -107,7 +107,7 @@ from .model._jit import jit
 from .model.friction import KINDS
 from .model.plant import plant_record
 from .model.sensor import reading
-from .model.simulation import make_sensor, plant_tick
+from .model.simulation import make_sensor, plant_tick, plant_tick_rows
 
 __all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "SWINGUP_ENV_ID", "TASKS",
            "FurutaEnv", "FurutaVectorEnv"]
@@ -196,7 +196,7 @@ class _Plants:
         self.us[i] = 0.0
         self.steps[i] = 0
         if i == 0:  # plant 0's arguments, ready for step_first
-            self._first = (int(self.substeps[0]), int(self.ratios[0]), self.h, cfg.plant.record(),
+            self._first = (int(self.substeps[0]), int(self.ratios[0]), self.h, self.pps[0],
                            int(self.fkinds[0]), self.fps[0])
 
     def step(self, mask: np.ndarray, u: np.ndarray) -> None:
@@ -208,7 +208,8 @@ class _Plants:
     def step_first(self, u: float) -> None:
         """:meth:`step` of plant 0 alone, without the batch's array work."""
         self.us[0] = u
-        self.friction[0], self.mems[0] = plant_tick(self._x0, u, self.mems[0], *self._first)
+        self.friction[0], self.mems[0] = plant_tick_rows(self._x0, u, self.mems[0],
+                                                            *self._first)
         self.steps[0] += 1
 
     def measure(self, rng: np.random.Generator) -> np.ndarray:

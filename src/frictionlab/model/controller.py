@@ -93,9 +93,11 @@ __all__ = [
     "compensator_levels",
     "compensator_params",
     "controller_step",
+    "controller_step_rows",
     "copy_state",
     "estimates",
     "gains_record",
+    "gains_row",
     "new_state",
     "reset_compensator",
     "state_index",
@@ -455,6 +457,22 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     s.f_hat = f_hat
     s.u = u
     return u, u_fb, f_hat
+
+
+@jit
+def controller_step_rows(x, g, cp, theta_m, arm_m, arm_dot_m):
+    """:func:`controller_step` on the state stored in the float vector ``x``
+    (:func:`state_vector`; updated in place) and the gains stored as the float
+    row ``g`` (:func:`gains_row`): the form for a caller in Python at every
+    tick (the 200 Hz loop).  Numba takes float arrays from Python in about
+    1 us; typing a state record and a :class:`Gains` argument costs about ten
+    per call, and reading a record's field from Python about seven."""
+    return controller_step(state_view(x), gains_record(g), cp, theta_m, arm_m, arm_dot_m)
+
+
+def gains_row(gains: Gains) -> np.ndarray:
+    """The :class:`Gains` as the float row :func:`gains_record` reads back."""
+    return np.array(gains, dtype=float)
 
 
 @dataclass(frozen=True)

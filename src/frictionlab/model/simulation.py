@@ -81,7 +81,7 @@ from .friction import (
     observer_gain,
     resolve_drift,
 )
-from .plant import accelerations_sc
+from .plant import accelerations_sc, plant_record
 from .sensor import SensorParams, ideal_reading, measure, sensor_params
 
 if TYPE_CHECKING:  # only annotations: the configuration layer builds what the model runs
@@ -396,6 +396,15 @@ class PlantState:
         return float(self.x[0])
 
 
+@jit
+def plant_tick_rows(x, u, mem, substeps, ratio, h, pp, fkind, fp):
+    """:func:`plant_tick` with the plant record stored as the float row ``pp``
+    (``np.array(record)``): the form for a caller in Python at every tick (the
+    emulated rigs), since numba takes a float array from Python faster than it
+    types a record argument."""
+    return plant_tick(x, u, mem, substeps, ratio, h, plant_record(pp), fkind, fp)
+
+
 class SimulatedPlant:
     """The plant with its friction, stepped one sample at a time.
 
@@ -412,7 +421,7 @@ class SimulatedPlant:
     def __init__(self, cfg: Config, duration: float | None = None):
         self.cfg = cfg
         self.h = cfg.design.h
-        self._pp = cfg.plant.record()
+        self._pp = np.array(cfg.plant.record(), dtype=float)  # plant_tick_rows reads it
         self._fkind = KINDS.index(cfg.friction_kind)
         # friction.drift: over friction.drift_time, else to the end of the run
         # (``duration``, default sim.duration)
@@ -434,8 +443,8 @@ class SimulatedPlant:
         fp = self._fp
         if self._drifting:
             fp = drifted_params(fp, state.tick * self.h, self._fpt)
-        f, memory = plant_tick(x, float(u), state.memory, self._substeps, self._ratio, self.h,
-                               self._pp, self._fkind, fp)
+        f, memory = plant_tick_rows(x, float(u), state.memory, self._substeps, self._ratio,
+                                    self.h, self._pp, self._fkind, fp)
         return PlantState(x, memory, f, state.tick + 1)
 
     def push(self, state: PlantState, theta_dot_kick: float) -> PlantState:

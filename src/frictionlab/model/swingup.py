@@ -110,7 +110,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import jit
-from .controller import Controller, controller_step, copy_state, new_state, zero_state
+from .controller import (
+    Controller,
+    controller_step,
+    copy_state,
+    gains_record,
+    new_state,
+    state_view,
+    zero_state,
+)
 from .params import Validated, param
 
 __all__ = [
@@ -120,6 +128,7 @@ __all__ = [
     "SwingUpParams",
     "energy",
     "swingup_step",
+    "swingup_step_rows",
     "wrap_angle",
 ]
 
@@ -353,3 +362,13 @@ class SwingUp:
         out = SwingUpOutput(float(u), PHASES[int(w[W_PHASE])], float(w[W_E]), float(w[W_TH]),
                             float(w[W_THD]), STOP_CODES[int(w[W_STOP])])
         return out, (w, s)
+
+
+@jit
+def swingup_step_rows(w, x, g, cp, sp, theta_m, arm_m, arm_dot_m):
+    """:func:`swingup_step` with the balancing controller's state as a float
+    vector ``x`` and its gains as a float row ``g``
+    (:func:`~frictionlab.model.controller.controller_step_rows`: the form for a
+    caller in Python at every tick)."""
+    return swingup_step(w, state_view(x), gains_record(g), cp, sp, theta_m, arm_m, arm_dot_m)
+

@@ -92,9 +92,12 @@ from dataclasses import dataclass
 from ..model import sensor
 from ..model.controller import (
     ADAPTIVE,
-    controller_step,
-    copy_state,
+    controller_step_rows,
+    gains_row,
     reset_compensator,
+    state_index,
+    state_record,
+    state_vector,
 )
 from ..model.params import Validated, param
 from ..model.rig import RigScaling
@@ -110,7 +113,7 @@ from ..model.swingup import (
     W_STOP,
     SwingUp,
     SwingUpParams,
-    swingup_step,
+    swingup_step_rows,
 )
 from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
@@ -138,6 +141,9 @@ STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_readin
                 "log_failed", "exception", "finished", "experiment_limit", "not_caught",
                 "arm_travel", "arm_speed")
 _NAN = math.nan
+#: The controller state's estimates in its float vector (the tick reads the vector:
+#: a state record's field costs microseconds to read from Python).
+_X1, _X2, _ARM, _ARMDOT, _ZHAT = (state_index(n) for n in ("x1", "x2", "arm", "arm_dot", "z_hat"))
 #: The signals of a :class:`Sample` from ``theta_m`` to ``v`` in a tick without a reading.
 _NO_SIGNALS = (_NAN,) * 13
 _TWO_PI = 2.0 * math.pi
@@ -334,10 +340,12 @@ class Loop:
         setup = self.stop_request is None
         p = self.params
         if setup and self.experiment is None:
-            controller_step(p.controller.init(0.0), p.gp, p.cp, 0.0, 0.0, 0.0)
+            controller_step_rows(state_vector(p.controller.init(0.0)), gains_row(p.gp), p.cp,
+                                 0.0, 0.0, 0.0)
             if self.swingup is not None:
                 w_, s_ = SwingUp(p.controller, self.swingup).init(0.0)
-                swingup_step(w_, s_, p.gp, p.cp, self._sp, 0.0, 0.0, 0.0)
+                swingup_step_rows(w_, state_vector(s_), gains_row(p.gp), p.cp, self._sp, 0.0,
+                                  0.0, 0.0)
         gc_was = gc.isenabled()
         if self.manage_gc and setup:
             gc.collect()
@@ -437,7 +445,9 @@ class Loop:
         # to l_to (Gains.with_feedback keeps the record's field types: the compiled
         # step's argument type does not change, nothing is compiled mid-run)
         gp_target = gp
-        s = None
+        g_row = gains_row(gp)  # what the compiled step reads (controller_step_rows)
+        s = None  # the controller state: a record (self.state) viewing the vector sx
+        sx = None
         swing = self.swingup is not None
         sp = self._sp
         w = None
@@ -459,8 +469,8 @@ class Loop:
                 sleep_until(deadline - prewarm_ns)
                 if now() < deadline:
                     # bring the tick's code and data back into the caches (see docstring)
-                    if s is not None:
-                        controller_step(copy_state(s), gp, cp, theta, arm, arm_dot)
+                    if sx is not None:
+                        controller_step_rows(sx.copy(), g_row, cp, theta, arm, arm_dot)
                     rig_warm()
                     spin_until(deadline)
             else:
@@ -571,7 +581,9 @@ class Loop:
                                     r)
                 else:
                     if first and swing:
-                        w, s = SwingUp(params.controller, self.swingup).init(theta)
+                        w, s0 = SwingUp(params.controller, self.swingup).init(theta)
+                        sx = state_vector(s0)
+                        s = state_record(sx)
                         self.swing_w = w
                         self.state = s
                         flags |= START
@@ -581,7 +593,8 @@ class Loop:
                             raise _Stop("not_upright", f"|theta| = {abs(theta):.3f} rad at the "
                                         f"start (tolerance {safety.start_tolerance} rad; no "
                                         "swing-up)", r)
-                        s = params.controller.init(theta)
+                        sx = state_vector(params.controller.init(theta))
+                        s = state_record(sx)
                         self.state = s
                         flags |= START
                         first = False
@@ -590,11 +603,11 @@ class Loop:
                                 math.remainder(theta, _TWO_PI)) <= angle_limit)):
                         raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
                                     f"{angle_limit} rad", r)
-                    th_hat = s.x1
-                    thd_hat = w0 * s.x2
-                    arm_hat = s.arm
-                    armd_hat = s.arm_dot
-                    z_hat = s.z_hat
+                    th_hat = sx[_X1]
+                    thd_hat = w0 * sx[_X2]
+                    arm_hat = sx[_ARM]
+                    armd_hat = sx[_ARMDOT]
+                    z_hat = sx[_ZHAT]
                     if ramp_k < ramp_n:
                         ramp_k += 1
                         if ramp_k == ramp_n:
@@ -602,8 +615,10 @@ class Loop:
                         else:
                             gp = gp_target.with_feedback(
                                 l_from + (ramp_k / ramp_n) * (l_to - l_from))
+                        g_row = gains_row(gp)
                     if swing:
-                        u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, theta, arm, arm_dot)
+                        u, _u_fb, f_hat = swingup_step_rows(w, sx, g_row, cp, sp, theta, arm,
+                                                            arm_dot)
                         ph = w[W_PHASE]
                         if ph == SWINGING:
                             flags |= SWINGING_FLAG
@@ -619,7 +634,7 @@ class Loop:
                             raise _Stop(code, _swing_stop_detail(code, self.swingup, arm,
                                                                  arm_dot), r)
                     else:
-                        u, _u_fb, f_hat = controller_step(s, gp, cp, theta, arm, arm_dot)
+                        u, _u_fb, f_hat = controller_step_rows(sx, g_row, cp, theta, arm, arm_dot)
                     if not -_FMAX <= u <= _FMAX:
                         raise _Stop("nonfinite_u", f"the controller computed u = {float(u)!r} "
                                     "from the estimates theta, theta', arm, arm', z = "
@@ -676,6 +691,7 @@ class Loop:
                     ramp_k = 0
                 else:
                     ramp_k = ramp_n
+                g_row = gains_row(gp)
                 w0 = gp.omega0
                 comp_flag = COMPENSATE if params.comp_enabled else 0
                 if s is not None and (gp.compensator != old_kind or (

@@ -417,6 +417,12 @@ class SerialTransport:
         self.port.close()
 
 
+#: How many timed-out requests a :class:`FramedRig` remembers, to recognise their
+#: late replies: at least the longest run of ticks without a timely reading that the
+#: loop lets pass (``Safety.unread_limit``, at most 1000).
+LATE_MEMORY = 1024
+
+
 class FramedRig(Rig):
     """A rig speaking the frame protocol over a transport (UDP or serial).
 
@@ -460,7 +466,10 @@ class FramedRig(Rig):
         self.hello_timeout = hello_timeout
         self.late_replies = 0
         self.ignored = 0
-        self._timed_out: deque[int] = deque(maxlen=64)
+        # the requests that timed out, so that their late replies are recognised (and
+        # dropped) rather than taken for a broken rig: as many as the loop may go
+        # without a timely reading (Safety.unread_limit <= 1000)
+        self._timed_out: deque[int] = deque(maxlen=LATE_MEMORY)
         self._last_seq = 0
         self.info: P.HelloInfo | None = None
 
