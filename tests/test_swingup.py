@@ -274,9 +274,8 @@ def test_loop_without_swing_up_still_refuses_a_hanging_start(tmp_path):
 
 def test_swingup_step_is_the_same_function_in_both_runners():
     import frictionlab.realtime.loop as loop
-    from frictionlab.studies import swingup_sim as sim
-
     from frictionlab.model.swingup import swingup_step_rows
+    from frictionlab.studies import swingup_sim as sim
 
     # the loop calls it through its float-row form, which calls the very same step
     assert sim.swingup_step is swingup_step
