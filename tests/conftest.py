@@ -40,7 +40,7 @@ def cli():
 
 
 #: Modules whose tests drive a real-time loop in real time against another process
-#: (marker ``realtime``: scripts/test runs them after the rest, two at a time).
+#: (marker ``realtime``: scripts/test runs them after the rest, one at a time).
 REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
                     "tests/test_rig_experiments_udp.py",
                     "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop",
