@@ -18,7 +18,8 @@ pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
 @pytest.fixture(scope="module")
 def console(tmp_path_factory):
     proc = ConsoleProcess(tmp_path_factory.mktemp("swingup-runs"),
-                          "--set", "sim.initial_angle=3.141592653589793")
+                          "--set", "sim.initial_angle=3.141592653589793",
+                          "--sim-lockstep")  # a host stall pauses the simulated plant too
     try:
         proc.wait_url()
         yield proc
