@@ -123,7 +123,7 @@ def _batched(xs, us, mems, substeps, ratio, h, pp, fkind, fp, n_steps):
 
 def plant_rate(steps: int, n: int, repeats: int) -> float:
     cfg = build_config(sets=SETS)
-    pp, fp = cfg.plant.record(), cfg.friction.pack()
+    pp, fp = cfg.plant.record(), cfg.friction.record()
     fkind = KINDS.index(cfg.friction_kind)
     batches = max(1, steps // n)
 

@@ -104,7 +104,7 @@ from gymnasium.vector.utils import batch_space
 
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
-from .model.friction import KINDS
+from .model.friction import KINDS, NP, friction_row, friction_view
 from .model.plant import plant_record
 from .model.sensor import reading
 from .model.simulation import make_sensor, plant_tick, plant_tick_rows
@@ -142,7 +142,8 @@ def _step_plants(mask, xs, us, mems, friction, substeps, ratios, h, pps, fkinds,
     for i in range(xs.shape[0]):
         if mask[i]:
             friction[i], mems[i] = plant_tick(xs[i], us[i], mems[i], substeps[i], ratios[i], h,
-                                              plant_record(pps[i]), fkinds[i], fps[i])
+                                              plant_record(pps[i]), fkinds[i],
+                                              friction_view(fps[i]))
 
 
 @jit
@@ -173,7 +174,7 @@ class _Plants:
         self.ratios = np.zeros(n, dtype=np.int64)
         self.pps = np.zeros((n, 5))
         self.fkinds = np.zeros(n, dtype=np.int64)
-        self.fps = np.zeros((n, len(cfg.friction.pack())))
+        self.fps = np.zeros((n, NP))  # friction records as float rows
         self.steps = np.zeros(n, dtype=np.int64)
         self.configs: list[Config] = [cfg] * n
         self._draws = np.zeros((n, 3))
@@ -185,7 +186,7 @@ class _Plants:
         """Plant i at rest at ``theta0`` with the parameters of ``cfg``."""
         self.configs[i] = cfg
         self.pps[i] = cfg.plant.record()
-        self.fps[i] = cfg.friction.pack()
+        self.fps[i] = friction_row(cfg.friction.record())
         self.fkinds[i] = KINDS.index(cfg.friction_kind)
         self.substeps[i] = cfg.substeps
         self.ratios[i] = cfg.pendulum_ratio

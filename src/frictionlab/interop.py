@@ -117,7 +117,7 @@ def to_control(config: Config | None = None) -> control.NonlinearIOSystem:
     """
     cfg = _config(config)
     kind = KINDS.index(cfg.friction_kind)
-    fp = cfg.friction.pack()
+    fp = cfg.friction.record()
     if kind == COULOMB and cfg.friction.hysteresis > 0.0:
         raise ValueError(
             f"friction.hysteresis = {cfg.friction.hysteresis:g}: the Coulomb relay with "

@@ -67,8 +67,11 @@ from .friction import (
     COULOMB,
     LUGRE,
     STRIBECK,
+    FRICTION_DTYPE,
     FrictionParams,
+    friction_arg,
     friction_step,
+    friction_view,
     levels,
     with_levels,
 )
@@ -306,9 +309,8 @@ def compensator_force(kind, s, cp, v, u_fb, e, h):
         implementation form, ``LUGRE``).
     s : record of :data:`STATE_DTYPE`
         Controller state (fields ``relay`` and ``z_hat`` are updated in place).
-    cp : ndarray
-        The compensator's packed friction parameters
-        (:func:`compensator_params`).
+    cp : record of :data:`~frictionlab.model.friction.FRICTION_DTYPE`
+        The compensator's friction parameters (:func:`compensator_params`).
     v : float
         Measured arm velocity (rad/s).
     u_fb : float
@@ -352,8 +354,18 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     s.fs_hat = fs
     s.v_hat = vh
     s.v_prev = v
-    f, s.z_hat = friction_step(LUGRE, with_levels(cp, fc, fs), s.z_hat, v, 0.0, h, e)
+    # the adapted law's parameters, in a scratch record (as the copy it replaced)
+    adapted = np.empty(1, FRICTION_DTYPE)
+    f, s.z_hat = friction_step(LUGRE, with_levels(cp, fc, fs, adapted[0]), s.z_hat, v, 0.0, h,
+                               e)
+    _keep(adapted)  # a record does not hold its array: numba frees it after its last use
     return f
+
+
+@jit_inline
+def _keep(a):
+    """Nothing; a use of ``a`` that keeps it alive up to here in compiled code."""
+    return None
 
 
 @jit_inline
@@ -377,8 +389,8 @@ def compensator_levels(s, gp, cp):
     return levels(cp)
 
 
-def compensator_params(params: FrictionParams) -> np.ndarray:
-    """The packed parameters a compensator runs with (:func:`compensator_force`).
+def compensator_params(params: FrictionParams) -> np.record:
+    """The friction record a compensator runs with (:func:`compensator_force`).
 
     Those of ``params``, except that the classical compensator's band is its
     hysteresis :math:`\\varepsilon` alone (Sec. 6.2): the plant's
@@ -386,7 +398,7 @@ def compensator_params(params: FrictionParams) -> np.ndarray:
     set to 0, so that with :math:`\\varepsilon = 0` only v = 0 counts as rest.
     """
     # (not a replaced, re-validated copy: a sweep packs every set)
-    return params.pack(zero_velocity_band=0.0)
+    return params.record(zero_velocity_band=0.0)
 
 
 def reset_compensator(s: np.record) -> None:
@@ -406,8 +418,10 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
         Controller state (see the module table).
     gp : Gains
         Gains (:meth:`Controller.record`).
-    cp : ndarray
-        Packed compensator parameters.
+    cp : record of :data:`~frictionlab.model.friction.FRICTION_DTYPE`
+        The compensator's friction parameters (:func:`compensator_params`), by
+        reference (or stored as a float row: viewed as the record here,
+        :func:`frictionlab.model.friction.friction_arg`).
     theta_m, arm_m, arm_dot_m : float
         Measured pendulum angle, arm angle (rad) and arm velocity (rad/s).
 
@@ -415,6 +429,8 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     -------
     (u, u_fb, F_hat) : applied control, feedback part, friction estimate.
     """
+    # a record as it is; a float row (swingup_step_rows passes one) viewed once here
+    cp = friction_arg(cp)
     w0 = gp.omega0
     h = gp.h
     th_hat = s.x1
@@ -463,11 +479,14 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
 def controller_step_rows(x, g, cp, theta_m, arm_m, arm_dot_m):
     """:func:`controller_step` on the state stored in the float vector ``x``
     (:func:`state_vector`; updated in place) and the gains stored as the float
-    row ``g`` (:func:`gains_row`): the form for a caller in Python at every
-    tick (the 200 Hz loop).  Numba takes float arrays from Python in about
-    1 us; typing a state record and a :class:`Gains` argument costs about ten
-    per call, and reading a record's field from Python about seven."""
-    return controller_step(state_view(x), gains_record(g), cp, theta_m, arm_m, arm_dot_m)
+    row ``g`` (:func:`gains_row`) and the compensator's friction record stored
+    as the float row ``cp`` (:func:`frictionlab.model.friction.friction_row`):
+    the form for a caller in Python at every tick (the 200 Hz loop).  Numba
+    takes float arrays from Python in about 1 us; typing a state record and a
+    :class:`Gains` argument costs about ten per call, and reading a record's
+    field from Python about seven."""
+    return controller_step(state_view(x), gains_record(g), friction_view(cp), theta_m, arm_m,
+                           arm_dot_m)
 
 
 def gains_row(gains: Gains) -> np.ndarray:
@@ -536,9 +555,9 @@ class Controller:
     def compensator_code(self) -> int:
         return COMPENSATOR_CODES[self.compensation]
 
-    def record(self) -> tuple[Gains, np.ndarray]:
+    def record(self) -> tuple[Gains, np.record]:
         """The compiled step's arguments: the :class:`Gains` record and the
-        compensator's packed parameters (:func:`compensator_params`)."""
+        compensator's friction record (:func:`compensator_params`)."""
         d = self.design
         L = [float(x) for x in d.L]
         K = [float(x) for x in d.K]

@@ -66,19 +66,29 @@ compensator (:mod:`frictionlab.model.adaptive`).
 One interface
 -------------
 Every model is one compiled step, :func:`friction_step` ``(kind, p, state, v,
-f_ext, dt, e) -> (F, state)`` over a packed parameter vector
-(:meth:`FrictionParams.pack`); it is the only place each law is evaluated:
+f_ext, dt, e) -> (F, state)`` over a friction record ``p`` (a numpy
+structured record of :data:`FRICTION_DTYPE`, made once by
+:meth:`FrictionParams.record` and passed by reference; the laws read its
+fields by name, ``p.fc``); it is the only place each law is evaluated:
 the simulator's plant (:func:`frictionlab.model.simulation.plant_tick`), the
 compensators (:func:`frictionlab.model.controller.compensator_force`, with the
 compensator's own parameters) and the model objects all call it.  The
 Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` is written once, in
 :func:`stribeck_level`.  For interactive use each model is a small frozen
 object with the same two methods, ``init() -> state`` and ``step(state, v,
-f_ext, dt, e=0.0) -> (F, state)``, plus ``steady_state(v)``
+f_ext, dt, e=0.0) -> (F, state)``, plus ``steady_state(v)`` (the compiled
+:func:`steady_state` of its law)
 (:class:`NoFriction`, :class:`Viscous`, :class:`Coulomb`, :class:`Classical`,
 :class:`Stribeck`, :class:`LuGre`; :func:`make_model` builds one).  Their
 parameters are one validated :class:`FrictionParams` (the ``friction.*`` /
 ``compensation.*`` keys); each model reads the fields listed above.
+
+Where parameters have to be a float vector (a batch's per-set rows, a caller
+in Python that steps every tick: numba types a record argument from Python
+on every call, about 10 us against 1 us for an array), :func:`friction_row`
+flattens the record and :func:`friction_view` (compiled) /
+:func:`friction_record` (Python) views such a row as the record, once, where
+the kernel starts.
 """
 
 from __future__ import annotations
@@ -90,10 +100,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, on_numba_load
 from .params import Validated, param
 
 __all__ = [
+    "FRICTION_DTYPE",
+    "FRICTION_FIELDS",
     "KINDS",
     "MODELS",
     "Classical",
@@ -106,19 +118,26 @@ __all__ = [
     "Viscous",
     "adaptation_settings",
     "classical_force",
+    "copy_friction",
+    "copy_friction_into",
     "coulomb_relay",
     "drift_factor",
     "drifted_params",
+    "drifted_rows",
+    "friction_arg",
+    "friction_record",
+    "friction_row",
     "friction_step",
+    "friction_view",
     "is_drifting",
     "levels",
     "lugre_dz",
     "lugre_force",
     "lugre_step_exact",
     "make_model",
-    "observer_gain",
     "resolve_drift",
     "steady_bristle",
+    "steady_state",
     "stribeck_curve",
     "stribeck_level",
     "stribeck_magnitude",
@@ -134,13 +153,38 @@ NONE, VISCOUS, COULOMB, CLASSICAL, STRIBECK, LUGRE = range(6)
 
 _TINY = 1e-12  # floor of the Stribeck level in divisions (F_S = F_C = 0: no friction)
 
-# packed parameter layout
-P_FS, P_FC, P_FV, P_VS, P_S0, P_S1, P_K, P_BAND, P_EPS, P_FSN, P_FCN, P_FVN, P_VD = range(13)
-# drift of the plant's levels (NaN drift time: the run's duration, filled in by the runner)
-P_DRIFT, P_DRIFT_START, P_DRIFT_TIME = 13, 14, 15
-# the adaptive compensator's law (:mod:`frictionlab.model.adaptive`)
-P_AGAIN, P_ABW, P_ADEAD, P_AINNOV, P_AMIN, P_AMAX, P_ADIST = range(16, 23)
-NP = 23
+#: Fields of the friction record :data:`FRICTION_DTYPE`, in storage order, with
+#: the :class:`FrictionParams` field each holds (see :meth:`FrictionParams.record`).
+FRICTION_FIELDS = (
+    "fs",                # stiction
+    "fc",                # coulomb
+    "fv",                # viscous
+    "vs",                # stribeck_velocity
+    "sigma0",            # sigma0
+    "sigma1",            # sigma1
+    "k",                 # observer_gain
+    "band",              # zero_velocity_band (0 in a compensator's record)
+    "eps",               # hysteresis
+    "fs_neg",            # stiction_negative (stiction when None)
+    "fc_neg",            # coulomb_negative (coulomb when None)
+    "fv_neg",            # viscous_negative (viscous when None)
+    "vd",                # sigma1_velocity (inf when None: constant sigma_1)
+    "drift",             # drift
+    "drift_start",       # drift_start
+    "drift_time",        # drift_time (NaN when None: to the end of the run)
+    "adapt_gain",        # adaptation_gain
+    "adapt_bandwidth",   # adaptation_bandwidth
+    "adapt_deadband",    # adaptation_deadband
+    "adapt_innovation",  # adaptation_max_innovation
+    "adapt_min",         # adaptation_min
+    "adapt_max",         # adaptation_max
+    "adapt_distance",    # adaptation_distance
+)
+#: The friction parameters' record type, one float64 per field of
+#: :data:`FRICTION_FIELDS`: what the compiled force laws read (``p.fc``).
+FRICTION_DTYPE = np.dtype([(name, np.float64) for name in FRICTION_FIELDS], align=True)
+#: Number of floats in a friction record (its size as a float row).
+NP = len(FRICTION_FIELDS)
 
 
 @dataclass(frozen=True)
@@ -246,39 +290,87 @@ class FrictionParams(Validated):
                                        observer_gain=7.0)
         return base
 
-    def pack(self, zero_velocity_band: float | None = None) -> np.ndarray:
-        """Packed float64 vector read by the compiled force laws.
+    def record(self, zero_velocity_band: float | None = None) -> np.record:
+        """The friction record (:data:`FRICTION_DTYPE`) the compiled force laws
+        read, backed by its own one-element array (compiled code may write it).
 
         ``zero_velocity_band``, when given, replaces the field's value
         without a validated copy (the compensators' 0,
         :func:`frictionlab.model.controller.compensator_params`).
         """
-        p = np.zeros(NP)
-        p[P_FS] = self.stiction
-        p[P_FC] = self.coulomb
-        p[P_FV] = self.viscous
-        p[P_VS] = self.stribeck_velocity
-        p[P_S0] = self.sigma0
-        p[P_S1] = self.sigma1
-        p[P_K] = self.observer_gain
-        p[P_BAND] = (self.zero_velocity_band if zero_velocity_band is None
-                     else zero_velocity_band)
-        p[P_EPS] = self.hysteresis
-        p[P_FSN] = self.stiction if self.stiction_negative is None else self.stiction_negative
-        p[P_FCN] = self.coulomb if self.coulomb_negative is None else self.coulomb_negative
-        p[P_FVN] = self.viscous if self.viscous_negative is None else self.viscous_negative
-        p[P_VD] = math.inf if self.sigma1_velocity is None else self.sigma1_velocity
-        p[P_DRIFT] = self.drift
-        p[P_DRIFT_START] = self.drift_start
-        p[P_DRIFT_TIME] = math.nan if self.drift_time is None else self.drift_time
-        p[P_AGAIN] = self.adaptation_gain
-        p[P_ABW] = self.adaptation_bandwidth
-        p[P_ADEAD] = self.adaptation_deadband
-        p[P_AINNOV] = self.adaptation_max_innovation
-        p[P_AMIN] = self.adaptation_min
-        p[P_AMAX] = self.adaptation_max
-        p[P_ADIST] = self.adaptation_distance
-        return p
+        r = np.zeros(1, FRICTION_DTYPE).view(np.recarray)[0]
+        r.fs = self.stiction
+        r.fc = self.coulomb
+        r.fv = self.viscous
+        r.vs = self.stribeck_velocity
+        r.sigma0 = self.sigma0
+        r.sigma1 = self.sigma1
+        r.k = self.observer_gain
+        r.band = self.zero_velocity_band if zero_velocity_band is None else zero_velocity_band
+        r.eps = self.hysteresis
+        r.fs_neg = self.stiction if self.stiction_negative is None else self.stiction_negative
+        r.fc_neg = self.coulomb if self.coulomb_negative is None else self.coulomb_negative
+        r.fv_neg = self.viscous if self.viscous_negative is None else self.viscous_negative
+        r.vd = math.inf if self.sigma1_velocity is None else self.sigma1_velocity
+        r.drift = self.drift
+        r.drift_start = self.drift_start
+        r.drift_time = math.nan if self.drift_time is None else self.drift_time
+        r.adapt_gain = self.adaptation_gain
+        r.adapt_bandwidth = self.adaptation_bandwidth
+        r.adapt_deadband = self.adaptation_deadband
+        r.adapt_innovation = self.adaptation_max_innovation
+        r.adapt_min = self.adaptation_min
+        r.adapt_max = self.adaptation_max
+        r.adapt_distance = self.adaptation_distance
+        return r
+
+
+def friction_row(p) -> np.ndarray:
+    """The friction record ``p`` as a float row (:data:`FRICTION_FIELDS` order; a
+    copy): what a batch stores per set and a caller in Python passes at every
+    tick (:func:`friction_view` reads it back in compiled code)."""
+    return np.array(p.tolist(), dtype=np.float64)
+
+
+def friction_record(row) -> np.record:
+    """The friction record stored in the float64 row ``row`` (:data:`NP`
+    contiguous floats), by reference (Python side of :func:`friction_view`)."""
+    return np.asarray(row, dtype=np.float64).view(FRICTION_DTYPE).view(np.recarray)[0]
+
+
+def copy_friction(p) -> np.record:
+    """An independent copy of the friction record ``p`` (a scratch record for
+    :func:`drifted_params`)."""
+    return friction_record(friction_row(p))
+
+
+def friction_arg(p):
+    """``p`` if it is a friction record, else the record stored in the float row
+    ``p`` (:func:`friction_record`); in compiled code a view or nothing, chosen
+    by ``p``'s type when the caller is compiled.  For a kernel that takes either
+    form, e.g. :func:`frictionlab.model.controller.controller_step`, which
+    :func:`frictionlab.model.swingup.swingup_step_rows` calls with a row."""
+    return friction_record(p) if isinstance(p, np.ndarray) else p
+
+
+@on_numba_load
+def _register_friction_arg() -> None:
+    from numba import types
+    from numba.extending import overload
+
+    @overload(friction_arg, inline="always")
+    def _friction_arg(p):
+        if isinstance(p, types.Array):
+            return lambda p: p.view(FRICTION_DTYPE)[0]
+        return lambda p: p
+
+
+@jit_inline
+def friction_view(row):
+    """The friction record stored in the float row ``row`` (:func:`friction_row`),
+    by reference; compiled code only.  Made once where a kernel starts from
+    float rows (a batch's sets, the ``*_rows`` entry points), never per law call."""
+    return row.view(FRICTION_DTYPE)[0]
 
 
 def _check_kind(kind: str) -> int:
@@ -319,7 +411,7 @@ def stribeck_magnitude(v, fc, fs, vs):
 def stribeck_weight(v, p):
     """The Stribeck decay :math:`e^{-(v/v_S)^2}`: the share of the stiction
     excess :math:`F_S - F_C` left at velocity ``v`` (eq. 18's g(v))."""
-    return _stribeck_decay(v, p[P_VS])
+    return _stribeck_decay(v, p.vs)
 
 
 @jit
@@ -327,10 +419,10 @@ def stribeck_level(v, p):
     """Stribeck level :func:`stribeck_magnitude` with the levels of ``v``'s
     direction (the asymmetric variant's negative levels for v < 0)."""
     if v >= 0.0:
-        fs, fc = p[P_FS], p[P_FC]
+        fs, fc = p.fs, p.fc
     else:
-        fs, fc = p[P_FSN], p[P_FCN]
-    return stribeck_magnitude(v, fc, fs, p[P_VS])
+        fs, fc = p.fs_neg, p.fc_neg
+    return stribeck_magnitude(v, fc, fs, p.vs)
 
 
 @jit
@@ -347,13 +439,13 @@ def coulomb_relay(v, s_prev, p):
     -------
     (F, s) : the friction and the new relay state (-1, 0 or +1).
     """
-    eps = p[P_EPS]
+    eps = p.eps
     s = s_prev
     if v > eps:
         s = 1.0
     elif v < -eps:
         s = -1.0
-    fc = p[P_FC] if s >= 0.0 else p[P_FCN]
+    fc = p.fc if s >= 0.0 else p.fc_neg
     return fc * s, s
 
 
@@ -361,7 +453,7 @@ def coulomb_relay(v, s_prev, p):
 def _stuck(fe, p):
     """Friction at rest: it balances the external force ``fe`` up to the
     stiction level (eq. 17's :math:`|F_e| < F_S` branch, Sec. 5.2, 6.2)."""
-    fs = p[P_FS] if fe >= 0.0 else p[P_FSN]
+    fs = p.fs if fe >= 0.0 else p.fs_neg
     if abs(fe) < fs:
         return fe
     return fs * _sgn(fe)
@@ -377,18 +469,18 @@ def classical_force(v, fe, p):
         Arm velocity, rad/s.
     fe : float
         External force on the arm in units of u (the applied :math:`k_u u`).
-    p : ndarray
-        Packed parameters.
+    p : record of :data:`FRICTION_DTYPE`
+        Friction parameters.
     """
-    if abs(v) >= p[P_BAND] and v != 0.0:
-        return p[P_FC] * _sgn(v) if v > 0.0 else p[P_FCN] * _sgn(v)
+    if abs(v) >= p.band and v != 0.0:
+        return p.fc * _sgn(v) if v > 0.0 else p.fc_neg * _sgn(v)
     return _stuck(fe, p)
 
 
 @jit
 def stribeck_classical_force(v, fe, p):
     """The classical model's implementation form with Stribeck decay (Sec. 6.2)."""
-    band = p[P_EPS] if p[P_EPS] > 0.0 else p[P_BAND]
+    band = p.eps if p.eps > 0.0 else p.band
     if abs(v) < band or v == 0.0:
         return _stuck(fe, p)
     return stribeck_level(v, p) * _sgn(v)
@@ -396,23 +488,23 @@ def stribeck_classical_force(v, fe, p):
 
 @jit
 def _sigma1(v, p):
-    vd = p[P_VD]
+    vd = p.vd
     if np.isinf(vd):
-        return p[P_S1]
+        return p.sigma1
     r = v / vd
-    return p[P_S1] * np.exp(-r * r)
+    return p.sigma1 * np.exp(-r * r)
 
 
 @jit
 def lugre_dz(v, z, e, p):
     """Bristle rate :math:`\\dot z` of eq. (18)/(19) (``e`` enters with gain k)."""
-    return v - abs(v) * p[P_S0] / max(stribeck_level(v, p), _TINY) * z - p[P_K] * e
+    return v - abs(v) * p.sigma0 / max(stribeck_level(v, p), _TINY) * z - p.k * e
 
 
 @jit
 def lugre_force(v, z, dz, p):
     """LuGre friction :math:`\\sigma_0 z + \\sigma_1(v)\\dot z + F_v v`."""
-    return p[P_S0] * z + _sigma1(v, p) * dz + viscous_force(v, p)
+    return p.sigma0 * z + _sigma1(v, p) * dz + viscous_force(v, p)
 
 
 @jit
@@ -432,8 +524,8 @@ def lugre_step_exact(v, z, e, dt, p):
         ``(z_new - z)/dt``; ``lugre_force(v, z_mean, dz_mean, p)`` is then the
         mean friction over the interval.
     """
-    a = abs(v) * p[P_S0] / max(stribeck_level(v, p), _TINY)
-    b = v - p[P_K] * e
+    a = abs(v) * p.sigma0 / max(stribeck_level(v, p), _TINY)
+    b = v - p.k * e
     x = a * dt
     if x < 1e-9:
         dz = b - a * z
@@ -450,7 +542,7 @@ def lugre_step_exact(v, z, e, dt, p):
 @jit
 def viscous_force(v, p):
     """Viscous friction :math:`F_v v` (:math:`F_v^-` for v < 0)."""
-    fv = p[P_FV] if v >= 0.0 else p[P_FVN]
+    fv = p.fv if v >= 0.0 else p.fv_neg
     return fv * v
 
 
@@ -463,8 +555,8 @@ def friction_step(kind, p, state, v, f_ext, dt, e):
     ----------
     kind : int
         Model code (index in :data:`KINDS`).
-    p : ndarray
-        Packed parameters (:meth:`FrictionParams.pack`).
+    p : record of :data:`FRICTION_DTYPE`
+        Friction parameters (:meth:`FrictionParams.record`), by reference.
     state : float
         The model's memory: the relay output :math:`s \in \{-1, 0, 1\}`
         (``coulomb``, Sec. 6.1), the bristle deflection z (``lugre``,
@@ -507,17 +599,45 @@ def friction_step(kind, p, state, v, f_ext, dt, e):
     return 0.0, state
 
 
+@jit_inline
+def copy_friction_into(p, out):
+    """Copy every field of the friction record ``p`` into ``out``."""
+    out.fs = p.fs
+    out.fc = p.fc
+    out.fv = p.fv
+    out.vs = p.vs
+    out.sigma0 = p.sigma0
+    out.sigma1 = p.sigma1
+    out.k = p.k
+    out.band = p.band
+    out.eps = p.eps
+    out.fs_neg = p.fs_neg
+    out.fc_neg = p.fc_neg
+    out.fv_neg = p.fv_neg
+    out.vd = p.vd
+    out.drift = p.drift
+    out.drift_start = p.drift_start
+    out.drift_time = p.drift_time
+    out.adapt_gain = p.adapt_gain
+    out.adapt_bandwidth = p.adapt_bandwidth
+    out.adapt_deadband = p.adapt_deadband
+    out.adapt_innovation = p.adapt_innovation
+    out.adapt_min = p.adapt_min
+    out.adapt_max = p.adapt_max
+    out.adapt_distance = p.adapt_distance
+
+
 @jit
-def with_levels(p, fc, fs):
-    """``p`` with the Coulomb and stiction levels (both directions) replaced by
-    ``fc`` and ``fs`` (a new parameter set; the adaptive compensator's
-    estimates, :mod:`frictionlab.model.adaptive`)."""
-    q = p.copy()
-    q[P_FC] = fc
-    q[P_FCN] = fc
-    q[P_FS] = fs
-    q[P_FSN] = fs
-    return q
+def with_levels(p, fc, fs, out):
+    """Write ``p`` with the Coulomb and stiction levels (both directions)
+    replaced by ``fc`` and ``fs`` into the record ``out`` (the adaptive
+    compensator's estimates, :mod:`frictionlab.model.adaptive`); returns ``out``."""
+    copy_friction_into(p, out)
+    out.fc = fc
+    out.fc_neg = fc
+    out.fs = fs
+    out.fs_neg = fs
+    return out
 
 
 @jit
@@ -528,11 +648,11 @@ def drift_factor(t, p):
     :math:`t_0` = ``drift_start`` and T = ``drift_time`` (a NaN T must have
     been replaced by the run's duration; T = 0 is a step at :math:`t_0`).
     """
-    d = p[P_DRIFT]
+    d = p.drift
     if d == 0.0:
         return 1.0
-    t0 = p[P_DRIFT_START]
-    span = p[P_DRIFT_TIME]
+    t0 = p.drift_start
+    span = p.drift_time
     if t < t0:
         return 1.0
     if not span > 0.0:
@@ -544,40 +664,45 @@ def drift_factor(t, p):
 @jit
 def drifted_params(p, t, out):
     """Write ``p`` with its levels (F_S, F_C, F_v, both directions) scaled by
-    :func:`drift_factor` at time ``t`` into ``out``; returns ``out``."""
+    :func:`drift_factor` at time ``t`` into the (scratch) record ``out``;
+    returns ``out``."""
     c = drift_factor(t, p)
-    for i in range(NP):
-        out[i] = p[i]
+    copy_friction_into(p, out)
     if c != 1.0:
-        for i in (P_FS, P_FC, P_FV, P_FSN, P_FCN, P_FVN):
-            out[i] = p[i] * c
+        out.fs = p.fs * c
+        out.fc = p.fc * c
+        out.fv = p.fv * c
+        out.fs_neg = p.fs_neg * c
+        out.fc_neg = p.fc_neg * c
+        out.fv_neg = p.fv_neg * c
     return out
+
+
+@jit
+def drifted_rows(p, t, out):
+    """:func:`drifted_params` on records stored as float rows (:func:`friction_row`):
+    the form for a caller in Python at every tick (the emulated plant)."""
+    drifted_params(friction_view(p), t, friction_view(out))
 
 
 @jit
 def is_drifting(p):
     """Whether ``p`` has a drift with a resolved drift time (:func:`resolve_drift`;
     an unresolved one, NaN, is ignored)."""
-    return p[P_DRIFT] != 0.0 and not np.isnan(p[P_DRIFT_TIME])
+    return p.drift != 0.0 and not np.isnan(p.drift_time)
 
 
-def without_drift(p: np.ndarray) -> np.ndarray:
+def without_drift(p: np.record) -> np.record:
     """A copy of ``p`` without drift (the plant at its starting levels)."""
-    q = p.copy()
-    q[P_DRIFT] = 0.0
+    q = copy_friction(p)
+    q.drift = 0.0
     return q
 
 
 @jit_inline
 def levels(p):
     """``(F_C, F_S)``, the Coulomb and stiction levels for v >= 0."""
-    return p[P_FC], p[P_FS]
-
-
-@jit_inline
-def observer_gain(p):
-    """The observer gain k of eq. (19)."""
-    return p[P_K]
+    return p.fc, p.fs
 
 
 @jit_inline
@@ -585,22 +710,36 @@ def adaptation_settings(p):
     """The adaptive compensator's law settings (:mod:`frictionlab.model.adaptive`):
     ``(gain, bandwidth, deadband, max_innovation, min, max, distance)``, the
     ``adaptation_*`` fields."""
-    return (p[P_AGAIN], p[P_ABW], p[P_ADEAD], p[P_AINNOV], p[P_AMIN], p[P_AMAX], p[P_ADIST])
+    return (p.adapt_gain, p.adapt_bandwidth, p.adapt_deadband, p.adapt_innovation,
+            p.adapt_min, p.adapt_max, p.adapt_distance)
 
 
 @jit
 def steady_bristle(v, p):
     """The bristle deflection of steady sliding at ``v``, :math:`z = s(v)\\,
     \\mathrm{sgn}(v)/\\sigma_0` (eq. 18 with :math:`\\dot z = 0`)."""
-    return math.copysign(1.0, v) * stribeck_level(v, p) / p[P_S0]
+    return math.copysign(1.0, v) * stribeck_level(v, p) / p.sigma0
 
 
-def resolve_drift(p: np.ndarray, duration: float) -> np.ndarray:
-    """``p`` with an unset drift time (NaN: to the end of the run) set to the
-    time from ``drift_start`` to ``duration``, the run's length in s."""
-    if math.isnan(p[P_DRIFT_TIME]):
-        p = p.copy()
-        p[P_DRIFT_TIME] = max(float(duration) - p[P_DRIFT_START], 0.0)
+@jit
+def steady_state(kind, p, v):
+    """The friction of law ``kind`` (a code, index in :data:`KINDS`) with the
+    parameters ``p`` in steady sliding at the constant velocity ``v`` with no
+    external force: the relay switched to the direction of ``v``, the LuGre
+    bristle settled (:math:`\\dot z = 0`: the Stribeck curve :func:`stribeck_curve`)."""
+    if kind == LUGRE:
+        return stribeck_curve(v, p)
+    f, _ = friction_step(kind, p, _sgn(v), v, 0.0, 0.0, 0.0)
+    return f
+
+
+def resolve_drift(p: np.record, duration: float) -> np.record:
+    """``p`` (a copy if changed) with an unset drift time (NaN: to the end of
+    the run) set to the time from ``drift_start`` to ``duration``, the run's
+    length in s."""
+    if math.isnan(p.drift_time):
+        p = copy_friction(p)
+        p.drift_time = max(float(duration) - p.drift_start, 0.0)
     return p
 
 
@@ -631,8 +770,8 @@ class FrictionModel:
         """The model's integer code (index in :data:`KINDS`)."""
         return KINDS.index(self.kind)
 
-    def _p(self) -> np.ndarray:
-        return self.params.pack()
+    def _p(self) -> np.record:
+        return self.params.record()
 
     def init(self) -> float:
         """Initial state: relay undecided (0), bristle relaxed (z = 0)."""
@@ -652,8 +791,7 @@ class FrictionModel:
     def steady_state(self, v: float) -> float:
         """Friction in steady sliding at constant velocity ``v`` with no external
         force (the relay switched to the direction of ``v``)."""
-        f, _ = friction_step(self.code, self._p(), float(np.sign(v)), float(v), 0.0, 0.0, 0.0)
-        return float(f)
+        return float(steady_state(self.code, self._p(), float(v)))
 
 
 @dataclass(frozen=True)
@@ -697,11 +835,6 @@ class LuGre(FrictionModel):
 
     kind: ClassVar[str] = "lugre"
     has_state: ClassVar[bool] = True
-
-    def steady_state(self, v: float) -> float:
-        """The Stribeck curve :math:`s(v)\\,\\mathrm{sgn}(v) + F_v v` (z settled at
-        :math:`\\dot z = 0`)."""
-        return float(stribeck_curve(v, self._p()))
 
 
 #: The model class of each kind.

@@ -191,7 +191,7 @@ class LoopCheck:
         }
 
 
-def _analysis_pack(controller: Controller, compensate: bool) -> tuple[Gains, np.ndarray]:
+def _analysis_pack(controller: Controller, compensate: bool) -> tuple[Gains, np.record]:
     gp, cp = controller.record()
     gp = gp._replace(u_max=math.inf)  # the linear loop, without saturation
     if not compensate:
@@ -299,7 +299,7 @@ def _friction_input(plant: PlantParams) -> np.ndarray:
     return (rhs(0.0, x0, (0.0, 1.0), plant) - rhs(0.0, x0, (0.0, -1.0), plant)) / 2.0
 
 
-def _steady_slope(controller: Controller, cp: np.ndarray, v: float) -> float:
+def _steady_slope(controller: Controller, cp: np.record, v: float) -> float:
     """Slope dF/dv (m/s^2 per rad/s) of the compensator's steady-state estimate at ``v``.
 
     LuGre: the Stribeck curve with viscous friction (where its exactly

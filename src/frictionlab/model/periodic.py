@@ -85,7 +85,7 @@ from .controller import (
     state_vector,
     state_view,
 )
-from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
+from .friction import KINDS, LUGRE, NONE, VISCOUS, copy_friction, without_drift
 from .limit_cycles import LimitCycleFeatures, _crossings, features
 from .sensor import arm_zero, reading
 from .simulation import (
@@ -212,7 +212,7 @@ class _Loop:
         self.pp = cfg.plant.record()
         self.fkind = KINDS.index(cfg.friction_kind)
         # periodic orbits of the plant at its starting levels
-        self.fp = without_drift(cfg.friction.pack())
+        self.fp = without_drift(cfg.friction.record())
         self.sensor = make_sensor(cfg)._replace(noise=0.0)
         self.x0 = arm_zero(self.sensor)
         self.substeps, self.ratio = cfg.substeps, cfg.pendulum_ratio
@@ -746,7 +746,8 @@ def _trajectory(loop: _Loop, state: np.ndarray, duration: float) -> Trajectory:
     s = state_record(np.array(state[I_S:I_MEM], dtype=float))
     out = np.zeros((n, NC))
     done, status, _, _ = _run(x, float(state[I_MEM]), n, loop.substeps, loop.ratio, loop.pp,
-                              loop.fkind, loop.fp, loop.gp, loop.cp, s, loop.sensor, 1,
+                              loop.fkind, loop.fp, copy_friction(loop.fp), loop.gp, loop.cp, s,
+                              loop.sensor, 1,
                               loop.x0, loop.fall_angle, out, True)
     return Trajectory(np.arange(done), loop.h, out[:done], STATUS[status], loop.cfg)
 

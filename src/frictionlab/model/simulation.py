@@ -75,10 +75,14 @@ from .friction import (
     KINDS,
     LUGRE,
     NONE,
+    copy_friction,
+    copy_friction_into,
     drifted_params,
+    drifted_rows,
+    friction_row,
     friction_step,
+    friction_view,
     is_drifting,
-    observer_gain,
     resolve_drift,
 )
 from .plant import accelerations_sc, plant_record
@@ -150,7 +154,8 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     pp : PlantRecord
         Plant parameters (:meth:`frictionlab.model.plant.PlantParams.record`).
     fkind, fp
-        Friction model code, packed friction parameters.
+        Friction model code, friction record
+        (:meth:`frictionlab.model.friction.FrictionParams.record`), by reference.
 
     Returns
     -------
@@ -164,7 +169,7 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     th, thd, arm, ad, z = x[0], x[1], x[2], x[3], x[4]
     sn = np.sin(th)
     cs = np.cos(th)
-    kgain = observer_gain(fp) if fkind == LUGRE else 0.0
+    kgain = fp.k if fkind == LUGRE else 0.0
     done = 0
     while done < substeps:
         m = min(ratio, substeps - done)
@@ -260,7 +265,7 @@ def record_tick(out, k, th_m, th_hat, thd_hat, u, arm_m, armd_m, arm_hat, armd_h
 
 
 @jit
-def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
+def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, fpt, gp, cp, s, sp, n0, x0,
          fall_angle, out, record):
     """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, mem, x0).
 
@@ -273,11 +278,13 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
     ``n0`` is also the run's tick at the first of these ticks: the plant's
     friction levels drift with the time ``(n0 + k) h`` when ``fp`` has a
     drift with a resolved drift time (:func:`frictionlab.model.friction.resolve_drift`;
-    an unresolved one, NaN, is ignored).
+    an unresolved one, NaN, is ignored).  ``fp`` and ``cp`` are the plant's
+    and the compensator's friction records, ``fpt`` a scratch friction record
+    (the plant's levels at the tick; overwritten).
     """
     h = gp.h
     drifting = is_drifting(fp)
-    fpt = fp.copy()
+    copy_friction_into(fp, fpt)
     # an ideal noise-free sensor measures the true signals: its (inlined) reading
     # saves the call of measure every tick; the same values bit for bit
     ideal = not (sp.noise > 0.0) and not (sp.step > 0.0)
@@ -399,10 +406,11 @@ class PlantState:
 @jit
 def plant_tick_rows(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     """:func:`plant_tick` with the plant record stored as the float row ``pp``
-    (``np.array(record)``): the form for a caller in Python at every tick (the
-    emulated rigs), since numba takes a float array from Python faster than it
-    types a record argument."""
-    return plant_tick(x, u, mem, substeps, ratio, h, plant_record(pp), fkind, fp)
+    (``np.array(record)``) and the friction record as the float row ``fp``
+    (:func:`frictionlab.model.friction.friction_row`): the form for a caller
+    in Python at every tick (the emulated rigs), since numba takes a float
+    array from Python faster than it types a record argument."""
+    return plant_tick(x, u, mem, substeps, ratio, h, plant_record(pp), fkind, friction_view(fp))
 
 
 class SimulatedPlant:
@@ -425,9 +433,11 @@ class SimulatedPlant:
         self._fkind = KINDS.index(cfg.friction_kind)
         # friction.drift: over friction.drift_time, else to the end of the run
         # (``duration``, default sim.duration)
-        self._fp = resolve_drift(cfg.friction.pack(),
-                                 cfg.sim.duration if duration is None else duration)
-        self._drifting = bool(is_drifting(self._fp))
+        # float rows: plant_tick_rows and drifted_rows view them as the record
+        fp = resolve_drift(cfg.friction.record(),
+                           cfg.sim.duration if duration is None else duration)
+        self._drifting = bool(is_drifting(fp))
+        self._fp = friction_row(fp)
         self._fpt = self._fp.copy()
         self._substeps = cfg.substeps
         self._ratio = cfg.pendulum_ratio
@@ -442,7 +452,8 @@ class SimulatedPlant:
         x = state.x.copy()
         fp = self._fp
         if self._drifting:
-            fp = drifted_params(fp, state.tick * self.h, self._fpt)
+            drifted_rows(fp, state.tick * self.h, self._fpt)
+            fp = self._fpt
         f, memory = plant_tick_rows(x, float(u), state.memory, self._substeps, self._ratio,
                                     self.h, self._pp, self._fkind, fp)
         return PlantState(x, memory, f, state.tick + 1)
@@ -528,12 +539,13 @@ def simulate_config(
     out = np.zeros((n, NC)) if record else np.zeros((1, NC))
     sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)
-    fp = resolve_drift(cfg.friction.pack(), n * h)
+    fp = resolve_drift(cfg.friction.record(), n * h)
+    fpt = copy_friction(fp)
     pp = cfg.plant.record()
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
     if progress is None:
-        done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
-                                  0, 0.0, cfg.sim.fall_angle, out, record)
+        done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, fpt, gp, cp, s,
+                                  sp, 0, 0.0, cfg.sim.fall_angle, out, record)
     else:
         # chunks of whole ticks; the noise of sample n is a function of (seed, n), and
         # the arm's zero x0 is carried over, so a chunked run is the unchunked one bit
@@ -543,8 +555,8 @@ def simulate_config(
         while done < n and status == 0:
             m = min(chunk, n - done)
             view = out[done:done + m] if record else out
-            d, status, mem, x0 = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
-                                      done, x0, cfg.sim.fall_angle, view, record)
+            d, status, mem, x0 = _run(x, mem, m, substeps, ratio, pp, fkind, fp, fpt, gp, cp,
+                                      s, sp, done, x0, cfg.sim.fall_angle, view, record)
             done += d
             progress(done / n)
     data = out[:done] if record else out[:0]

@@ -52,7 +52,7 @@ import numpy as np
 from ..config import Config, ConfigError
 from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller, Gains
 from ..model.design import PRESETS, Design, DesignSpec, design, preset
-from ..model.friction import FrictionParams
+from ..model.friction import FrictionParams, friction_row
 from ..model.loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
 from ..model.params import ParamError
 
@@ -130,7 +130,9 @@ class ControlParams:
     gp : Gains
         The controller's gains (:meth:`Controller.record`).
     cp : ndarray
-        The compensator's packed parameters (read-only).
+        The compensator's friction record as a float row (read-only;
+        :func:`frictionlab.model.friction.friction_row`), what the ``*_rows``
+        steps take at every tick.
     """
 
     cfg: Config
@@ -161,7 +163,8 @@ class ControlParams:
         d = design(spec, cfg.plant)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
                           error_signal=error_signal, u_max=cfg.rig.u_max)
-        gp, cp = ctrl.record()
+        gp, rec = ctrl.record()
+        cp = friction_row(rec)
         cp.flags.writeable = False
         return cls(cfg, enabled, kind, dict(params), error_signal, d, ctrl, gp, cp)
 

@@ -42,7 +42,7 @@ import numpy as np
 from ..config import Config
 from ..model._jit import _njit, jit, jit_parallel
 from ..model.controller import NS, gains_record, state_vector, state_view
-from ..model.friction import KINDS, resolve_drift
+from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
 from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
 from ..model.plant import plant_record
 from ..model.sensor import SensorParams, sensor_record
@@ -82,7 +82,14 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     """
     x = np.zeros(5)
     x[0] = x0[i]
-    s = state_view(s0[i].copy())  # the controller state record, on a copy of row i
+    # the controller state and the plant's drifted friction levels are records
+    # on copies of row i (passed as views below, where the copy is used, so that
+    # numba keeps it alive: a record does not hold its array); the plant's and
+    # the compensator's friction records view rows of the caller's arrays
+    s_row = s0[i].copy()
+    drift_row = fp[i].copy()
+    plant_friction = friction_view(fp[i])
+    comp = friction_view(cp[i])
     sp = sensor_record(sens[i])
     plant = plant_record(pp[i])
     gains = gains_record(gp[i])
@@ -91,8 +98,9 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     done, fell_code, mem, zero = 0, 0, 0.0, 0.0
     while done < n and fell_code == 0:
         m = min(chunk, n - done)
-        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], plant, fk[i], fp[i], gains,
-                                       cp[i], s, sp, done, zero, fall[i], buf, True)
+        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], plant, fk[i], plant_friction,
+                                       friction_view(drift_row), gains, comp, state_view(s_row),
+                                       sp, done, zero, fall[i], buf, True)
         for k in range(d):
             sig[0, done + k] = buf[k, 0]
             sig[1, done + k] = buf[k, 3]
@@ -206,7 +214,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
             ctrl = make_controller(cfg)
             g, c = ctrl.record()
             shared = (np.array(g, dtype=float),  # gains_record reads it back
-                      c, state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
+                      friction_row(c), state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
                       cfg.plant.record(),
                       np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
             last_key = key
@@ -215,7 +223,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
         s0.append(shared[2])
         pp.append(shared[3])
         sens.append(shared[4])
-        fp.append(resolve_drift(cfg.friction.pack(), ticks * cfg.design.h))
+        fp.append(friction_row(resolve_drift(cfg.friction.record(), ticks * cfg.design.h)))
         x0[k] = cfg.sim.initial_angle
         nt[k] = ticks
         sub[k] = cfg.substeps

@@ -92,7 +92,7 @@ from ..model.controller import (
     compensator_params,
     new_state,
 )
-from ..model.friction import LUGRE, FrictionParams, with_levels
+from ..model.friction import LUGRE, FrictionParams, copy_friction, with_levels
 from ..model.rig import RigScaling
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
@@ -165,7 +165,7 @@ class Compensator:
     kind: ClassVar[str] = ""
     params: FrictionParams = None  # type: ignore[assignment]
     h: float = 0.005
-    _cp: np.ndarray = dataclasses.field(default=None, init=False, repr=False,
+    _cp: np.record = dataclasses.field(default=None, init=False, repr=False,
                                         compare=False)
 
     def __post_init__(self) -> None:
@@ -192,12 +192,12 @@ class Compensator:
         """Initial state: relay undecided, bristle at ``z_hat`` (default relaxed)."""
         return CompensatorState(0.0, float(z_hat), 0.0)
 
-    def law(self, state: CompensatorState) -> tuple[int, np.ndarray, float]:
+    def law(self, state: CompensatorState) -> tuple[int, np.record, float]:
         """The friction law this compensator runs as of ``state``: ``(code, p,
         law_state)`` such that its estimate of a step from a state ``prev`` to
         ``state`` is ``friction_step(code, p, law(prev)[2], v, u_fb, h, e)``
         (:func:`frictionlab.model.friction.friction_step`): its model kind, its
-        packed parameters (the adaptive one's with its levels as of ``state``)
+        friction record (the adaptive one's with its levels as of ``state``)
         and the law's memory (the relay, else the bristle)."""
         return self.code, self._cp, state.relay if self.kind == "coulomb" else state.z_hat
 
@@ -291,14 +291,14 @@ class AdaptiveCompensator(LuGreCompensator):
         return f, CompensatorState(0.0, float(s.z_hat), f,
                                    tuple(float(getattr(s, name)) for name in _ADAPTATION_FIELDS))
 
-    def law(self, state: CompensatorState) -> tuple[int, np.ndarray, float]:
+    def law(self, state: CompensatorState) -> tuple[int, np.record, float]:
         """LuGre with the levels the adaptation had reached by ``state`` (both
         directions); see :meth:`Compensator.law`."""
         fc = fs = None
         if state.adaptation:
             named = dict(zip(_ADAPTATION_FIELDS, state.adaptation, strict=True))
             fc, fs = named["fc_hat"], named["fs_hat"]
-        p = self._cp if fc is None else with_levels(self._cp, fc, fs)
+        p = self._cp if fc is None else with_levels(self._cp, fc, fs, copy_friction(self._cp))
         return LUGRE, p, state.z_hat
 
 

@@ -143,7 +143,7 @@ def friction_nonlinearity(cfg: Config):
     if kind in ("stribeck", "lugre"):
         # steady sliding: s(v) sgn v (+ F_v v for LuGre); the stribeck form's
         # zero-velocity band counts as rest (no friction without applied force)
-        packed = p.pack()
+        packed = p.record()
         if kind == "lugre":
             def curve(v):
                 return stribeck_curve(v, packed)

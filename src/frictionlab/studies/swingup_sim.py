@@ -23,7 +23,14 @@ import numpy as np
 from ..config import Config
 from ..model._jit import jit
 from ..model.controller import Controller, compensator_levels, estimates
-from ..model.friction import KINDS, drifted_params, is_drifting, resolve_drift
+from ..model.friction import (
+    KINDS,
+    copy_friction,
+    copy_friction_into,
+    drifted_params,
+    is_drifting,
+    resolve_drift,
+)
 from ..model.sensor import measure
 from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick, record_tick
 from ..model.swingup import (
@@ -46,12 +53,15 @@ _OK, _FELL, _STOPPED = 0, 1, 2
 
 
 @jit
-def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
+def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, fpt, gp, cp, sp, s, w, sens,
                  fall_angle, out, phase_out):
-    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
+    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code).
+
+    ``fp`` is the plant's friction record, ``fpt`` a scratch friction record
+    (the plant's levels at the tick, overwritten)."""
     h = gp.h
     drifting = is_drifting(fp)
-    fpt = fp.copy()
+    copy_friction_into(fp, fpt)
     mem = 0.0
     x0 = 0.0
     for k in range(n_ticks):
@@ -134,9 +144,10 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
+    fp = resolve_drift(cfg.friction.record(), n * h)
     done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, cfg.plant.record(),
                                 KINDS.index(cfg.friction_kind),
-                                resolve_drift(cfg.friction.pack(), n * h), gp, cp, sp, s, w,
+                                fp, copy_friction(fp), gp, cp, sp, s, w,
                                 make_sensor(cfg), cfg.sim.fall_angle, out, phase)
     phase = phase[:done]
     balanced = bool((phase == BALANCING).any())
