@@ -28,11 +28,9 @@ from frictionlab.model.controller import (
     controller_step,
 )
 from frictionlab.model.friction import (
-    P_FC,
-    P_FCN,
-    P_FS,
-    P_FV,
+    FRICTION_FIELDS,
     FrictionParams,
+    copy_friction,
     drift_factor,
     drifted_params,
     resolve_drift,
@@ -49,26 +47,28 @@ L1 = 0.21
 
 
 def test_drift_factor_is_linear_over_the_drift_time_then_holds():
-    p = FrictionParams(drift=-0.4, drift_start=10.0, drift_time=20.0).pack()
+    p = FrictionParams(drift=-0.4, drift_start=10.0, drift_time=20.0).record()
     for t, c in ((0.0, 1.0), (10.0, 1.0), (15.0, 0.9), (20.0, 0.8), (30.0, 0.6), (99.0, 0.6)):
         assert drift_factor(t, p) == pytest.approx(c, abs=1e-12), t
 
 
 def test_drift_time_zero_is_a_step_and_unset_runs_to_the_end():
-    p = FrictionParams(drift=0.5, drift_start=3.0, drift_time=0.0).pack()
+    p = FrictionParams(drift=0.5, drift_start=3.0, drift_time=0.0).record()
     assert drift_factor(2.999, p) == 1.0 and drift_factor(3.0, p) == 1.5
-    q = resolve_drift(FrictionParams(drift=-0.4, drift_start=10.0).pack(), 60.0)
+    q = resolve_drift(FrictionParams(drift=-0.4, drift_start=10.0).record(), 60.0)
     assert drift_factor(35.0, q) == pytest.approx(0.8) and drift_factor(60.0, q) == 0.6
 
 
 def test_drifted_params_scale_the_levels_only():
-    p = FrictionParams(drift=-0.5, drift_time=10.0, coulomb_negative=1.0).pack()
-    out = drifted_params(p, 10.0, np.zeros_like(p))
-    for i in range(len(p)):
-        if i in (P_FC, P_FS, P_FV, P_FCN, 9, 11):  # both directions' F_S, F_C, F_v
-            assert out[i] == pytest.approx(0.5 * p[i]), i
-        elif not np.isnan(p[i]):
-            assert out[i] == p[i], i
+    p = FrictionParams(drift=-0.5, drift_time=10.0, coulomb_negative=1.0).record()
+    out = copy_friction(p)
+    out.fs = out.drift_start = math.nan  # written by drifted_params
+    drifted_params(p, 10.0, out)  # writes out in place
+    for name in FRICTION_FIELDS:
+        if name in ("fs", "fc", "fv", "fs_neg", "fc_neg", "fv_neg"):  # both directions' levels
+            assert out[name] == pytest.approx(0.5 * p[name]), name
+        else:
+            assert out[name] == p[name], name
 
 
 def test_the_simulated_plant_friction_follows_a_step_drift():
@@ -105,7 +105,7 @@ def test_drift_zero_is_bit_for_bit_the_plain_plant():
 def comp_params(**kw):
     base = dict(FrictionParams.defaults("adaptive", "compensation").__dict__)
     base.update(kw)
-    return FrictionParams(**base).pack()
+    return FrictionParams(**base).record()
 
 
 def identify(p, true_fc, true_fs, ticks, fv=0.07, amp=8.0, start=(0.0, 0.0, 0.0)):

@@ -134,7 +134,7 @@ def test_observers_must_be_fed_the_net_acceleration():
        sigma0=st.floats(50.0, 1000.0), z0=st.floats(-0.05, 0.05))
 def test_observer_steady_sliding_accurate(v, sign, sigma0, z0):
     c = make_compensator("lugre", sigma0=sigma0)
-    p = c.params.pack()
+    p = c.params.record()
     st_ = c.init(z0)
     vv = sign * v
     f_max = 0.0
@@ -272,7 +272,7 @@ def test_classical_implementation_form(v, u_fb):
     if abs(v) < p.hysteresis:
         assert f == pytest.approx(min(max(u_fb, -p.stiction), p.stiction))
     else:
-        assert f == pytest.approx(math.copysign(stribeck_level(v, p.pack()), v))
+        assert f == pytest.approx(math.copysign(stribeck_level(v, p.record()), v))
 
 
 def test_api_matches_controller_tick(fast_design):

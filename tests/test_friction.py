@@ -28,7 +28,7 @@ def stribeck_oracle(v, fs, fc, fv, vs):
 def test_lugre_steady_sliding_is_stribeck_curve(v):
     """Integrate dz/dt at constant v to steady state: F equals the Stribeck curve."""
     p = FrictionParams()  # eq. (21) values, k = 0
-    pk = p.pack()
+    pk = p.record()
     z = 0.0
     for _ in range(20000):
         z, _, _ = lugre_step_exact(v, z, 0.0, 0.01, pk)
@@ -40,7 +40,7 @@ def test_lugre_steady_sliding_is_stribeck_curve(v):
 @settings(max_examples=60, deadline=None)
 @given(v=st.floats(-20, 20), fs=levels, fc=levels, fv=st.floats(0, 1), vs=st.floats(0.1, 5))
 def test_stribeck_curve_closed_form(v, fs, fc, fv, vs):
-    p = FrictionParams(stiction=fs, coulomb=fc, viscous=fv, stribeck_velocity=vs).pack()
+    p = FrictionParams(stiction=fs, coulomb=fc, viscous=fv, stribeck_velocity=vs).record()
     assert np.isclose(stribeck_curve(v, p), stribeck_oracle(v, fs, fc, fv, vs), atol=1e-12)
 
 
@@ -65,7 +65,7 @@ def test_lugre_passivity(v, zr, fs, fc, s0, s1, fv):
     """Bristle passivity: sigma0 z v >= d/dt(sigma0 z^2 / 2) always, and the full
     dissipation inequality F v >= d/dt(sigma0 z^2/2) where sigma1 |v| <= 4 s(v)
     (the condition for the sigma1 cross term, Olsson 1996)."""
-    p = FrictionParams(stiction=fs, coulomb=fc, viscous=fv, sigma0=s0, sigma1=s1).pack()
+    p = FrictionParams(stiction=fs, coulomb=fc, viscous=fv, sigma0=s0, sigma1=s1).record()
     level = fc + (fs - fc) * np.exp(-(v**2))
     z = zr * level / s0  # inside the invariant set |z| <= s(v)/sigma0
     dz = lugre_dz(v, z, 0.0, p)
@@ -77,7 +77,7 @@ def test_lugre_passivity(v, zr, fs, fc, s0, s1, fv):
 
 
 def test_velocity_dependent_sigma1_restores_passivity():
-    p = FrictionParams(sigma1=20.0, sigma1_velocity=0.1).pack()
+    p = FrictionParams(sigma1=20.0, sigma1_velocity=0.1).record()
     v, z = 3.0, -0.01
     dz = lugre_dz(v, z, 0.0, p)
     assert lugre_force(v, z, dz, p) * v >= 100.0 * z * dz
@@ -136,15 +136,15 @@ def test_ideal_relay_without_hysteresis_switches_at_zero():
 
 
 def test_observer_gain_zero_is_plain_lugre():
-    p0 = FrictionParams().pack()
-    pk = dataclasses.replace(FrictionParams(), observer_gain=3.0).pack()
+    p0 = FrictionParams().record()
+    pk = dataclasses.replace(FrictionParams(), observer_gain=3.0).record()
     assert lugre_dz(0.4, 0.01, 0.0, pk) == lugre_dz(0.4, 0.01, 0.0, p0)
     assert lugre_dz(0.4, 0.01, 0.2, pk) == pytest.approx(lugre_dz(0.4, 0.01, 0.0, p0) - 0.6)
 
 
 def test_exact_bristle_update_is_stable_where_euler_is_not():
     """sigma0 = 1000, h = 5 ms: forward Euler diverges, the exact update does not."""
-    p = FrictionParams(sigma0=1000.0).pack()
+    p = FrictionParams(sigma0=1000.0).record()
     v, h = 3.0, 0.005
     z_exact, z_euler = 0.0, 0.0
     for _ in range(200):
@@ -163,7 +163,7 @@ def test_lugre_object_steps_to_the_stribeck_curve_and_matches_the_force_law():
         f, z = m.step(z, 0.8, 0.0, 0.005)
     assert f == pytest.approx(m.steady_state(0.8), abs=1e-9)
     # at the steady state the bristle rate vanishes and the force law agrees
-    p = m.params.pack()
+    p = m.params.record()
     assert abs(lugre_dz(0.8, z, 0.0, p)) < 1e-9
     assert lugre_force(0.8, z, 0.0, p) == pytest.approx(f, abs=1e-9)
 
