@@ -65,9 +65,9 @@ from .design import Design
 from .friction import (
     CLASSICAL,
     COULOMB,
+    FRICTION_DTYPE,
     LUGRE,
     STRIBECK,
-    FRICTION_DTYPE,
     FrictionParams,
     friction_arg,
     friction_step,

@@ -214,7 +214,8 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
             ctrl = make_controller(cfg)
             g, c = ctrl.record()
             shared = (np.array(g, dtype=float),  # gains_record reads it back
-                      friction_row(c), state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
+                      friction_row(c),  # friction_view reads it back
+                      state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
                       cfg.plant.record(),
                       np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
             last_key = key
