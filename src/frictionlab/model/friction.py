@@ -181,8 +181,11 @@ FRICTION_FIELDS = (
     "adapt_distance",    # adaptation_distance
 )
 #: The friction parameters' record type, one float64 per field of
-#: :data:`FRICTION_FIELDS`: what the compiled force laws read (``p.fc``).
-FRICTION_DTYPE = np.dtype([(name, np.float64) for name in FRICTION_FIELDS], align=True)
+#: :data:`FRICTION_FIELDS`: what the compiled force laws read (``p.fc``).  Its
+#: scalar type is ``np.record``, so that in Python too an element of an array
+#: of it (a view of a float row) is a record with its fields as attributes.
+FRICTION_DTYPE = np.dtype((np.record, np.dtype([(name, np.float64) for name in FRICTION_FIELDS],
+                                               align=True)))
 #: Number of floats in a friction record (its size as a float row).
 NP = len(FRICTION_FIELDS)
 
@@ -292,37 +295,27 @@ class FrictionParams(Validated):
 
     def record(self, zero_velocity_band: float | None = None) -> np.record:
         """The friction record (:data:`FRICTION_DTYPE`) the compiled force laws
-        read, backed by its own one-element array (compiled code may write it).
+        read, backed by its own array (compiled code may write it).
 
         ``zero_velocity_band``, when given, replaces the field's value
         without a validated copy (the compensators' 0,
         :func:`frictionlab.model.controller.compensator_params`).
         """
-        r = np.zeros(1, FRICTION_DTYPE).view(np.recarray)[0]
-        r.fs = self.stiction
-        r.fc = self.coulomb
-        r.fv = self.viscous
-        r.vs = self.stribeck_velocity
-        r.sigma0 = self.sigma0
-        r.sigma1 = self.sigma1
-        r.k = self.observer_gain
-        r.band = self.zero_velocity_band if zero_velocity_band is None else zero_velocity_band
-        r.eps = self.hysteresis
-        r.fs_neg = self.stiction if self.stiction_negative is None else self.stiction_negative
-        r.fc_neg = self.coulomb if self.coulomb_negative is None else self.coulomb_negative
-        r.fv_neg = self.viscous if self.viscous_negative is None else self.viscous_negative
-        r.vd = math.inf if self.sigma1_velocity is None else self.sigma1_velocity
-        r.drift = self.drift
-        r.drift_start = self.drift_start
-        r.drift_time = math.nan if self.drift_time is None else self.drift_time
-        r.adapt_gain = self.adaptation_gain
-        r.adapt_bandwidth = self.adaptation_bandwidth
-        r.adapt_deadband = self.adaptation_deadband
-        r.adapt_innovation = self.adaptation_max_innovation
-        r.adapt_min = self.adaptation_min
-        r.adapt_max = self.adaptation_max
-        r.adapt_distance = self.adaptation_distance
-        return r
+        row = (  # in FRICTION_FIELDS order
+            self.stiction, self.coulomb, self.viscous, self.stribeck_velocity, self.sigma0,
+            self.sigma1, self.observer_gain,
+            self.zero_velocity_band if zero_velocity_band is None else zero_velocity_band,
+            self.hysteresis,
+            self.stiction if self.stiction_negative is None else self.stiction_negative,
+            self.coulomb if self.coulomb_negative is None else self.coulomb_negative,
+            self.viscous if self.viscous_negative is None else self.viscous_negative,
+            math.inf if self.sigma1_velocity is None else self.sigma1_velocity,
+            self.drift, self.drift_start,
+            math.nan if self.drift_time is None else self.drift_time,
+            self.adaptation_gain, self.adaptation_bandwidth, self.adaptation_deadband,
+            self.adaptation_max_innovation, self.adaptation_min, self.adaptation_max,
+            self.adaptation_distance)
+        return friction_record(np.array(row, dtype=np.float64))
 
 
 def friction_row(p) -> np.ndarray:
@@ -335,7 +328,7 @@ def friction_row(p) -> np.ndarray:
 def friction_record(row) -> np.record:
     """The friction record stored in the float64 row ``row`` (:data:`NP`
     contiguous floats), by reference (Python side of :func:`friction_view`)."""
-    return np.asarray(row, dtype=np.float64).view(FRICTION_DTYPE).view(np.recarray)[0]
+    return np.asarray(row, dtype=np.float64).view(FRICTION_DTYPE)[0]
 
 
 def copy_friction(p) -> np.record:
