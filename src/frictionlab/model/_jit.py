@@ -23,7 +23,7 @@ import functools
 from importlib import import_module
 from typing import Any
 
-__all__ = ["Kernel", "jit", "jit_inline", "jit_parallel", "on_numba_load"]
+__all__ = ["Kernel", "jit", "jit_inline", "jit_parallel", "keep_alive", "on_numba_load"]
 
 _ON_LOAD: list = []
 _LOADED: list = []
@@ -125,3 +125,16 @@ def jit_parallel(fn) -> Kernel:
     """As :func:`jit`, with numba's ``parallel=True`` (``prange`` loops run on
     numba's threads) and ``nogil=True``; compiled on first use."""
     return Kernel(fn, parallel=True)
+
+
+def _keep_alive(a):
+    """Nothing: a use of ``a`` in compiled code.  Numba frees an array after
+    its last use, and a record taken from it (``a[0]``, ``x.view(dtype)[0]``)
+    does not hold it: a kernel that works on such a record calls
+    ``keep_alive(a)`` after the record's last use."""
+    return None
+
+
+#: :func:`_keep_alive` compiled; a call, not inlined by numba (whose dead-code
+#: elimination would drop an inlined use), so the array lives until it returns.
+keep_alive = jit(_keep_alive)

@@ -59,7 +59,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, keep_alive
 from .adaptive import adaptation_step, check_gains
 from .design import Design
 from .friction import (
@@ -358,14 +358,8 @@ def adaptive_force(s, cp, v, e, h, arm_len, u_max):
     adapted = np.empty(1, FRICTION_DTYPE)
     f, s.z_hat = friction_step(LUGRE, with_levels(cp, fc, fs, adapted[0]), s.z_hat, v, 0.0, h,
                                e)
-    _keep(adapted)  # a record does not hold its array: numba frees it after its last use
+    keep_alive(adapted)  # a record does not hold its array
     return f
-
-
-@jit_inline
-def _keep(a):
-    """Nothing; a use of ``a`` that keeps it alive up to here in compiled code."""
-    return None
 
 
 @jit_inline

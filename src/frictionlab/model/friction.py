@@ -332,9 +332,10 @@ def friction_record(row) -> np.record:
 
 
 def copy_friction(p) -> np.record:
-    """An independent copy of the friction record ``p`` (a scratch record for
-    :func:`drifted_params`)."""
-    return friction_record(friction_row(p))
+    """An independent copy of the friction record ``p``."""
+    a = np.empty(1, FRICTION_DTYPE)
+    a[0] = p
+    return a[0]
 
 
 def friction_arg(p):
@@ -688,7 +689,7 @@ def is_drifting(p):
 def without_drift(p: np.record) -> np.record:
     """A copy of ``p`` without drift (the plant at its starting levels)."""
     q = copy_friction(p)
-    q.drift = 0.0
+    q["drift"] = 0.0
     return q
 
 
@@ -730,9 +731,10 @@ def resolve_drift(p: np.record, duration: float) -> np.record:
     """``p`` (a copy if changed) with an unset drift time (NaN: to the end of
     the run) set to the time from ``drift_start`` to ``duration``, the run's
     length in s."""
-    if math.isnan(p.drift_time):
+    # (items, not attributes: numpy reads a record's attribute in Python code)
+    if math.isnan(p["drift_time"]):
         p = copy_friction(p)
-        p.drift_time = max(float(duration) - p.drift_start, 0.0)
+        p["drift_time"] = max(float(duration) - p["drift_start"], 0.0)
     return p
 
 

@@ -85,7 +85,7 @@ from .controller import (
     state_vector,
     state_view,
 )
-from .friction import KINDS, LUGRE, NONE, VISCOUS, copy_friction, without_drift
+from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
 from .limit_cycles import LimitCycleFeatures, _crossings, features
 from .sensor import arm_zero, reading
 from .simulation import (
@@ -746,8 +746,7 @@ def _trajectory(loop: _Loop, state: np.ndarray, duration: float) -> Trajectory:
     s = state_record(np.array(state[I_S:I_MEM], dtype=float))
     out = np.zeros((n, NC))
     done, status, _, _ = _run(x, float(state[I_MEM]), n, loop.substeps, loop.ratio, loop.pp,
-                              loop.fkind, loop.fp, copy_friction(loop.fp), loop.gp, loop.cp, s,
-                              loop.sensor, 1,
+                              loop.fkind, loop.fp, loop.gp, loop.cp, s, loop.sensor, 1,
                               loop.x0, loop.fall_angle, out, True)
     return Trajectory(np.arange(done), loop.h, out[:done], STATUS[status], loop.cfg)
 

@@ -61,7 +61,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, keep_alive
 from .controller import (
     DEFAULT_ERROR_SIGNAL,
     STATE_DTYPE,
@@ -72,10 +72,10 @@ from .controller import (
 )
 from .design import design as make_design
 from .friction import (
+    FRICTION_DTYPE,
     KINDS,
     LUGRE,
     NONE,
-    copy_friction,
     copy_friction_into,
     drifted_params,
     drifted_rows,
@@ -265,7 +265,7 @@ def record_tick(out, k, th_m, th_hat, thd_hat, u, arm_m, armd_m, arm_hat, armd_h
 
 
 @jit
-def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, fpt, gp, cp, s, sp, n0, x0,
+def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
          fall_angle, out, record):
     """The closed loop for ``n_ticks`` ticks; returns (ticks done, status code, mem, x0).
 
@@ -279,11 +279,14 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, fpt, gp, cp, s, sp, n0
     friction levels drift with the time ``(n0 + k) h`` when ``fp`` has a
     drift with a resolved drift time (:func:`frictionlab.model.friction.resolve_drift`;
     an unresolved one, NaN, is ignored).  ``fp`` and ``cp`` are the plant's
-    and the compensator's friction records, ``fpt`` a scratch friction record
-    (the plant's levels at the tick; overwritten).
+    and the compensator's friction records (by reference).
     """
     h = gp.h
     drifting = is_drifting(fp)
+    # the plant's levels at the tick, in a scratch record (kept alive to the end:
+    # a record does not hold its array)
+    buf = np.empty(1, FRICTION_DTYPE)
+    fpt = buf[0]
     copy_friction_into(fp, fpt)
     # an ideal noise-free sensor measures the true signals: its (inlined) reading
     # saves the call of measure every tick; the same values bit for bit
@@ -305,7 +308,9 @@ def _run(x, mem, n_ticks, substeps, ratio, pp, fkind, fp, fpt, gp, cp, s, sp, n0
         if record:
             out[k, 15] = f_mean
         if not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
+            keep_alive(buf)
             return k + 1, 1, mem, x0
+    keep_alive(buf)
     return n_ticks, 0, mem, x0
 
 
@@ -540,12 +545,11 @@ def simulate_config(
     sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)
     fp = resolve_drift(cfg.friction.record(), n * h)
-    fpt = copy_friction(fp)
     pp = cfg.plant.record()
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
     if progress is None:
-        done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, fpt, gp, cp, s,
-                                  sp, 0, 0.0, cfg.sim.fall_angle, out, record)
+        done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                  0, 0.0, cfg.sim.fall_angle, out, record)
     else:
         # chunks of whole ticks; the noise of sample n is a function of (seed, n), and
         # the arm's zero x0 is carried over, so a chunked run is the unchunked one bit
@@ -555,8 +559,8 @@ def simulate_config(
         while done < n and status == 0:
             m = min(chunk, n - done)
             view = out[done:done + m] if record else out
-            d, status, mem, x0 = _run(x, mem, m, substeps, ratio, pp, fkind, fp, fpt, gp, cp,
-                                      s, sp, done, x0, cfg.sim.fall_angle, view, record)
+            d, status, mem, x0 = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                      done, x0, cfg.sim.fall_angle, view, record)
             done += d
             progress(done / n)
     data = out[:done] if record else out[:0]

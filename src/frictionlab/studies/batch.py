@@ -82,12 +82,11 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     """
     x = np.zeros(5)
     x[0] = x0[i]
-    # the controller state and the plant's drifted friction levels are records
-    # on copies of row i (passed as views below, where the copy is used, so that
-    # numba keeps it alive: a record does not hold its array); the plant's and
-    # the compensator's friction records view rows of the caller's arrays
+    # the controller state is a record on a copy of row i (viewed below, where
+    # the copy is used, so that numba keeps it alive: a record does not hold its
+    # array); the plant's and the compensator's friction records view rows of
+    # the caller's arrays, once
     s_row = s0[i].copy()
-    drift_row = fp[i].copy()
     plant_friction = friction_view(fp[i])
     comp = friction_view(cp[i])
     sp = sensor_record(sens[i])
@@ -99,8 +98,8 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     while done < n and fell_code == 0:
         m = min(chunk, n - done)
         d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], plant, fk[i], plant_friction,
-                                       friction_view(drift_row), gains, comp, state_view(s_row),
-                                       sp, done, zero, fall[i], buf, True)
+                                       gains, comp, state_view(s_row), sp, done, zero, fall[i],
+                                       buf, True)
         for k in range(d):
             sig[0, done + k] = buf[k, 0]
             sig[1, done + k] = buf[k, 3]

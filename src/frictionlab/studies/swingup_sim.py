@@ -21,11 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config
-from ..model._jit import jit
+from ..model._jit import jit, keep_alive
 from ..model.controller import Controller, compensator_levels, estimates
 from ..model.friction import (
+    FRICTION_DTYPE,
     KINDS,
-    copy_friction,
     copy_friction_into,
     drifted_params,
     is_drifting,
@@ -53,14 +53,15 @@ _OK, _FELL, _STOPPED = 0, 1, 2
 
 
 @jit
-def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, fpt, gp, cp, sp, s, w, sens,
+def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
                  fall_angle, out, phase_out):
-    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code).
-
-    ``fp`` is the plant's friction record, ``fpt`` a scratch friction record
-    (the plant's levels at the tick, overwritten)."""
+    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
     h = gp.h
     drifting = is_drifting(fp)
+    # the plant's levels at the tick, in a scratch friction record (kept alive
+    # to the end: a record does not hold its array)
+    buf = np.empty(1, FRICTION_DTYPE)
+    fpt = buf[0]
     copy_friction_into(fp, fpt)
     mem = 0.0
     x0 = 0.0
@@ -80,11 +81,15 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, fpt, gp, cp, sp, s,
         f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         out[k, 15] = f_mean
         if w[W_PHASE] == 3.0:
+            keep_alive(buf)
             return k + 1, _STOPPED
         if not np.isfinite(x[0] + x[1] + x[3] + x[4]):
+            keep_alive(buf)
             return k + 1, _FELL
         if w[W_PHASE] == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
+            keep_alive(buf)
             return k + 1, _FELL
+    keep_alive(buf)
     return n_ticks, _OK
 
 
@@ -144,10 +149,9 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
-    fp = resolve_drift(cfg.friction.record(), n * h)
     done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, cfg.plant.record(),
                                 KINDS.index(cfg.friction_kind),
-                                fp, copy_friction(fp), gp, cp, sp, s, w,
+                                resolve_drift(cfg.friction.record(), n * h), gp, cp, sp, s, w,
                                 make_sensor(cfg), cfg.sim.fall_angle, out, phase)
     phase = phase[:done]
     balanced = bool((phase == BALANCING).any())
