@@ -169,7 +169,8 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     th, thd, arm, ad, z = x[0], x[1], x[2], x[3], x[4]
     sn = np.sin(th)
     cs = np.cos(th)
-    kgain = fp.k if fkind == LUGRE else 0.0
+    k = fp.k  # read unconditionally (model.friction's docstring, "Reads")
+    kgain = k if fkind == LUGRE else 0.0
     done = 0
     while done < substeps:
         m = min(ratio, substeps - done)
