@@ -20,8 +20,8 @@ from frictionlab.config import build_config
 from frictionlab.model.controller import ERROR_SIGNALS, Controller
 from frictionlab.model.design import design as make_design
 from frictionlab.model.friction import (
-    P_K,
     FrictionParams,
+    copy_friction,
     lugre_force,
     lugre_step_exact,
     stribeck_curve,
@@ -72,8 +72,8 @@ class _FlippedGain:
 
     def record(self):
         gp, cp = self.ctrl.record()
-        cp = cp.copy()
-        cp[P_K] = -cp[P_K]
+        cp = copy_friction(cp)
+        cp["k"] = -cp["k"]
         return gp, cp
 
     def init(self, theta0=0.0):
@@ -221,7 +221,7 @@ def feed_table() -> None:
 
 def observer_run(v, prm: FrictionParams, h: float, method: str) -> np.ndarray:
     """F_hat along the velocity sequence ``v`` (e = 0) with one update scheme."""
-    p = prm.pack()
+    p = prm.record()
     s0, s1, fv, fc, fs, vs = (prm.sigma0, prm.sigma1, prm.viscous, prm.coulomb,
                               prm.stiction, prm.stribeck_velocity)
     z = 0.0
@@ -293,7 +293,7 @@ def discretisation() -> None:
         steady = []
         for method in ("exact", "forward_euler"):
             f = observer_run(np.full(400, 1.0), prm, h, method)
-            err = abs(f[-1] - stribeck_curve(1.0, prm.pack()))
+            err = abs(f[-1] - stribeck_curve(1.0, prm.record()))
             steady.append(f"{err:.2g}" if np.isfinite(err) else "diverged")
         print(f"| {sigma0:g} | {a_max * h:.2f} | " + " | ".join(cells + steady) + " |")
     axes[1].set_xlabel("time [s]")

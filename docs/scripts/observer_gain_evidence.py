@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 
 from frictionlab.config import Config, build_config
-from frictionlab.model.friction import P_K, FrictionParams
+from frictionlab.model.friction import FrictionParams
 from frictionlab.model.simulation import run_features
 
 DURATION = 40.0
@@ -31,11 +31,11 @@ COMPARED = ("peak1", "period", "max_u", "max_arm_velocity")
 @dataclasses.dataclass(frozen=True)
 class _PlusTheta(FrictionParams):
     """The counterfactual e = +theta: the same term with the opposite sign (the
-    simulator reads e = -theta, so the packed gain is negated)."""
+    simulator reads e = -theta, so the record's gain is negated)."""
 
-    def pack(self):
-        p = super().pack()
-        p[P_K] = -p[P_K]
+    def record(self, zero_velocity_band=None):
+        p = super().record(zero_velocity_band)
+        p["k"] = -p["k"]
         return p
 
 

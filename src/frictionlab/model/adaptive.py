@@ -209,8 +209,9 @@ def adaptation_step(status, fc, fs, v_hat, v_prev, slide, u_prev, v, p, h, arm_l
         The control applied over the last interval (m/s^2).
     v : float
         This tick's measured arm velocity (rad/s).
-    p : ndarray
-        Packed compensator parameters (``v_S``, ``F_v``, the ``adaptation_*`` fields).
+    p : record of :data:`~frictionlab.model.friction.FRICTION_DTYPE`
+        The compensator's friction record (``v_S``, ``F_v``, the ``adaptation_*``
+        fields).
     h, arm_len, u_max : float
         Sampling period, :math:`L_1`, saturation of u.
 

@@ -143,14 +143,14 @@ def friction_nonlinearity(cfg: Config):
     if kind in ("stribeck", "lugre"):
         # steady sliding: s(v) sgn v (+ F_v v for LuGre); the stribeck form's
         # zero-velocity band counts as rest (no friction without applied force)
-        packed = p.record()
+        rec = p.record()
         if kind == "lugre":
             def curve(v):
-                return stribeck_curve(v, packed)
+                return stribeck_curve(v, rec)
             band = ()
         else:
             def curve(v):
-                return stribeck_classical_force(v, 0.0, packed)
+                return stribeck_classical_force(v, 0.0, rec)
             band = (p.hysteresis if p.hysteresis > 0 else p.zero_velocity_band,)
         return (StaticFrictionNonlinearity(curve, f"{kind} steady-state curve", band),
                 f"{kind} steady-state curve (F_S = {p.stiction:g}, F_C = {p.coulomb:g}, "
