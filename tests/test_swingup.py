@@ -133,16 +133,16 @@ def test_handover_initialises_the_observers_from_the_measurement():
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
     w, s = sw.init(0.5)
-    w[4] = -1.2  # swing-up observer's theta_dot
+    w.theta_dot_hat = -1.2  # swing-up observer's theta_dot
     state = (w, s)
     out, (w2, s2) = sw.step(state, 0.2 + 2 * math.pi, 1.5, 0.3)
     assert out.phase == "caught"
     # the balancing observers started at the measurement (and took one predictor step)
     h = cfg.design.h
-    assert s2.x1 == pytest.approx(0.2 + h * w2[4], abs=0.01)
-    assert s2.x2 * cfg.design.omega0 == pytest.approx(w2[4], abs=0.5)
+    assert s2.x1 == pytest.approx(0.2 + h * w2.theta_dot_hat, abs=0.01)
+    assert s2.x2 * cfg.design.omega0 == pytest.approx(w2.theta_dot_hat, abs=0.5)
     assert s2.arm == pytest.approx(h * 0.3, abs=0.01)  # relative to the catch position
-    assert w2[5] == pytest.approx(1.5, rel=0.01)  # arm reference offset: the catch position
+    assert w2.arm_offset == pytest.approx(1.5, rel=0.01)  # arm reference offset: the catch position
     assert np.all(state_vector(state[1]) == 0.0)  # step does not modify its input
 
 
@@ -224,7 +224,7 @@ def test_a_design_change_mid_swing_reaches_the_swing_up(tmp_path):
     """The swing-up's observer and energy use the design's omega_0: a change of it
     while swinging is in effect for the swing-up from the same tick as for the
     balancing controller."""
-    from frictionlab.model.swingup import P_W0
+    from frictionlab.model.swingup import swingup_record
     from frictionlab.realtime import FakeClock, RealtimeController
 
     cfg = build_config("fast", "classical", sets=[HANGING])
@@ -240,7 +240,7 @@ def test_a_design_change_mid_swing_reaches_the_swing_up(tmp_path):
     assert st["stop_reason"] == "duration" and st["swing_up"]["phase"] == "swinging"
     assert seen["fut"].result(timeout=0) is not None  # applied during the run
     assert ctl._loop.params.gp.omega0 == 6.3
-    assert ctl._loop._sp[P_W0] == 6.3
+    assert swingup_record(ctl._loop._sp).omega0 == 6.3
 
 
 @pytest.mark.parametrize("limit,reason", [("swingup.time_limit=1", "not_caught"),

@@ -28,12 +28,10 @@ from ..model.sensor import measure
 from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick, record_tick
 from ..model.swingup import (
     BALANCING,
+    CAUGHT,
     PHASES,
     STOP_CODES,
-    W_CATCH,
-    W_PHASE,
-    W_STOP,
-    W_T,
+    STOPPED,
     SwingUp,
     swingup_step,
     wrap_angle,
@@ -59,21 +57,22 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, s
         th_m = wrap_angle(th_m)
         est = estimates(s, gp)
         u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
-        balancing = w[W_PHASE] >= 1.0 and w[W_PHASE] <= 2.0
+        balancing = CAUGHT <= w.phase <= BALANCING
         fc_used, fs_used = compensator_levels(s, gp, cp)
-        record_tick(out, k, th_m, est[0] if balancing else w[3], est[1] if balancing else w[4],
+        record_tick(out, k, th_m, est[0] if balancing else w.theta_hat,
+                    est[1] if balancing else w.theta_dot_hat,
                     u, arm_m, armd_m, est[2], est[3], f_hat, est[4], wrap_angle(x[0]), x,
                     fc_used, fs_used)
-        phase_out[k] = w[W_PHASE]
+        phase_out[k] = w.phase
         if drifting:
             drifted_params(fp, k * h, fpt)
         f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         out[k, 15] = f_mean
-        if w[W_PHASE] == 3.0:
+        if w.phase == STOPPED:
             return k + 1, _STOPPED
         if not np.isfinite(x[0] + x[1] + x[3] + x[4]):
             return k + 1, _FELL
-        if w[W_PHASE] == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
+        if w.phase == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
             return k + 1, _FELL
     return n_ticks, _OK
 
@@ -128,7 +127,7 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     if n > 20_000_000:
         raise ValueError(f"duration {duration:g} s is too long for a recorded swing-up run")
     sw = SwingUp(controller or make_controller(cfg), cfg.swingup)
-    gp, cp, sp = sw.pack()
+    gp, cp, sp = sw.record()
     w, s = sw.init(cfg.sim.initial_angle)
     x = np.zeros(5)
     x[0] = cfg.sim.initial_angle
@@ -140,16 +139,16 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
                                 make_sensor(cfg), cfg.sim.fall_angle, out, phase)
     phase = phase[:done]
     balanced = bool((phase == BALANCING).any())
-    stop = STOP_CODES[int(w[W_STOP])] if status == _STOPPED else ""
+    stop = STOP_CODES[int(w.stop)] if status == _STOPPED else ""
     if status == _FELL:
         stop = "fell"
-    catch_time = float(w[W_CATCH]) * h if balanced and w[W_CATCH] >= 0 else None
+    catch_time = float(w.catch_tick) * h if balanced and w.catch_tick >= 0 else None
     swinging = phase == 0
     u = out[:done, 3]
     max_u = float(np.abs(u[swinging]).max()) if swinging.any() else 0.0
     traj = Trajectory(np.arange(done), h, out[:done], "fell" if status == _FELL else "ok", cfg,
-                      meta={"phase": phase, "phases": PHASES, "ticks": int(w[W_T])})
-    return SwingUpResult(traj, catch_time, balanced, stop, int(w[10]), max_u)
+                      meta={"phase": phase, "phases": PHASES, "ticks": int(w.tick)})
+    return SwingUpResult(traj, catch_time, balanced, stop, int(w.catches), max_u)
 
 
 def swingup_outcome(res: SwingUpResult, window: float | None = None):
