@@ -159,6 +159,74 @@ def test_swingup_step_compiled_equals_the_step_method():
         assert out.u == tr["u"][k]
 
 
+@pytest.mark.slow
+def test_swing_up_settings_are_a_typed_record_with_a_float_row():
+    from frictionlab.model.swingup import SwingUpRecord, swingup_record, swingup_row
+
+    p = SwingUpParams(settle_time=0.3, time_limit=7.0, observer_omega=40.0, recentre_time=0.0)
+    rec = p.record(6.8, 9.82, 0.005)
+    assert isinstance(rec, SwingUpRecord)
+    assert rec.settle_ticks == 60 and rec.limit_ticks == 1400 and rec.decay == 0.0
+    pole = math.exp(-40.0 * 0.005)
+    assert rec.l1 == 1.0 - pole * pole and rec.l2 == (1.0 - pole) ** 2 / 0.005
+    assert rec.g_inv == 6.8 * 6.8 / 9.82 and rec.omega0 == 6.8 and rec.h == 0.005
+    assert swingup_record(swingup_row(rec)) == rec  # the compiled row reader
+
+
+def test_swing_up_state_record_views_its_float_vector_by_reference():
+    from frictionlab.model.swingup import (
+        SWING_FIELDS,
+        new_swing_state,
+        swing_index,
+        swing_record,
+        swing_vector,
+    )
+
+    w = new_swing_state(phase=2.0, catches=3.0, theta_hat=-0.25)
+    x = swing_vector(w)
+    assert x.shape == (len(SWING_FIELDS),)
+    assert (x[swing_index("phase")], x[swing_index("catches")],
+            x[swing_index("theta_hat")]) == (2.0, 3.0, -0.25)
+    view = swing_record(x)
+    view.stop = 1.0
+    assert x[swing_index("stop")] == 1.0 and view.catches == 3.0
+
+
+@pytest.mark.slow
+def test_swingup_step_rows_equals_the_step_on_records_field_for_field():
+    """The float-row form views the same fields the record form sets: a swing, a
+    catch and the balancing ticks give the same state either way."""
+    from frictionlab.model.controller import gains_row
+    from frictionlab.model.swingup import (
+        SWING_FIELDS,
+        copy_swing_state,
+        swing_vector,
+        swingup_row,
+        swingup_step_rows,
+    )
+
+    cfg = build_config("fast", "classical", sets=[HANGING])
+    res = simulate_swingup(cfg, 2.0)
+    tr = res.trajectory
+    from frictionlab.model.simulation import make_controller
+
+    sw = SwingUp(make_controller(cfg), cfg.swingup)
+    gp, cp, sp = sw.record()
+    w, s = sw.init(math.pi)
+    wx, sx = swing_vector(copy_swing_state(w)), state_vector(s)
+    g_row, sp_row = gains_row(gp), swingup_row(sp)
+    phases = set()
+    for k in range(len(tr)):
+        meas = (tr["theta_m"][k], tr["arm_m"][k], tr["arm_dot_m"][k])
+        u1 = swingup_step(w, s, gp, cp, sp, *meas)
+        u2 = swingup_step_rows(wx, sx, g_row, cp, sp_row, *meas)
+        assert u1 == u2
+        np.testing.assert_array_equal(swing_vector(w), wx)
+        np.testing.assert_array_equal(state_vector(s), sx)
+        phases.add(int(w.phase))
+    assert phases == {0, 1, 2} and w.catches == 1 and len(SWING_FIELDS) == len(wx)
+
+
 def test_keys_are_validated_with_their_range():
     with pytest.raises(ConfigError, match=r"sim.initial_angle"):
         build_config(sets=["sim.initial_angle=3.2"])
