@@ -483,8 +483,10 @@ class SwingUp:
         s = copy_state(state[1])
         gp, cp, sp = self.record()
         u, _, _ = swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m)
-        out = SwingUpOutput(float(u), PHASES[int(w.phase)], float(w.energy), float(w.theta_hat),
-                            float(w.theta_dot_hat), STOP_CODES[int(w.stop)])
+        # fields read as items: about 1 us each from Python against 4 for an attribute
+        out = SwingUpOutput(float(u), PHASES[int(w["phase"])], float(w["energy"]),
+                            float(w["theta_hat"]), float(w["theta_dot_hat"]),
+                            STOP_CODES[int(w["stop"])])
         return out, (w, s)
 
 
