@@ -23,7 +23,13 @@ Figures (sets per second of wall time):
 * ``ceiling_sets_per_s`` - cores / the CPU time of the simulation alone (one
   30 s run without recording or features, :func:`simulate_config` with
   ``record=False``): the rate if the cores did nothing but simulate;
-  ``fraction_of_ceiling`` = ``sets_per_s`` / it.  On a busy machine the
+  ``fraction_of_ceiling`` = ``sets_per_s`` / it;
+* ``all_cores_ceiling_sets_per_s`` - the simulation alone measured with every
+  core busy: one process per core, each simulating the same 100 sets at once
+  (started together at a barrier; best of the passes).  Where the cores share
+  caches, memory bandwidth or a host's physical core, a run costs more CPU
+  with the other cores computing than alone, and this is the rate the cores
+  can reach; ``fraction_of_all_cores_ceiling`` = ``sets_per_s`` / it.  On a busy machine the
   wall-clock rates fall with the share of the cores the benchmark gets, so
   the CPU times are compared too: ``batch_fraction_simulation`` is the
   simulation alone over the compiled batch on one thread (both timed in
@@ -116,6 +122,42 @@ def sim_vs_batch_ms(base: Config, points: list[dict], repeats: int) -> tuple[flo
     return 1e3 * sim, 1e3 * bat
 
 
+def _sim_worker(base: Config, points: list[dict], barrier, repeats: int) -> list[tuple]:
+    """In a process of its own: the simulation alone of every point, ``repeats`` times,
+    each pass started at a barrier shared with the other workers; the monotonic start and
+    end of each pass (the clock is the same in every process)."""
+    cfgs = [base.with_values(p) for p in points]
+    simulate_config(cfgs[0], DURATION, record=False)  # load the compiled code
+    spans = []
+    for _ in range(repeats):
+        barrier.wait()
+        t0 = time.monotonic()
+        for cfg in cfgs:
+            simulate_config(cfg, DURATION, record=False)
+        spans.append((t0, time.monotonic()))
+    return spans
+
+
+def all_cores_ceiling(base: Config, points: list[dict], cores: int, repeats: int) -> float:
+    """Sets per second of wall time when ``cores`` processes do nothing but the
+    simulation alone, all at once (best of ``repeats`` passes): the ceiling measured
+    with every core busy, where :func:`sim_vs_batch_ms`'s one process has the machine's
+    caches and memory bandwidth to itself."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = mp.get_context("spawn")
+    with ctx.Manager() as manager:
+        barrier = manager.Barrier(cores)
+        with ProcessPoolExecutor(cores, mp_context=ctx) as ex:
+            futs = [ex.submit(_sim_worker, base, points, barrier, repeats)
+                    for _ in range(cores)]
+            spans = [f.result() for f in futs]
+    best = min(max(s[r][1] for s in spans) - min(s[r][0] for s in spans)
+               for r in range(repeats))
+    return cores * len(points) / best
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3, help="timed sweeps per backend (best)")
@@ -143,6 +185,10 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"simulation alone: {sim_ms:.2f} ms CPU per set (ceiling {ceiling:.0f} sets/s on "
           f"{cores} cores); the compiled batch on one thread, alternated with it: "
           f"{batch_ms:.2f} ms ({100 * sim_ms / batch_ms:.0f} % simulation)")
+    busy_ceiling = all_cores_ceiling(base, sub[:100], cores, 2 * args.repeats)
+    print(f"simulation alone on all {cores} cores at once ({cores} processes): "
+          f"{busy_ceiling:.0f} sets/s ({100 * busy_ceiling / ceiling:.0f} % of "
+          f"{cores} x one process's rate)")
     serial, serial_med, serial_cpu, serial_rows = _rates(
         lambda: evaluate(base, sub, duration=DURATION, workers=1), len(sub), args.repeats)
     print(f"serial (compiled batch, one thread): {serial:.1f} sets/s (median "
@@ -151,7 +197,8 @@ def main(argv: list[str] | None = None) -> dict:
     threads, threads_med, threads_cpu, threads_rows = _rates(lambda: run(workers=cores),
                                                              N_SETS, args.repeats)
     print(f"threads (default): {threads:.1f} sets/s (median {threads_med:.1f}), "
-          f"{100 * threads / ceiling:.0f} % of the ceiling; CPU {threads_cpu:.2f} ms per set, "
+          f"{100 * threads / ceiling:.0f} % of the ceiling, {100 * threads / busy_ceiling:.0f} % "
+          f"of the all-cores ceiling; CPU {threads_cpu:.2f} ms per set, "
           f"i.e. {cores * 1e3 / threads_cpu:.0f} sets/s if {cores} cores were free")
     print(f"threads vs one thread, CPU per set: {threads_cpu:.2f} / {serial_cpu:.2f} ms "
           f"(x{threads_cpu / serial_cpu:.2f})")
@@ -190,7 +237,10 @@ def main(argv: list[str] | None = None) -> dict:
               "batch_fraction_simulation": round(sim_ms / batch_ms, 3),
               "threads_cpu_ms": round(threads_cpu, 3),
               "ceiling_sets_per_s": round(ceiling, 1),
-              "fraction_of_ceiling": round(threads / ceiling, 3), "identical": identical}
+              "fraction_of_ceiling": round(threads / ceiling, 3),
+              "all_cores_ceiling_sets_per_s": round(busy_ceiling, 1),
+              "fraction_of_all_cores_ceiling": round(threads / busy_ceiling, 3),
+              "identical": identical}
     print(json.dumps(result))
     return result
 
