@@ -33,6 +33,11 @@ from ..model.swingup import (
     STOP_CODES,
     STOPPED,
     SwingUp,
+    swing_record,
+    swing_vector,
+    swing_view,
+    swingup_record,
+    swingup_row,
     swingup_step,
     wrap_angle,
 )
@@ -44,9 +49,15 @@ _OK, _FELL, _STOPPED = 0, 1, 2
 
 
 @jit
-def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
+def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp_row, s, wx, sens,
                  fall_angle, out, phase_out):
-    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
+    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code).
+
+    The swing-up's settings and state come as their float rows (numba types a
+    row from Python in about 1 us, a record or NamedTuple in about 5) and are
+    viewed as the records here, once."""
+    sp = swingup_record(sp_row)
+    w = swing_view(wx)
     h = gp.h
     drifting = is_drifting(fp)
     fpt = fp.copy()
@@ -129,17 +140,20 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     sw = SwingUp(controller or make_controller(cfg), cfg.swingup)
     gp, cp, sp = sw.record()
     w, s = sw.init(cfg.sim.initial_angle)
+    wx = swing_vector(w)
     x = np.zeros(5)
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
     done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, cfg.plant.record(),
                                 KINDS.index(cfg.friction_kind),
-                                resolve_drift(cfg.friction.pack(), n * h), gp, cp, sp, s, w,
-                                make_sensor(cfg), cfg.sim.fall_angle, out, phase)
+                                resolve_drift(cfg.friction.pack(), n * h), gp, cp,
+                                swingup_row(sp), s, wx, make_sensor(cfg), cfg.sim.fall_angle,
+                                out, phase)
     phase = phase[:done]
     # the end state's fields, read as items (about 1 us each; an attribute of a
     # numpy record costs about 4 us from Python)
+    w = swing_record(wx)
     stop_code, catch_tick, ticks, catches = (w[f] for f in ("stop", "catch_tick", "tick",
                                                              "catches"))
     balanced = bool((phase == BALANCING).any())
