@@ -1,5 +1,6 @@
 """Parameter sweeps: parsing, backends (serial, pool, Dask), files, resume, CLI."""
 
+import contextlib
 import csv
 import io
 import itertools
@@ -8,9 +9,11 @@ import math
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
+import warnings
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
@@ -182,7 +185,16 @@ def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
     points = [{"friction.coulomb": v} for v in TABLE2_FC]
     serial = evaluate(base, points, duration=10, workers=1)
     pool = evaluate(base, points, duration=10, workers=2)
-    dask = evaluate(base, points, duration=10, dask="local", workers=2)
+    # a new cluster while another process holds Dask's default HTTP port 8787: the
+    # scheduler's HTTP server takes a free port of its own, without a warning
+    shutdown()
+    with socket.socket() as held, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with contextlib.suppress(OSError):  # already held by someone else: as good
+            held.bind(("0.0.0.0", 8787))
+            held.listen()
+        dask = evaluate(base, points, duration=10, dask="local", workers=2)
+    assert not [w for w in caught if "8787" in str(w.message)], [str(w.message) for w in caught]
     per_run = evaluate(base, points, duration=10, workers=2, reduce=reduce_features)
     assert pool == serial
     assert dask == pool

@@ -556,9 +556,14 @@ def _get_dask(address: str, workers: int | None):
             return hit[0]
         if address == "local":
             with dask.config.set(_local_dask_config()):
+                # no dashboard; the scheduler's own HTTP server (health routes) on a
+                # port the kernel picks, not the default 8787 that another cluster on
+                # the machine may hold
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                        dashboard_address=None, host="127.0.0.1",
-                                       silence_logs=logging.ERROR)
+                                       silence_logs=logging.ERROR,
+                                       scheduler_kwargs={"dashboard": False,
+                                                         "dashboard_address": "127.0.0.1:0"})
             try:
                 client = Client(cluster, timeout="60s")
             except BaseException:
