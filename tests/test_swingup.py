@@ -133,16 +133,16 @@ def test_handover_initialises_the_observers_from_the_measurement():
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
     w, s = sw.init(0.5)
-    w[4] = -1.2  # swing-up observer's theta_dot
+    w.theta_dot_hat = -1.2  # swing-up observer's theta_dot
     state = (w, s)
     out, (w2, s2) = sw.step(state, 0.2 + 2 * math.pi, 1.5, 0.3)
     assert out.phase == "caught"
     # the balancing observers started at the measurement (and took one predictor step)
     h = cfg.design.h
-    assert s2.x1 == pytest.approx(0.2 + h * w2[4], abs=0.01)
-    assert s2.x2 * cfg.design.omega0 == pytest.approx(w2[4], abs=0.5)
+    assert s2.x1 == pytest.approx(0.2 + h * w2.theta_dot_hat, abs=0.01)
+    assert s2.x2 * cfg.design.omega0 == pytest.approx(w2.theta_dot_hat, abs=0.5)
     assert s2.arm == pytest.approx(h * 0.3, abs=0.01)  # relative to the catch position
-    assert w2[5] == pytest.approx(1.5, rel=0.01)  # arm reference offset: the catch position
+    assert w2.arm_offset == pytest.approx(1.5, rel=0.01)  # arm reference offset: the catch position
     assert np.all(state_vector(state[1]) == 0.0)  # step does not modify its input
 
 
@@ -157,6 +157,74 @@ def test_swingup_step_compiled_equals_the_step_method():
     for k in range(len(tr)):
         out, state = sw.step(state, tr["theta_m"][k], tr["arm_m"][k], tr["arm_dot_m"][k])
         assert out.u == tr["u"][k]
+
+
+@pytest.mark.slow
+def test_swing_up_settings_are_a_typed_record_with_a_float_row():
+    from frictionlab.model.swingup import SwingUpRecord, swingup_record, swingup_row
+
+    p = SwingUpParams(settle_time=0.3, time_limit=7.0, observer_omega=40.0, recentre_time=0.0)
+    rec = p.record(6.8, 9.82, 0.005)
+    assert isinstance(rec, SwingUpRecord)
+    assert rec.settle_ticks == 60 and rec.limit_ticks == 1400 and rec.decay == 0.0
+    pole = math.exp(-40.0 * 0.005)
+    assert rec.l1 == 1.0 - pole * pole and rec.l2 == (1.0 - pole) ** 2 / 0.005
+    assert rec.g_inv == 6.8 * 6.8 / 9.82 and rec.omega0 == 6.8 and rec.h == 0.005
+    assert swingup_record(swingup_row(rec)) == rec  # the compiled row reader
+
+
+def test_swing_up_state_record_views_its_float_vector_by_reference():
+    from frictionlab.model.swingup import (
+        SWING_FIELDS,
+        new_swing_state,
+        swing_index,
+        swing_record,
+        swing_vector,
+    )
+
+    w = new_swing_state(phase=2.0, catches=3.0, theta_hat=-0.25)
+    x = swing_vector(w)
+    assert x.shape == (len(SWING_FIELDS),)
+    assert (x[swing_index("phase")], x[swing_index("catches")],
+            x[swing_index("theta_hat")]) == (2.0, 3.0, -0.25)
+    view = swing_record(x)
+    view.stop = 1.0
+    assert x[swing_index("stop")] == 1.0 and view.catches == 3.0
+
+
+@pytest.mark.slow
+def test_swingup_step_rows_equals_the_step_on_records_field_for_field():
+    """The float-row form views the same fields the record form sets: a swing, a
+    catch and the balancing ticks give the same state either way."""
+    from frictionlab.model.controller import gains_row
+    from frictionlab.model.swingup import (
+        SWING_FIELDS,
+        copy_swing_state,
+        swing_vector,
+        swingup_row,
+        swingup_step_rows,
+    )
+
+    cfg = build_config("fast", "classical", sets=[HANGING])
+    res = simulate_swingup(cfg, 2.0)
+    tr = res.trajectory
+    from frictionlab.model.simulation import make_controller
+
+    sw = SwingUp(make_controller(cfg), cfg.swingup)
+    gp, cp, sp = sw.record()
+    w, s = sw.init(math.pi)
+    wx, sx = swing_vector(copy_swing_state(w)), state_vector(s)
+    g_row, sp_row = gains_row(gp), swingup_row(sp)
+    phases = set()
+    for k in range(len(tr)):
+        meas = (tr["theta_m"][k], tr["arm_m"][k], tr["arm_dot_m"][k])
+        u1 = swingup_step(w, s, gp, cp, sp, *meas)
+        u2 = swingup_step_rows(wx, sx, g_row, cp, sp_row, *meas)
+        assert u1 == u2
+        np.testing.assert_array_equal(swing_vector(w), wx)
+        np.testing.assert_array_equal(state_vector(s), sx)
+        phases.add(int(w.phase))
+    assert phases == {0, 1, 2} and w.catches == 1 and len(SWING_FIELDS) == len(wx)
 
 
 def test_keys_are_validated_with_their_range():
@@ -224,7 +292,7 @@ def test_a_design_change_mid_swing_reaches_the_swing_up(tmp_path):
     """The swing-up's observer and energy use the design's omega_0: a change of it
     while swinging is in effect for the swing-up from the same tick as for the
     balancing controller."""
-    from frictionlab.model.swingup import P_W0
+    from frictionlab.model.swingup import swingup_record
     from frictionlab.realtime import FakeClock, RealtimeController
 
     cfg = build_config("fast", "classical", sets=[HANGING])
@@ -240,7 +308,7 @@ def test_a_design_change_mid_swing_reaches_the_swing_up(tmp_path):
     assert st["stop_reason"] == "duration" and st["swing_up"]["phase"] == "swinging"
     assert seen["fut"].result(timeout=0) is not None  # applied during the run
     assert ctl._loop.params.gp.omega0 == 6.3
-    assert ctl._loop._sp[P_W0] == 6.3
+    assert swingup_record(ctl._loop._sp).omega0 == 6.3
 
 
 @pytest.mark.parametrize("limit,reason", [("swingup.time_limit=1", "not_caught"),

@@ -23,33 +23,12 @@ import functools
 from importlib import import_module
 from typing import Any
 
-__all__ = ["Kernel", "jit", "jit_inline", "jit_parallel", "keep_alive", "on_numba_load"]
-
-_ON_LOAD: list = []
-_LOADED: list = []
-
-
-def on_numba_load(fn):
-    """Run ``fn()`` once numba is loaded (now, if it is): registers what a
-    module adds to numba (an ``overload``) without importing numba with it."""
-    _ON_LOAD.append(fn)
-    if _LOADED:
-        fn()
-    return fn
-
-
-@functools.cache
-def _load_numba() -> None:
-    import_module("._numba_cache", __package__)  # sets NUMBA_CACHE_DIR before numba loads
-    import_module("numba")
-    _LOADED.append(True)
-    for fn in _ON_LOAD:
-        fn()
+__all__ = ["Kernel", "jit", "jit_inline", "jit_parallel", "keep_alive"]
 
 
 @functools.cache
 def _njit(parallel: bool = False, inline: bool = False):
-    _load_numba()
+    import_module("._numba_cache", __package__)  # sets NUMBA_CACHE_DIR before numba loads
     from numba import njit
 
     if parallel:

@@ -69,7 +69,6 @@ from .friction import (
     LUGRE,
     STRIBECK,
     FrictionParams,
-    friction_arg,
     friction_step,
     friction_view,
     levels,
@@ -414,8 +413,7 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
         Gains (:meth:`Controller.record`).
     cp : record of :data:`~frictionlab.model.friction.FRICTION_DTYPE`
         The compensator's friction parameters (:func:`compensator_params`), by
-        reference (or stored as a float row: viewed as the record here,
-        :func:`frictionlab.model.friction.friction_arg`).
+        reference.
     theta_m, arm_m, arm_dot_m : float
         Measured pendulum angle, arm angle (rad) and arm velocity (rad/s).
 
@@ -423,8 +421,6 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     -------
     (u, u_fb, F_hat) : applied control, feedback part, friction estimate.
     """
-    # a record as it is; a float row (swingup_step_rows passes one) viewed once here
-    cp = friction_arg(cp)
     w0 = gp.omega0
     h = gp.h
     th_hat = s.x1

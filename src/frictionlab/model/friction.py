@@ -107,7 +107,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._jit import jit, jit_inline, on_numba_load
+from ._jit import jit, jit_inline
 from .params import Validated, param
 
 __all__ = [
@@ -131,7 +131,6 @@ __all__ = [
     "drift_factor",
     "drifted_params",
     "drifted_rows",
-    "friction_arg",
     "friction_record",
     "friction_row",
     "friction_step",
@@ -343,27 +342,6 @@ def copy_friction(p) -> np.record:
     a = np.empty(1, FRICTION_DTYPE)
     a[0] = p
     return a[0]
-
-
-def friction_arg(p):
-    """``p`` if it is a friction record, else the record stored in the float row
-    ``p`` (:func:`friction_record`); in compiled code a view or nothing, chosen
-    by ``p``'s type when the caller is compiled.  For a kernel that takes either
-    form, e.g. :func:`frictionlab.model.controller.controller_step`, which
-    :func:`frictionlab.model.swingup.swingup_step_rows` calls with a row."""
-    return friction_record(p) if isinstance(p, np.ndarray) else p
-
-
-@on_numba_load
-def _register_friction_arg() -> None:
-    from numba import types
-    from numba.extending import overload
-
-    @overload(friction_arg, inline="always")
-    def _friction_arg(p):
-        if isinstance(p, types.Array):
-            return lambda p: p.view(FRICTION_DTYPE)[0]
-        return lambda p: p
 
 
 @jit_inline

@@ -83,35 +83,49 @@ Every tick checks ``|Omega| <= swingup.arm_limit`` (stop code
 until balancing, the elapsed time against ``swingup.time_limit``
 (``not_caught``); a stop sets the phase to ``stopped`` and u = 0 from then on.
 
-State vector (float64, explicit)
---------------------------------
-====  ============  =====================================================
-idx   name          meaning
-====  ============  =====================================================
-0     ``W_PHASE``   0 swinging, 1 caught, 2 balancing, 3 stopped
-1     ``W_T``       ticks since the start
-2     ``W_PT``      ticks in the current phase
-3     ``W_TH``      swing-up observer angle (rad, wrapped)
-4     ``W_THD``     swing-up observer angular velocity (rad/s)
-5     ``W_OFF``     arm reference offset after a catch (rad)
-6     ``W_E``       normalised energy E of the estimates
-7     ``W_STOP``    stop code (0 none, 1 not_caught, 2 arm_travel, 3 arm_speed)
-8     ``W_CATCH``   tick of the last catch (-1: none)
-9     ``W_U``       last applied u (m/s^2)
-10    ``W_NCATCH``  number of catches so far
-====  ============  =====================================================
+Typed records
+-------------
+The compiled step reads its settings from :class:`SwingUpRecord` (a
+``NamedTuple``, built by :meth:`SwingUpParams.record` for the design's
+omega_0, g and h) and updates the working state in place: a numpy structured
+record of float64 fields, :data:`SWING_DTYPE`, read and set by field name
+(``w.phase``) in compiled code and in Python.
+
+====  =================  =====================================================
+pos   field              meaning
+====  =================  =====================================================
+0     ``phase``          0 swinging, 1 caught, 2 balancing, 3 stopped (:data:`PHASES`)
+1     ``tick``           ticks since the start
+2     ``phase_ticks``    ticks in the current phase
+3     ``theta_hat``      swing-up observer angle (rad, wrapped)
+4     ``theta_dot_hat``  swing-up observer angular velocity (rad/s)
+5     ``arm_offset``     arm reference offset after a catch (rad)
+6     ``energy``         normalised energy E of the estimates
+7     ``stop``           stop code (0 none, 1 not_caught, 2 arm_travel, 3 arm_speed;
+                         :data:`STOP_CODES`)
+8     ``catch_tick``     tick of the last catch (-1: none)
+9     ``u``              last applied u (m/s^2)
+10    ``catches``        number of catches so far
+====  =================  =====================================================
+
+A caller in Python at every tick (the 200 Hz loop) keeps the state as a float
+vector (:func:`swing_vector`; positions :func:`swing_index`) and the settings
+as a float row (:func:`swingup_row`), and calls :func:`swingup_step_rows`,
+which views them as the records inside the compiled code.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .controller import (
     Controller,
+    Gains,
     controller_step,
     copy_state,
     gains_record,
@@ -119,14 +133,26 @@ from .controller import (
     state_view,
     zero_state,
 )
+from .friction import friction_view
 from .params import Validated, param
 
 __all__ = [
     "PHASES",
     "STOP_CODES",
+    "SWING_DTYPE",
+    "SWING_FIELDS",
     "SwingUp",
     "SwingUpParams",
+    "SwingUpRecord",
+    "copy_swing_state",
     "energy",
+    "new_swing_state",
+    "swing_index",
+    "swing_record",
+    "swing_vector",
+    "swing_view",
+    "swingup_record",
+    "swingup_row",
     "swingup_step",
     "swingup_step_rows",
     "wrap_angle",
@@ -138,12 +164,111 @@ PHASES = ("swinging", "caught", "balancing", "stopped")
 #: Stop reasons by code (0: not stopped).
 STOP_CODES = ("", "not_caught", "arm_travel", "arm_speed")
 
-W_PHASE, W_T, W_PT, W_TH, W_THD, W_OFF, W_E, W_STOP, W_CATCH, W_U, W_NCATCH = range(11)
-NW = 11
+#: Fields of the swing-up state, in their storage order (module table).
+SWING_FIELDS = ("phase", "tick", "phase_ticks", "theta_hat", "theta_dot_hat", "arm_offset",
+                "energy", "stop", "catch_tick", "u", "catches")
+#: The swing-up state's record type: one float64 per field of :data:`SWING_FIELDS`.
+SWING_DTYPE = np.dtype([(name, np.float64) for name in SWING_FIELDS], align=True)
+#: The same as a dtype whose scalars are :class:`numpy.record` (fields read as
+#: attributes from Python; indexing an array of it gives the record directly,
+#: several times faster than a view as ``np.recarray``).
+_SWING_RECORD = np.dtype((np.record, SWING_DTYPE))
 
-(P_K, P_UMAX, P_CATCH, P_RELEASE, P_SETTLE, P_LIMIT, P_KP, P_KD, P_L1, P_L2, P_E0, P_W0,
- P_GINV, P_H, P_ARM, P_SPEED, P_DECAY) = range(17)
-NSP = 17
+
+def new_swing_state(**values: float) -> np.record:
+    """A zeroed swing-up state record (fields set from ``values``), backed by
+    its own one-element array: compiled code updates it in place."""
+    arr = np.zeros(1, _SWING_RECORD)
+    for name, value in values.items():
+        arr[name] = value
+    return arr[0]
+
+
+def copy_swing_state(w) -> np.record:
+    """An independent copy of a swing-up state record."""
+    arr = np.zeros(1, _SWING_RECORD)
+    arr[0] = w
+    return arr[0]
+
+
+def swing_vector(w) -> np.ndarray:
+    """The swing-up state as a float vector (fields in :data:`SWING_FIELDS` order)."""
+    return np.array(w.tolist(), dtype=float)
+
+
+def swing_index(name: str) -> int:
+    """Position of field ``name`` in :func:`swing_vector` (and in :func:`swing_view`'s vector)."""
+    return SWING_FIELDS.index(name)
+
+
+def swing_record(x) -> np.record:
+    """The swing-up state record stored in the float64 vector ``x``
+    (:data:`SWING_FIELDS` order), by reference: setting a field, here or in
+    compiled code, writes ``x``.  (Python side of :func:`swing_view`.)"""
+    return np.asarray(x, dtype=np.float64).view(_SWING_RECORD)[0]
+
+
+@jit_inline
+def swing_view(x):
+    """The swing-up state record stored in the float vector ``x`` by reference
+    (:func:`swing_record` in compiled code)."""
+    return x.view(SWING_DTYPE)[0]
+
+
+class SwingUpRecord(NamedTuple):
+    """What the compiled swing-up step reads besides its state (a typed record;
+    :meth:`SwingUpParams.record`).
+
+    Attributes
+    ----------
+    gain, max_acceleration, energy_target : float
+        Energy law k (m/s^2), its |u| limit (m/s^2) and E0.
+    catch_angle, release_angle : float
+        Hand-over and failed-catch angles (rad).
+    settle_ticks, limit_ticks : float
+        ``settle_time`` and ``time_limit`` in ticks (rounded).
+    arm_stiffness, arm_damping : float
+        Arm-centring gains k_p, k_d.
+    l1, l2 : float
+        Swing-up observer's correction gains (both poles at exp(-omega_s h)).
+    omega0, g_inv, h : float
+        The design's omega_0 (rad/s), omega_0^2/g (s^2/m... per m/s^2) and h (s).
+    arm_limit, arm_speed_limit : float
+        Safety limits on |Omega| (rad) and |Omega'| (rad/s).
+    decay : float
+        Per-tick factor of the arm reference's return to 0 (0: at once).
+    """
+
+    gain: float
+    max_acceleration: float
+    catch_angle: float
+    release_angle: float
+    settle_ticks: float
+    limit_ticks: float
+    arm_stiffness: float
+    arm_damping: float
+    l1: float
+    l2: float
+    energy_target: float
+    omega0: float
+    g_inv: float
+    h: float
+    arm_limit: float
+    arm_speed_limit: float
+    decay: float
+
+
+@jit
+def swingup_record(row):
+    """The :class:`SwingUpRecord` stored as the float row :func:`swingup_row`."""
+    return SwingUpRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7],
+                         row[8], row[9], row[10], row[11], row[12], row[13], row[14], row[15],
+                         row[16])
+
+
+def swingup_row(rec: SwingUpRecord) -> np.ndarray:
+    """The :class:`SwingUpRecord` as the float row :func:`swingup_record` reads back."""
+    return np.array(rec, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -180,28 +305,28 @@ class SwingUpParams(Validated):
     arm_speed_limit: float = param(25.0, "stop (arm_speed) when |Omega'| exceeds this",
                                    "rad/s", lo=0.0, hi=1e3, lo_open=True)
 
-    def pack(self, omega0: float, g: float, h: float) -> np.ndarray:
-        """Packed vector for :func:`swingup_step` (design omega_0, g and h)."""
-        p = np.zeros(NSP)
-        p[P_K] = self.gain
-        p[P_UMAX] = self.max_acceleration
-        p[P_CATCH] = self.catch_angle
-        p[P_RELEASE] = self.release_angle
-        p[P_SETTLE] = round(self.settle_time / h)
-        p[P_LIMIT] = round(self.time_limit / h)
-        p[P_KP] = self.arm_stiffness
-        p[P_KD] = self.arm_damping
+    def record(self, omega0: float, g: float, h: float) -> SwingUpRecord:
+        """The :class:`SwingUpRecord` for :func:`swingup_step` (design omega_0, g and h)."""
         pole = math.exp(-self.observer_omega * h)
-        p[P_L1] = 1.0 - pole * pole
-        p[P_L2] = (1.0 - pole) ** 2 / h
-        p[P_E0] = self.energy_target
-        p[P_W0] = omega0
-        p[P_GINV] = omega0 * omega0 / g
-        p[P_H] = h
-        p[P_ARM] = self.arm_limit
-        p[P_SPEED] = self.arm_speed_limit
-        p[P_DECAY] = 0.0 if self.recentre_time == 0 else math.exp(-h / self.recentre_time)
-        return p
+        return SwingUpRecord(
+            gain=float(self.gain),
+            max_acceleration=float(self.max_acceleration),
+            catch_angle=float(self.catch_angle),
+            release_angle=float(self.release_angle),
+            settle_ticks=float(round(self.settle_time / h)),
+            limit_ticks=float(round(self.time_limit / h)),
+            arm_stiffness=float(self.arm_stiffness),
+            arm_damping=float(self.arm_damping),
+            l1=1.0 - pole * pole,
+            l2=(1.0 - pole) ** 2 / h,
+            energy_target=float(self.energy_target),
+            omega0=float(omega0),
+            g_inv=float(omega0 * omega0 / g),
+            h=float(h),
+            arm_limit=float(self.arm_limit),
+            arm_speed_limit=float(self.arm_speed_limit),
+            decay=0.0 if self.recentre_time == 0 else math.exp(-h / self.recentre_time),
+        )
 
 
 @jit
@@ -231,15 +356,16 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
 
     Parameters
     ----------
-    w : ndarray (NW,)
-        Swing-up state (module table).
+    w : record
+        Swing-up state, a :data:`SWING_DTYPE` record (module table).
     s : record
         The balancing controller's state record (:mod:`frictionlab.model.controller`),
         initialised here at a catch.
-    gp, cp : ndarray
-        The balancing controller's packed gains and compensator parameters.
-    sp : ndarray (NSP,)
-        :meth:`SwingUpParams.pack`.
+    gp, cp : Gains, ndarray
+        The balancing controller's gains record and compensator parameters
+        (:meth:`~frictionlab.model.controller.Controller.record`).
+    sp : SwingUpRecord
+        :meth:`SwingUpParams.record`.
     theta_m, arm_m, arm_dot_m : float
         Measured pendulum angle (any multiple of 2 pi), arm angle, arm velocity.
 
@@ -247,70 +373,70 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     -------
     (u, u_fb, F_hat) as :func:`~frictionlab.model.controller.controller_step`.
     """
-    h = sp[P_H]
-    w0 = sp[P_W0]
+    h = sp.h
+    w0 = sp.omega0
     th_m = wrap_angle(theta_m)
     # swing-up observer: predict with eq. (6) and the u held, correct with theta_m
-    th = w[W_TH]
-    thd = w[W_THD]
+    th = w.theta_hat
+    thd = w.theta_dot_hat
     sn = math.sin(th)
     cs = math.cos(th)
-    acc = w0 * w0 * sn - sp[P_GINV] * w[W_U] * cs + arm_dot_m * arm_dot_m * sn * cs
+    acc = w0 * w0 * sn - sp.g_inv * w.u * cs + arm_dot_m * arm_dot_m * sn * cs
     thp = th + h * (thd + 0.5 * h * acc)
     thdp = thd + h * acc
     err = wrap_angle(th_m - thp)
-    th = wrap_angle(thp + sp[P_L1] * err)
-    thd = thdp + sp[P_L2] * err
-    w[W_TH] = th
-    w[W_THD] = thd
-    w[W_T] += 1.0
-    w[W_PT] += 1.0
-    phase = int(w[W_PHASE])
+    th = wrap_angle(thp + sp.l1 * err)
+    thd = thdp + sp.l2 * err
+    w.theta_hat = th
+    w.theta_dot_hat = thd
+    w.tick += 1.0
+    w.phase_ticks += 1.0
+    phase = int(w.phase)
     if phase == STOPPED:
-        w[W_U] = 0.0
+        w.u = 0.0
         return 0.0, 0.0, 0.0
     stop = 0
-    if not abs(arm_m) <= sp[P_ARM]:
+    if not abs(arm_m) <= sp.arm_limit:
         stop = 2
-    elif not abs(arm_dot_m) <= sp[P_SPEED]:
+    elif not abs(arm_dot_m) <= sp.arm_speed_limit:
         stop = 3
-    elif phase != BALANCING and w[W_T] > sp[P_LIMIT]:
+    elif phase != BALANCING and w.tick > sp.limit_ticks:
         stop = 1
     if stop != 0:
-        w[W_PHASE] = STOPPED
-        w[W_STOP] = stop
-        w[W_PT] = 0.0
-        w[W_U] = 0.0
+        w.phase = STOPPED
+        w.stop = stop
+        w.phase_ticks = 0.0
+        w.u = 0.0
         return 0.0, 0.0, 0.0
     e = energy(th, thd, w0)
-    w[W_E] = e
-    if phase == CAUGHT and abs(th_m) > sp[P_RELEASE]:
+    w.energy = e
+    if phase == CAUGHT and abs(th_m) > sp.release_angle:
         phase = SWINGING
-        w[W_PT] = 0.0
-    if phase == SWINGING and abs(th_m) < sp[P_CATCH]:
+        w.phase_ticks = 0.0
+    if phase == SWINGING and abs(th_m) < sp.catch_angle:
         phase = CAUGHT
-        w[W_PT] = 0.0
-        w[W_CATCH] = w[W_T] - 1.0
-        w[W_NCATCH] += 1.0
-        w[W_OFF] = arm_m
+        w.phase_ticks = 0.0
+        w.catch_tick = w.tick - 1.0
+        w.catches += 1.0
+        w.arm_offset = arm_m
         zero_state(s)
         s.x1 = th_m
         s.x2 = thd / gp.omega0
         s.arm_dot = arm_dot_m
-    if phase == CAUGHT and w[W_PT] >= sp[P_SETTLE]:
+    if phase == CAUGHT and w.phase_ticks >= sp.settle_ticks:
         phase = BALANCING
-        w[W_PT] = 0.0
-    w[W_PHASE] = phase
+        w.phase_ticks = 0.0
+    w.phase = phase
     if phase == SWINGING:
-        u = energy_law(th, thd, e, sp[P_K], sp[P_E0], sp[P_UMAX])
-        u -= sp[P_KP] * arm_m + sp[P_KD] * arm_dot_m
-        umax = min(sp[P_UMAX], gp.u_max)  # and the DAC range
+        u = energy_law(th, thd, e, sp.gain, sp.energy_target, sp.max_acceleration)
+        u -= sp.arm_stiffness * arm_m + sp.arm_damping * arm_dot_m
+        umax = min(sp.max_acceleration, gp.u_max)  # and the DAC range
         u = min(max(u, -umax), umax)
-        w[W_U] = u
+        w.u = u
         return u, u, 0.0
-    w[W_OFF] *= sp[P_DECAY]
-    u, u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m - w[W_OFF], arm_dot_m)
-    w[W_U] = u
+    w.arm_offset *= sp.decay
+    u, u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m - w.arm_offset, arm_dot_m)
+    w.u = u
     return u, u_fb, f_hat
 
 
@@ -340,35 +466,40 @@ class SwingUp:
     controller: Controller
     params: SwingUpParams = SwingUpParams()
 
-    def pack(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(gains, compensator parameters, swing-up parameters) for the compiled step."""
+    def record(self) -> tuple[Gains, np.ndarray, SwingUpRecord]:
+        """(gains, compensator parameters, swing-up record) for the compiled step."""
         gp, cp = self.controller.record()
         d = self.controller.design
-        return gp, cp, self.params.pack(d.spec.omega0, d.g, d.spec.h)
+        return gp, cp, self.params.record(d.spec.omega0, d.g, d.spec.h)
 
-    def init(self, theta0: float = math.pi) -> tuple[np.ndarray, np.record]:
-        """Initial ``(w, s)``: swinging, the observer at the first measured angle, at rest."""
-        w = np.zeros(NW)
-        w[W_TH] = wrap_angle(float(theta0))
-        w[W_CATCH] = -1.0
-        return w, new_state()
+    def init(self, theta0: float = math.pi) -> tuple[np.record, np.record]:
+        """Initial ``(w, s)`` (:data:`SWING_DTYPE` and controller state records):
+        swinging, the observer at the first measured angle, at rest."""
+        return (new_swing_state(theta_hat=wrap_angle(float(theta0)), catch_tick=-1.0),
+                new_state())
 
     def step(self, state, theta_m: float, arm_m: float, arm_dot_m: float):
         """One tick: ``(output, next_state)``; ``state`` (w, s) is not modified."""
-        w = np.array(state[0], dtype=float, copy=True)
+        w = copy_swing_state(state[0])
         s = copy_state(state[1])
-        gp, cp, sp = self.pack()
+        gp, cp, sp = self.record()
         u, _, _ = swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m)
-        out = SwingUpOutput(float(u), PHASES[int(w[W_PHASE])], float(w[W_E]), float(w[W_TH]),
-                            float(w[W_THD]), STOP_CODES[int(w[W_STOP])])
+        # fields read as items: about 1 us each from Python against 4 for an attribute
+        out = SwingUpOutput(float(u), PHASES[int(w["phase"])], float(w["energy"]),
+                            float(w["theta_hat"]), float(w["theta_dot_hat"]),
+                            STOP_CODES[int(w["stop"])])
         return out, (w, s)
 
 
 @jit
 def swingup_step_rows(w, x, g, cp, sp, theta_m, arm_m, arm_dot_m):
-    """:func:`swingup_step` with the balancing controller's state as a float
-    vector ``x`` and its gains as a float row ``g``
+    """:func:`swingup_step` with the records as float vectors, viewed once at
+    entry: the swing-up state ``w`` (:func:`swing_vector`) and the balancing
+    controller's state ``x`` (updated in place), the gains row ``g`` and the
+    swing-up row ``sp`` (:func:`swingup_row`) and the compensator's friction
+    row ``cp`` (:func:`~frictionlab.model.friction.friction_row`)
     (:func:`~frictionlab.model.controller.controller_step_rows`: the form for a
     caller in Python at every tick)."""
-    return swingup_step(w, state_view(x), gains_record(g), cp, sp, theta_m, arm_m, arm_dot_m)
+    return swingup_step(swing_view(w), state_view(x), gains_record(g), friction_view(cp),
+                        swingup_record(sp), theta_m, arm_m, arm_dot_m)
 

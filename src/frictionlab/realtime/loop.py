@@ -107,12 +107,12 @@ from ..model.swingup import (
     PHASES,
     STOP_CODES,
     SWINGING,
-    W_CATCH,
-    W_NCATCH,
-    W_PHASE,
-    W_STOP,
     SwingUp,
     SwingUpParams,
+    swing_index,
+    swing_record,
+    swing_vector,
+    swingup_row,
     swingup_step_rows,
 )
 from .osrt import normal_priority, try_realtime_priority
@@ -144,6 +144,9 @@ _NAN = math.nan
 #: The controller state's estimates in its float vector (the tick reads the vector:
 #: a state record's field costs microseconds to read from Python).
 _X1, _X2, _ARM, _ARMDOT, _ZHAT = (state_index(n) for n in ("x1", "x2", "arm", "arm_dot", "z_hat"))
+# positions of the swing-up state's fields in its float vector
+_PHASE, _TH_SW, _THD_SW, _CATCH, _STOP = (swing_index(n) for n in (
+    "phase", "theta_hat", "theta_dot_hat", "catch_tick", "stop"))
 #: The signals of a :class:`Sample` from ``theta_m`` to ``v`` in a tick without a reading.
 _NO_SIGNALS = (_NAN,) * 13
 _TWO_PI = 2.0 * math.pi
@@ -311,8 +314,9 @@ class Loop:
         self.state = None
         self.swingup = swingup
         self._sp = (None if swingup is None
-                    else SwingUp(params.controller, swingup).pack()[2])
-        # swing-up state (read by other threads: phase code, catch tick)
+                    else swingup_row(SwingUp(params.controller, swingup).record()[2]))
+        # swing-up state: a record viewing the float vector the ticks update (read by
+        # other threads: phase, catches)
         self.swing_w = None
         self.swing_caught_tick: int | None = None
 
@@ -344,7 +348,8 @@ class Loop:
                                  0.0, 0.0, 0.0)
             if self.swingup is not None:
                 w_, s_ = SwingUp(p.controller, self.swingup).init(0.0)
-                swingup_step_rows(w_, state_vector(s_), gains_row(p.gp), p.cp, self._sp, 0.0,
+                swingup_step_rows(swing_vector(w_), state_vector(s_), gains_row(p.gp), p.cp,
+                                  self._sp, 0.0,
                                   0.0, 0.0)
         gc_was = gc.isenabled()
         if self.manage_gc and setup:
@@ -581,10 +586,11 @@ class Loop:
                                     r)
                 else:
                     if first and swing:
-                        w, s0 = SwingUp(params.controller, self.swingup).init(theta)
+                        w_rec, s0 = SwingUp(params.controller, self.swingup).init(theta)
+                        w = swing_vector(w_rec)
                         sx = state_vector(s0)
                         s = state_record(sx)
-                        self.swing_w = w
+                        self.swing_w = swing_record(w)
                         self.state = s
                         flags |= START
                         first = False
@@ -599,7 +605,7 @@ class Loop:
                         flags |= START
                         first = False
                     if not abs(theta) <= angle_limit and (
-                            not swing or (w[W_PHASE] == BALANCING and not abs(
+                            not swing or (w[_PHASE] == BALANCING and not abs(
                                 math.remainder(theta, _TWO_PI)) <= angle_limit)):
                         raise _Stop("angle_limit", f"|theta| = {abs(theta):.3f} rad > "
                                     f"{angle_limit} rad", r)
@@ -619,18 +625,18 @@ class Loop:
                     if swing:
                         u, _u_fb, f_hat = swingup_step_rows(w, sx, g_row, cp, sp, theta, arm,
                                                             arm_dot)
-                        ph = w[W_PHASE]
+                        ph = w[_PHASE]
                         if ph == SWINGING:
                             flags |= SWINGING_FLAG
-                            th_hat = w[3]
-                            thd_hat = w[4]
+                            th_hat = w[_TH_SW]
+                            thd_hat = w[_THD_SW]
                         elif ph == CAUGHT:
                             flags |= CAUGHT_FLAG
                         elif ph == BALANCING:
                             if self.swing_caught_tick is None:
-                                self.swing_caught_tick = int(w[W_CATCH])
+                                self.swing_caught_tick = int(w[_CATCH])
                         else:
-                            code = STOP_CODES[int(w[W_STOP])]
+                            code = STOP_CODES[int(w[_STOP])]
                             raise _Stop(code, _swing_stop_detail(code, self.swingup, arm,
                                                                  arm_dot), r)
                     else:
@@ -680,7 +686,8 @@ class Loop:
                 self.params = params
                 if swing:
                     # the swing-up's observer and energy use the design's omega_0 too
-                    sp = self._sp = SwingUp(params.controller, self.swingup).pack()[2]
+                    sp = self._sp = swingup_row(
+                        SwingUp(params.controller, self.swingup).record()[2])
                 l_now = gp.feedback
                 gp, cp = params.gp, params.cp
                 if ramp_n and s is not None and not (l_now == gp.feedback).all():
@@ -718,9 +725,9 @@ class Loop:
         if w is None:
             return {"phase": "swinging", "swing_up_time": None, "catches": 0}
         caught = self.swing_caught_tick
-        return {"phase": PHASES[int(w[W_PHASE])],
+        return {"phase": PHASES[int(w.phase)],
                 "swing_up_time": None if caught is None else caught * self.h,
-                "catches": int(w[W_NCATCH])}
+                "catches": int(w.catches)}
 
     def _housekeeping(self, k: int) -> None:
         """Scheduled garbage collection (outside the tick)."""

@@ -35,13 +35,16 @@ from ..model.sensor import measure
 from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick, record_tick
 from ..model.swingup import (
     BALANCING,
+    CAUGHT,
     PHASES,
     STOP_CODES,
-    W_CATCH,
-    W_PHASE,
-    W_STOP,
-    W_T,
+    STOPPED,
     SwingUp,
+    swing_record,
+    swing_vector,
+    swing_view,
+    swingup_record,
+    swingup_row,
     swingup_step,
     wrap_angle,
 )
@@ -53,9 +56,15 @@ _OK, _FELL, _STOPPED = 0, 1, 2
 
 
 @jit
-def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, sens,
+def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp_row, s, wx, sens,
                  fall_angle, out, phase_out):
-    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code)."""
+    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code).
+
+    The swing-up's settings and state come as their float rows (numba types a
+    row from Python in about 1 us, a record or NamedTuple in about 5) and are
+    viewed as the records here, once."""
+    sp = swingup_record(sp_row)
+    w = swing_view(wx)
     h = gp.h
     drifting = is_drifting(fp)
     # the plant's levels at the tick, in a scratch friction record (kept alive
@@ -70,23 +79,24 @@ def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp, s, w, s
         th_m = wrap_angle(th_m)
         est = estimates(s, gp)
         u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
-        balancing = w[W_PHASE] >= 1.0 and w[W_PHASE] <= 2.0
+        balancing = CAUGHT <= w.phase <= BALANCING
         fc_used, fs_used = compensator_levels(s, gp, cp)
-        record_tick(out, k, th_m, est[0] if balancing else w[3], est[1] if balancing else w[4],
+        record_tick(out, k, th_m, est[0] if balancing else w.theta_hat,
+                    est[1] if balancing else w.theta_dot_hat,
                     u, arm_m, armd_m, est[2], est[3], f_hat, est[4], wrap_angle(x[0]), x,
                     fc_used, fs_used)
-        phase_out[k] = w[W_PHASE]
+        phase_out[k] = w.phase
         if drifting:
             drifted_params(fp, k * h, fpt)
         f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         out[k, 15] = f_mean
-        if w[W_PHASE] == 3.0:
+        if w.phase == STOPPED:
             keep_alive(buf)
             return k + 1, _STOPPED
         if not np.isfinite(x[0] + x[1] + x[3] + x[4]):
             keep_alive(buf)
             return k + 1, _FELL
-        if w[W_PHASE] == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
+        if w.phase == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
             keep_alive(buf)
             return k + 1, _FELL
     keep_alive(buf)
@@ -143,28 +153,35 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     if n > 20_000_000:
         raise ValueError(f"duration {duration:g} s is too long for a recorded swing-up run")
     sw = SwingUp(controller or make_controller(cfg), cfg.swingup)
-    gp, cp, sp = sw.pack()
+    gp, cp, sp = sw.record()
     w, s = sw.init(cfg.sim.initial_angle)
+    wx = swing_vector(w)
     x = np.zeros(5)
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
     done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, cfg.plant.record(),
                                 KINDS.index(cfg.friction_kind),
-                                resolve_drift(cfg.friction.record(), n * h), gp, cp, sp, s, w,
-                                make_sensor(cfg), cfg.sim.fall_angle, out, phase)
+                                resolve_drift(cfg.friction.record(), n * h), gp, cp,
+                                swingup_row(sp), s, wx, make_sensor(cfg), cfg.sim.fall_angle,
+                                out, phase)
     phase = phase[:done]
+    # the end state's fields, read as items (about 1 us each; an attribute of a
+    # numpy record costs about 4 us from Python)
+    w = swing_record(wx)
+    stop_code, catch_tick, ticks, catches = (w[f] for f in ("stop", "catch_tick", "tick",
+                                                             "catches"))
     balanced = bool((phase == BALANCING).any())
-    stop = STOP_CODES[int(w[W_STOP])] if status == _STOPPED else ""
+    stop = STOP_CODES[int(stop_code)] if status == _STOPPED else ""
     if status == _FELL:
         stop = "fell"
-    catch_time = float(w[W_CATCH]) * h if balanced and w[W_CATCH] >= 0 else None
+    catch_time = float(catch_tick) * h if balanced and catch_tick >= 0 else None
     swinging = phase == 0
     u = out[:done, 3]
     max_u = float(np.abs(u[swinging]).max()) if swinging.any() else 0.0
     traj = Trajectory(np.arange(done), h, out[:done], "fell" if status == _FELL else "ok", cfg,
-                      meta={"phase": phase, "phases": PHASES, "ticks": int(w[W_T])})
-    return SwingUpResult(traj, catch_time, balanced, stop, int(w[10]), max_u)
+                      meta={"phase": phase, "phases": PHASES, "ticks": int(ticks)})
+    return SwingUpResult(traj, catch_time, balanced, stop, int(catches), max_u)
 
 
 def swingup_outcome(res: SwingUpResult, window: float | None = None):
