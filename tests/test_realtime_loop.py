@@ -18,6 +18,7 @@ import pytest
 
 from frictionlab.config import ConfigError, build_config
 from frictionlab.model.controller import controller_step
+from frictionlab.model.friction import friction_record
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime import loop as loop_mod
 from frictionlab.realtime.loop import Loop
@@ -178,7 +179,8 @@ def _replay_u(samples, params_at):
             s.relay = 0.0
             s.z_hat = 0.0
         p = q
-        u, _, _ = controller_step(s, p.gp, p.cp, smp.theta_m, smp.arm_m, smp.arm_dot_m)
+        u, _, _ = controller_step(s, p.gp, friction_record(p.cp), smp.theta_m, smp.arm_m,
+                                  smp.arm_dot_m)
         out.append(u)
     return np.array(out)
 

@@ -197,6 +197,7 @@ def test_swingup_step_rows_equals_the_step_on_records_field_for_field():
     """The float-row form views the same fields the record form sets: a swing, a
     catch and the balancing ticks give the same state either way."""
     from frictionlab.model.controller import gains_row
+    from frictionlab.model.friction import friction_row
     from frictionlab.model.swingup import (
         SWING_FIELDS,
         copy_swing_state,
@@ -219,7 +220,7 @@ def test_swingup_step_rows_equals_the_step_on_records_field_for_field():
     for k in range(len(tr)):
         meas = (tr["theta_m"][k], tr["arm_m"][k], tr["arm_dot_m"][k])
         u1 = swingup_step(w, s, gp, cp, sp, *meas)
-        u2 = swingup_step_rows(wx, sx, g_row, cp, sp_row, *meas)
+        u2 = swingup_step_rows(wx, sx, g_row, friction_row(cp), sp_row, *meas)
         assert u1 == u2
         np.testing.assert_array_equal(swing_vector(w), wx)
         np.testing.assert_array_equal(state_vector(s), sx)
