@@ -88,7 +88,11 @@ a record as a pointer, and a read under a condition cannot leave the
 simulator's substep loop (the pointer is not known to be readable there),
 while an unconditional one can; reading the classical model's levels inside
 its branches made a 30 s classical run 16 % slower than with the packed
-vector.
+vector.  The small laws that the substep loop runs (``classical_force``,
+``stribeck_classical_force``, ``coulomb_relay``, ``viscous_force``,
+``_sgn``) are inlined into their caller (``jit_inline``): called, they left
+the classical run 5-9 % slower than with the vector; inlined, 2-4 % faster
+(docs/performance.md).
 
 Where parameters have to be a float vector (a batch's per-set rows, a caller
 in Python that steps every tick: numba types a record argument from Python
@@ -363,7 +367,7 @@ def _check_kind(kind: str) -> int:
 # --------------------------------------------------------------------------
 
 
-@jit
+@jit_inline
 def _sgn(x):
     if x > 0.0:
         return 1.0
@@ -418,7 +422,7 @@ def stribeck_curve(v, p):
     return stribeck_level(v, p) * _sgn(v) + viscous_force(v, p)
 
 
-@jit
+@jit_inline
 def coulomb_relay(v, s_prev, p):
     """Coulomb relay with hysteresis (Sec. 6.1).
 
@@ -447,7 +451,7 @@ def _stuck(fe, fs_pos, fs_neg):
     return fs * _sgn(fe)
 
 
-@jit
+@jit_inline
 def classical_force(v, fe, p):
     """Stiction + Coulomb friction, eq. (17), with a zero-velocity band.
 
@@ -467,7 +471,7 @@ def classical_force(v, fe, p):
     return _stuck(fe, fs, fs_neg)
 
 
-@jit
+@jit_inline
 def stribeck_classical_force(v, fe, p):
     """The classical model's implementation form with Stribeck decay (Sec. 6.2)."""
     eps, band0, fs, fc, fs_neg, fc_neg, vs = p.eps, p.band, p.fs, p.fc, p.fs_neg, p.fc_neg, p.vs
@@ -530,7 +534,7 @@ def lugre_step_exact(v, z, e, dt, p):
     return z - q, z_ss + q * inv_x, -q * (1.0 / dt)
 
 
-@jit
+@jit_inline
 def viscous_force(v, p):
     """Viscous friction :math:`F_v v` (:math:`F_v^-` for v < 0)."""
     fv = p.fv if v >= 0.0 else p.fv_neg
