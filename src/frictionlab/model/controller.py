@@ -76,6 +76,7 @@ from .friction import (
 )
 from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
+from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 
 __all__ = [
     "ADAPTIVE",
@@ -129,7 +130,7 @@ COMPENSATOR_FIELDS = {
 STATE_FIELDS = ("x1", "x2", "arm", "arm_dot", "relay", "z_hat", "f_hat", "u",
                 "v_hat", "v_prev", "fc_hat", "fs_hat", "adapt", "slide")
 #: The controller state's record type: one float64 per field of :data:`STATE_FIELDS`.
-STATE_DTYPE = np.dtype([(name, np.float64) for name in STATE_FIELDS], align=True)
+STATE_DTYPE = float_record_dtype(STATE_FIELDS)
 #: Number of floats in a controller state (its size as a float vector).
 NS = len(STATE_FIELDS)
 #: The compensator's fields (:func:`reset_compensator` zeroes them).
@@ -139,22 +140,17 @@ _COMPENSATOR_STATE = ("relay", "z_hat", "v_hat", "v_prev", "fc_hat", "fs_hat", "
 def new_state(**values: float) -> np.record:
     """A zeroed controller state record (fields set from ``values``), backed
     by its own one-element array: compiled code updates it in place."""
-    s = np.zeros(1, STATE_DTYPE).view(np.recarray)[0]
-    for name, value in values.items():
-        setattr(s, name, value)
-    return s
+    return new_record(STATE_DTYPE, **values)
 
 
 def copy_state(s) -> np.record:
     """An independent copy of a controller state record."""
-    arr = np.zeros(1, STATE_DTYPE)
-    arr[0] = s
-    return arr.view(np.recarray)[0]
+    return copy_record(s)
 
 
 def state_vector(s) -> np.ndarray:
     """The controller state as a float vector (fields in :data:`STATE_FIELDS` order)."""
-    return np.array(s.tolist(), dtype=float)
+    return record_row(s)
 
 
 def state_index(name: str) -> int:
@@ -195,7 +191,7 @@ def state_record(x) -> np.record:
     contiguous floats, :data:`STATE_FIELDS` order), by reference: setting a
     field, here or in compiled code, writes ``x``.  (Python side of
     :func:`state_view`; pass a copy for an independent record.)"""
-    return np.asarray(x, dtype=np.float64).view(STATE_DTYPE).view(np.recarray)[0]
+    return row_record(x, STATE_DTYPE)
 
 #: Compensator code of ``adaptive`` (after the friction model codes).
 ADAPTIVE = 6

@@ -113,6 +113,7 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from .params import Validated, param
+from .records import copy_record, float_record_dtype, record_row, row_record
 
 __all__ = [
     "FRICTION_DTYPE",
@@ -194,8 +195,7 @@ FRICTION_FIELDS = (
 #: :data:`FRICTION_FIELDS`: what the compiled force laws read (``p.fc``).  Its
 #: scalar type is ``np.record``, so that in Python too an element of an array
 #: of it (a view of a float row) is a record with its fields as attributes.
-FRICTION_DTYPE = np.dtype((np.record, np.dtype([(name, np.float64) for name in FRICTION_FIELDS],
-                                               align=True)))
+FRICTION_DTYPE = float_record_dtype(FRICTION_FIELDS)
 #: Number of floats in a friction record (its size as a float row).
 NP = len(FRICTION_FIELDS)
 
@@ -332,20 +332,18 @@ def friction_row(p) -> np.ndarray:
     """The friction record ``p`` as a float row (:data:`FRICTION_FIELDS` order; a
     copy): what a batch stores per set and a caller in Python passes at every
     tick (:func:`friction_view` reads it back in compiled code)."""
-    return np.array(p.tolist(), dtype=np.float64)
+    return record_row(p)
 
 
 def friction_record(row) -> np.record:
     """The friction record stored in the float64 row ``row`` (:data:`NP`
     contiguous floats), by reference (Python side of :func:`friction_view`)."""
-    return np.asarray(row, dtype=np.float64).view(FRICTION_DTYPE)[0]
+    return row_record(row, FRICTION_DTYPE)
 
 
 def copy_friction(p) -> np.record:
     """An independent copy of the friction record ``p``."""
-    a = np.empty(1, FRICTION_DTYPE)
-    a[0] = p
-    return a[0]
+    return copy_record(p)
 
 
 @jit_inline

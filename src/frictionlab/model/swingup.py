@@ -135,6 +135,7 @@ from .controller import (
 )
 from .friction import friction_view
 from .params import Validated, param
+from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 
 __all__ = [
     "PHASES",
@@ -168,32 +169,23 @@ STOP_CODES = ("", "not_caught", "arm_travel", "arm_speed")
 SWING_FIELDS = ("phase", "tick", "phase_ticks", "theta_hat", "theta_dot_hat", "arm_offset",
                 "energy", "stop", "catch_tick", "u", "catches")
 #: The swing-up state's record type: one float64 per field of :data:`SWING_FIELDS`.
-SWING_DTYPE = np.dtype([(name, np.float64) for name in SWING_FIELDS], align=True)
-#: The same as a dtype whose scalars are :class:`numpy.record` (fields read as
-#: attributes from Python; indexing an array of it gives the record directly,
-#: several times faster than a view as ``np.recarray``).
-_SWING_RECORD = np.dtype((np.record, SWING_DTYPE))
+SWING_DTYPE = float_record_dtype(SWING_FIELDS)
 
 
 def new_swing_state(**values: float) -> np.record:
     """A zeroed swing-up state record (fields set from ``values``), backed by
     its own one-element array: compiled code updates it in place."""
-    arr = np.zeros(1, _SWING_RECORD)
-    for name, value in values.items():
-        arr[name] = value
-    return arr[0]
+    return new_record(SWING_DTYPE, **values)
 
 
 def copy_swing_state(w) -> np.record:
     """An independent copy of a swing-up state record."""
-    arr = np.zeros(1, _SWING_RECORD)
-    arr[0] = w
-    return arr[0]
+    return copy_record(w)
 
 
 def swing_vector(w) -> np.ndarray:
     """The swing-up state as a float vector (fields in :data:`SWING_FIELDS` order)."""
-    return np.array(w.tolist(), dtype=float)
+    return record_row(w)
 
 
 def swing_index(name: str) -> int:
@@ -205,7 +197,7 @@ def swing_record(x) -> np.record:
     """The swing-up state record stored in the float64 vector ``x``
     (:data:`SWING_FIELDS` order), by reference: setting a field, here or in
     compiled code, writes ``x``.  (Python side of :func:`swing_view`.)"""
-    return np.asarray(x, dtype=np.float64).view(_SWING_RECORD)[0]
+    return row_record(x, SWING_DTYPE)
 
 
 @jit_inline
