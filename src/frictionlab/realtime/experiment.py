@@ -63,6 +63,7 @@ per tick.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -107,7 +108,7 @@ class Limits(Validated):
                             "1", lo=0.0, hi=1.0, lo_open=True)
 
 
-class RigExperiment:
+class RigExperiment(ABC):
     """Base of the experiments: limits, progress, the generator schedule.
 
     Parameters
@@ -178,8 +179,10 @@ class RigExperiment:
 
     # --- building blocks of the schedules ----------------------------------------------
 
-    def schedule(self) -> Iterator[float]:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def schedule(self) -> Iterator[float]:
+        """The experiment's u, one value per tick (a generator built from the
+        building blocks below); each experiment defines it."""
 
     def _ticks(self, seconds: float) -> int:
         return max(1, round(seconds / self.h))
