@@ -418,10 +418,18 @@ def test_sim_rig_moves_on_through_missed_ticks_unless_lockstep(cfg, lockstep):
 
     clock = FakeClock(wake_latency=latency)
     rig = Counting(cfg, lockstep=lockstep)
-    loop, _ = run_loop(cfg, clock, rig=rig, duration=0.5)
+    loop, samples = run_loop(cfg, clock, rig=rig, duration=0.5)
     assert loop.missed == 4
     # wall: the plant followed every deadline (100 steps); lockstep: one per executed tick
     assert len(steps) == (loop.ticks - 1 if lockstep else 99)
+    ks = [smp.k for smp in samples if not smp.flags & STOP]
+    if lockstep:
+        # the tick count (the logged time t = k h) pauses with the plant: no gap, and
+        # the run still covers its 0.5 s of simulated time
+        assert ks == list(range(100)) and loop.ticks == 100
+    else:
+        # in real time the stall is a gap of 4 ticks in the log
+        assert len(ks) == 96 and max(np.diff(ks)) == 5
 
 
 def test_controller_api_record_push_subscribe_and_status(cfg, tmp_path):

@@ -6,7 +6,9 @@ nanoseconds on the monotonic clock, so there is no drift):
 1. sleep until the deadline; *jitter* = wake-up time - deadline;
 2. if the wake-up is a whole period or more late, skip ahead to the
    latest deadline that has passed (never a burst of catch-up ticks),
-   count the skipped ones as *missed* and record the stall;
+   count the skipped ones as *missed* and record the stall (with a rig whose
+   plant waits for the loop, ``Rig.realtime_plant`` False, the deadlines move
+   on instead and k does not skip: t = k h stays the plant's time);
 3. read the rig's raw (y, x, v), check them (finite, inside [-1, 1]),
    convert them to SI with App. B (the laws of :mod:`frictionlab.model.sensor`
    with the ``rig.*`` factors; the arm channel is unwrapped and its bias
@@ -468,6 +470,7 @@ class Loop:
         k = 0
         t0 = now() + h_ns
         self.t0_ns = t0
+        lockstep = not rig.realtime_plant
         while True:
             deadline = t0 + k * h_ns
             if prewarm_ns:
@@ -487,10 +490,17 @@ class Loop:
             m = 0
             if late >= h_ns:
                 m = late // h_ns
-                k += m
-                deadline += m * h_ns
                 # count only the deadlines inside the run (a stall at its very end)
-                self.missed += m if n_ticks is None else max(0, min(m, n_ticks - k + m))
+                self.missed += m if n_ticks is None else max(0, min(m, n_ticks - k))
+                deadline += m * h_ns
+                if lockstep:
+                    # the plant waits for the loop: the schedule moves on, the tick
+                    # count - the simulated time, t = k h - does not (else the log's
+                    # time would run ahead of the plant's by the stall)
+                    t0 += m * h_ns
+                    self.t0_ns = t0
+                else:
+                    k += m
                 flags |= MISSED
                 self.stalls.add(k, k * h, late, m)
                 late -= m * h_ns
