@@ -34,6 +34,7 @@ angle-scales       ``t``, ``y``, ``x`` (raw) and the run's marks
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -759,8 +760,9 @@ def analyse_velocity_scale(log: Any, *, chunk: float = 0.25, v_min: float = 0.5)
     The arm angle :math:`\Omega` (``arm_m``, whose scale ``rig.arm_scale`` is
     known from App. B.2) gives the true arm velocity; the raw velocity
     channel ``v`` is compared with it at several steady speeds.  The log is
-    cut into chunks of ``chunk`` s; in each the velocity is the slope of a
-    straight line fitted to :math:`\Omega(t)` and the raw reading is the
+    cut into chunks of ``chunk`` s of time (ticks the loop missed leave gaps;
+    a chunk counts if it holds at least half its samples); in each the
+    velocity is the slope of a straight line fitted to :math:`\Omega(t)` and the raw reading is the
     mean of ``v``.  A chunk counts when the arm moves faster than ``v_min``
     rad/s, the raw reading is steady (its range below 3 % of its level plus
     8 noise standard deviations) and the line fits (residual below 2 % of
@@ -787,11 +789,14 @@ def analyse_velocity_scale(log: Any, *, chunk: float = 0.25, v_min: float = 0.5)
     n = max(8, round(chunk / h))
     sig_v, sig_a = _noise_level(v), _noise_level(arm)
     pts = []
-    for a in range(0, len(t) - n + 1, n):
-        s = slice(a, a + n)
-        tt, aa, vv = t[s], arm[s], v[s]
-        if np.any(np.diff(tt) > 3.0 * h):
-            continue  # a gap in the log (missed ticks)
+    # chunks of time, not of samples: ticks a stalled host made the loop miss leave gaps
+    # in the log; the line is fitted to the samples' own times, so a chunk with gaps
+    # counts when at least half its samples are there
+    edges = np.searchsorted(t, np.arange(t[0], t[-1] + h, n * h) - 0.5 * h)
+    for a, b in itertools.pairwise(edges):
+        if b - a < max(8, n // 2):
+            continue
+        tt, aa, vv = t[a:b], arm[a:b], v[a:b]
         vel, icpt, _ = _slope(tt, aa)
         vm = float(vv.mean())
         if abs(vel) < v_min:
