@@ -19,7 +19,7 @@ Jacobian for the standard errors), on two problems:
 The target of issue 5 is under 2 minutes per fit on the 2-core machine.  The
 evaluations go through :func:`frictionlab.studies.sweep.evaluate` with ``--workers``
 (default: all cores), i.e. the compiled batch evaluator
-(:mod:`frictionlab.studies.batch`) on numba threads: one generation of the global
+(:mod:`frictionlab.studies.batch`) on threads: one generation of the global
 search is one compiled call.  The synthetic fit is repeated in-process
 (``synthetic_inprocess``, ``workers = 1``: the same batches on one thread).
 

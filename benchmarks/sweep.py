@@ -10,7 +10,8 @@ band 0.03 rad/s of Sec. 5.2, reduced to its limit-cycle features by
 Figures (sets per second of wall time):
 
 * ``sets_per_s`` - the default backend, the compiled batch evaluator
-  (:mod:`frictionlab.studies.batch`) on numba threads, one per core
+  (:mod:`frictionlab.studies.batch`) on threads, one per core, each taking the
+  next chunk when done
   (``workers=None``);
 * ``dask_sets_per_s`` - a Dask ``LocalCluster`` with one single-threaded
   worker process per core (``dask="local"``), each evaluating its chunks with
@@ -29,7 +30,12 @@ Figures (sets per second of wall time):
   (started together at a barrier; best of the passes).  Where the cores share
   caches, memory bandwidth or a host's physical core, a run costs more CPU
   with the other cores computing than alone, and this is the rate the cores
-  can reach; ``fraction_of_all_cores_ceiling`` = ``sets_per_s`` / it.  On a busy machine the
+  can reach; ``fraction_of_all_cores_ceiling`` = ``sets_per_s`` / it;
+* ``alternated_fraction_of_ceiling`` - the threaded sweep over the ceiling with
+  the two timed in alternation, one ratio per round (the simulation alone of
+  100 sets in this process, then the threaded sweep): the figures above are
+  timed minutes apart, and this virtual machine's speed drifts by 10-30 %
+  between minutes and processes.  On a busy machine the
   wall-clock rates fall with the share of the cores the benchmark gets, so
   the CPU times are compared too: ``batch_fraction_simulation`` is the
   simulation alone over the compiled batch on one thread (both timed in
@@ -61,7 +67,7 @@ from __future__ import annotations
 import os
 
 if __name__ == "__main__":  # single-threaded BLAS in every process (inherited by workers);
-    # numba's threads are the default backend's workers
+    # the default backend runs in this process's threads
     for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[_var] = "1"
 
@@ -120,6 +126,26 @@ def sim_vs_batch_ms(base: Config, points: list[dict], repeats: int) -> tuple[flo
         evaluate(base, points, duration=DURATION, workers=1)
         bat = min(bat, (time.process_time() - t0) / len(cfgs))
     return 1e3 * sim, 1e3 * bat
+
+
+def threads_vs_ceiling(base: Config, points: list[dict], sims: list[dict], cores: int,
+                       rounds: int) -> list[float]:
+    """The threaded sweep's rate over the ceiling, one ratio per round: each round
+    times the simulation alone of ``sims`` in this process (CPU time; the ceiling is
+    ``cores`` over it), then the threaded sweep of ``points`` (wall clock), so that
+    the machine's speed, which drifts by 10-30 % between minutes and processes on a
+    virtual machine, is the same for both figures of a ratio."""
+    cfgs = [base.with_values(p) for p in sims]
+    ratios = []
+    for _ in range(rounds):
+        t0 = time.process_time()
+        for cfg in cfgs:
+            simulate_config(cfg, DURATION, record=False)
+        ceiling = cores * len(cfgs) / (time.process_time() - t0)
+        t0 = time.perf_counter()
+        evaluate(base, points, duration=DURATION, workers=cores)
+        ratios.append(len(points) / (time.perf_counter() - t0) / ceiling)
+    return ratios
 
 
 def _sim_worker(base: Config, points: list[dict], barrier, repeats: int) -> list[tuple]:
@@ -202,6 +228,10 @@ def main(argv: list[str] | None = None) -> dict:
           f"i.e. {cores * 1e3 / threads_cpu:.0f} sets/s if {cores} cores were free")
     print(f"threads vs one thread, CPU per set: {threads_cpu:.2f} / {serial_cpu:.2f} ms "
           f"(x{threads_cpu / serial_cpu:.2f})")
+    ratios = threads_vs_ceiling(base, points, sub[:100], cores, 2 * args.repeats)
+    print(f"threads / ceiling, the two timed in alternation ({len(ratios)} rounds): median "
+          f"{100 * statistics.median(ratios):.0f} %, best {100 * max(ratios):.0f} %, worst "
+          f"{100 * min(ratios):.0f} %")
 
     t0 = time.perf_counter()
     evaluate(base, points[:4 * cores], duration=DURATION, dask="local", workers=cores,
@@ -240,6 +270,7 @@ def main(argv: list[str] | None = None) -> dict:
               "fraction_of_ceiling": round(threads / ceiling, 3),
               "all_cores_ceiling_sets_per_s": round(busy_ceiling, 1),
               "fraction_of_all_cores_ceiling": round(threads / busy_ceiling, 3),
+              "alternated_fraction_of_ceiling": [round(r, 3) for r in ratios],
               "identical": identical}
     print(json.dumps(result))
     return result

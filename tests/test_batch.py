@@ -35,9 +35,8 @@ def _single_row(cfg, duration, window):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("window", [None, 4.0])
-def test_batch_features_equal_single_runs_exactly(threads, window):
+def test_batch_features_equal_single_runs_exactly(window):
     """One batch of mixed configurations gives each run's features and status
     exactly as run_features (simulate_config + trajectory_features) does."""
     base = build_config("fast", "classical")
@@ -46,7 +45,7 @@ def test_batch_features_equal_single_runs_exactly(threads, window):
         cfg = build_config(design, fric, comp, sets=list(sets.items()))
         points.append({})
         expected.append(_single_row(cfg, 8.0, window))
-        rows = batch.evaluate_rows(cfg, points[-1:], 8.0, window, threads=threads)
+        rows = batch.evaluate_rows(cfg, points[-1:], 8.0, window)
         (row,) = rows
         feats, status = expected[-1]
         assert row["status"] == status, (design, fric, comp, sets)
@@ -56,7 +55,7 @@ def test_batch_features_equal_single_runs_exactly(threads, window):
     assert any(s == "limit_cycle" for _, s in expected)
     # several sets of one base in one batch, in order
     pts = [{"friction.coulomb": c, "sim.noise": n} for c in (1.2, 1.6) for n in (0.0, 0.002)]
-    rows = batch.evaluate_rows(base, pts, 8.0, window, threads=threads)
+    rows = batch.evaluate_rows(base, pts, 8.0, window)
     for p, row in zip(pts, rows, strict=True):
         feats, status = _single_row(base.with_values(p), 8.0, window)
         assert {k: row[k] for k in p} == p
@@ -66,7 +65,7 @@ def test_batch_features_equal_single_runs_exactly(threads, window):
 def test_points_that_cannot_run_are_error_rows_in_place():
     base = build_config("fast", "classical")
     pts = [{"friction.coulomb": 1e9}, {"friction.coulomb": 1.3}, {"design.h": 0.5}]
-    rows = batch.evaluate_rows(base, pts, 0.2, None, threads=1)
+    rows = batch.evaluate_rows(base, pts, 0.2, None)
     assert [r["status"] for r in rows] == [
         "error", run_features(base.with_values(pts[1]), 0.2).status, "error"]
     assert "out of range" in rows[0]["error"] or "friction.coulomb" in rows[0]["error"]
@@ -77,7 +76,7 @@ def test_points_that_cannot_run_are_error_rows_in_place():
 
 def test_a_non_positive_window_is_an_error_row():
     base = build_config("fast", "classical")
-    (row,) = batch.evaluate_rows(base, [{}], 1.0, -1.0, threads=1)
+    (row,) = batch.evaluate_rows(base, [{}], 1.0, -1.0)
     assert row["status"] == "error" and "window must be > 0 s" in row["error"]
 
 
@@ -88,8 +87,7 @@ def test_pairwise_sum_is_numpys_sum_bit_for_bit():
         assert _pairwise_sum(a) == a.sum()
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-def test_sets_that_change_the_shared_sections_get_their_own_rows(threads):
+def test_sets_that_change_the_shared_sections_get_their_own_rows():
     """Points that change the plant, the compensator, the sensor or the design
     between points that do not (the packing reuses the rows of unchanged
     sections) give each run's features exactly as single runs do."""
@@ -98,7 +96,7 @@ def test_sets_that_change_the_shared_sections_get_their_own_rows(threads):
     pts = [{}, {"friction.coulomb": 1.2}, {"compensation.coulomb": 1.2},
            {"compensation.coulomb": 1.2}, {"plant.input_gain": 0.9}, {},
            {"sim.noise": 0.002}, {"design.h": 0.004}, {"friction.coulomb": 1.7}]
-    rows = batch.evaluate_rows(base, pts, 2.0, None, threads=threads)
+    rows = batch.evaluate_rows(base, pts, 2.0, None)
     for p, row in zip(pts, rows, strict=True):
         feats, status = _single_row(base.with_values(p), 2.0, None)
         assert row["status"] == status and {k: row[k] for k in FEATURES} == feats, p

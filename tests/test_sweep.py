@@ -688,36 +688,72 @@ def test_engine_imports_no_cli_plotting_or_terminal_code():
     assert probe.stdout.strip() == "[]"
 
 
-def test_thread_backend_runs_the_next_chunk_while_the_caller_takes_the_rows(monkeypatch):
-    """The thread backend starts chunk k + 1 before it yields chunk k's rows (the
-    cores compute while the caller writes), and the rows are those of one chunk
-    at a time, in order, equal to a single batch's."""
+def test_thread_backend_runs_chunks_on_every_thread_while_the_caller_takes_the_rows(
+        monkeypatch):
+    """The thread backend's threads run their chunks at the same time (each takes the
+    next chunk when done, no thread waits for another), and go on while the caller
+    holds a chunk's rows; every point's row comes once, equal to a single batch's."""
     import threading
 
     from frictionlab.studies import batch
 
     real_run = batch.run
-    started = {}
+    both = threading.Barrier(2, timeout=60)  # a failing run (one at a time) breaks it
+    started = []
 
-    def logged_run(b, threads=1):
-        started.setdefault(b.points[0]["friction.coulomb"], threading.Event()).set()
-        return real_run(b, threads)
+    def logged_run(b):
+        started.append(b.points[0]["friction.coulomb"])
+        if len(started) <= 2:
+            both.wait()  # the first two chunks run at once, one on each thread
+        return real_run(b)
 
     monkeypatch.setattr(batch, "run", logged_run)
     base = build_config("fast", "classical")
     values = (1.2, 1.4, 1.6, 1.8)
-    for c in values:
-        started[c] = threading.Event()
     pts = [{"friction.coulomb": c} for c in values]
-    got = []
-    for k, (idx, rows) in enumerate(sweep_module.iter_evaluate(
-            base, pts, duration=0.5, workers=2, chunk_size=1)):
-        assert idx == [k] and len(rows) == 1
-        if k + 1 < len(values):
-            # the next chunk runs although this one's rows are not yet taken (a
-            # backend that started it only after the yield would never set this;
-            # the timeout only bounds a failing run)
-            assert started[values[k + 1]].wait(60)
-        got.extend(rows)
+    got = {}
+    gen = sweep_module.iter_evaluate(base, pts, duration=0.5, workers=2, chunk_size=1)
+    idx, rows = next(gen)
+    # the caller has not taken the other chunks' rows: the threads run them meanwhile
+    for _ in range(6000):
+        if len(started) == len(values):
+            break
+        threading.Event().wait(0.01)
+    assert sorted(started) == sorted(values)
+    got.update(zip(idx, rows, strict=True))
+    for idx, rows in gen:
+        assert len(idx) == len(rows) == 1
+        got.update(zip(idx, rows, strict=True))
     monkeypatch.setattr(batch, "run", real_run)
-    assert got == batch.evaluate_rows(base, pts, 0.5, None, threads=2)
+    assert sorted(got) == [0, 1, 2, 3]
+    assert [got[i] for i in range(4)] == batch.evaluate_rows(base, pts, 0.5, None)
+
+
+def test_closing_a_thread_sweep_early_cancels_the_chunks_not_started(monkeypatch):
+    """Closing the generator after the first chunk: the chunks not started never run
+    (the running ones finish first, so closing returns only when no thread computes)."""
+    import threading
+
+    from frictionlab.studies import batch
+
+    real_run = batch.run
+    started, release = [], threading.Event()
+
+    def held_run(b):
+        started.append(b.points[0]["friction.coulomb"])
+        if len(started) > 2:
+            release.wait(60)  # the threads' second chunks wait until the caller closes
+        return real_run(b)
+
+    monkeypatch.setattr(batch, "run", held_run)
+    base = build_config("fast", "classical")
+    pts = [{"friction.coulomb": 1.0 + 0.1 * k} for k in range(8)]
+    gen = sweep_module.iter_evaluate(base, pts, duration=0.5, workers=2, chunk_size=1)
+    next(gen)
+    timer = threading.Timer(0.5, release.set)
+    timer.start()
+    gen.close()
+    timer.join()
+    n = len(started)
+    threading.Event().wait(0.2)
+    assert len(started) == n <= 4  # 2 threads: at most 2 chunks each, the rest cancelled

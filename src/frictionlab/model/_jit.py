@@ -23,17 +23,18 @@ import functools
 from importlib import import_module
 from typing import Any
 
-__all__ = ["Kernel", "jit", "jit_inline", "jit_parallel", "keep_alive"]
+__all__ = ["Kernel", "jit", "jit_inline", "jit_nogil", "keep_alive"]
 
 
 @functools.cache
-def _njit(parallel: bool = False, inline: bool = False):
+def _njit(nogil: bool = False, inline: bool = False):
     import_module("._numba_cache", __package__)  # sets NUMBA_CACHE_DIR before numba loads
     from numba import njit
 
-    if parallel:
-        # a batch driver (frictionlab.studies.batch): prange over threads, GIL released
-        return njit(cache=True, error_model="numpy", parallel=True, nogil=True)
+    if nogil:
+        # a batch driver (frictionlab.studies.batch): the GIL released while it runs,
+        # so that several Python threads run batches on the cores at once
+        return njit(cache=True, error_model="numpy", nogil=True)
     if inline:
         # inlined into each compiled caller at numba's IR level (a dispatch on a
         # constant kind then costs nothing on the hot path)
@@ -50,9 +51,9 @@ class Kernel:
         The Python function (as numba's dispatchers call it).
     """
 
-    def __init__(self, fn, parallel: bool = False, inline: bool = False):
+    def __init__(self, fn, nogil: bool = False, inline: bool = False):
         self.py_func = fn
-        self._parallel = parallel
+        self._nogil = nogil
         self._inline = inline
         self._dispatcher = None
         functools.update_wrapper(self, fn)
@@ -61,7 +62,7 @@ class Kernel:
     def dispatcher(self):
         """The numba dispatcher (created, and numba imported, on first access)."""
         if self._dispatcher is None:
-            self._dispatcher = _njit(self._parallel, self._inline)(self.py_func)
+            self._dispatcher = _njit(self._nogil, self._inline)(self.py_func)
         return self._dispatcher
 
     def __call__(self, *args: Any) -> Any:
@@ -100,10 +101,10 @@ def jit_inline(fn) -> Kernel:
     return Kernel(fn, inline=True)
 
 
-def jit_parallel(fn) -> Kernel:
-    """As :func:`jit`, with numba's ``parallel=True`` (``prange`` loops run on
-    numba's threads) and ``nogil=True``; compiled on first use."""
-    return Kernel(fn, parallel=True)
+def jit_nogil(fn) -> Kernel:
+    """As :func:`jit`, with numba's ``nogil=True``: the GIL is released while the
+    kernel runs (a batch driver, run by several Python threads at once)."""
+    return Kernel(fn, nogil=True)
 
 
 def _keep_alive(a):

@@ -16,13 +16,10 @@ for bit (noise included: :func:`frictionlab.model.sensor.measure`'s noise is a
 function of the seed and the sample number, with no generator state to share
 between threads).
 
-Two drivers: :func:`_batch_serial` (one thread; the Dask and process-pool
-workers of :mod:`frictionlab.studies.sweep`) and :func:`_batch_threads` (numba
-``prange`` over ``threads`` numba threads, the GIL released; the sets are
-dealt to the threads in turn, so that short runs - a pendulum that falls - do
-not pile up on one thread).  numba's ``workqueue`` threading layer (its
-fallback when neither OpenMP nor TBB is available) must not be entered by
-two Python threads at once; :func:`run` holds a lock.
+The driver :func:`_batch_serial` runs the sets in turn with the GIL
+released: the thread backend of :mod:`frictionlab.studies.sweep` runs one
+batch per Python thread, each thread taking the next chunk of the sweep when
+it is done with one; the Dask and process-pool workers run one batch at a time.
 
 numba is imported on the first batch, as for every kernel
 (:mod:`frictionlab.model._jit`).
@@ -31,8 +28,6 @@ numba is imported on the first batch, as for every kernel
 from __future__ import annotations
 
 import math
-import os
-import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -40,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Config
-from ..model._jit import _njit, jit, jit_parallel
+from ..model._jit import jit, jit_nogil
 from ..model.controller import NS, gains_record, state_vector, state_view
 from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
 from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
@@ -48,11 +43,7 @@ from ..model.plant import plant_record
 from ..model.sensor import SensorParams, sensor_record
 from ..model.simulation import NC, _run, make_controller, make_sensor, run_ticks
 
-#: ``numba.prange`` once a parallel batch has run (:func:`_numba`); numba reads
-#: it when it compiles :func:`_batch_threads`, on that batch's first call.
-prange = range
-
-__all__ = ["Batch", "evaluate_rows", "max_threads", "prepare", "rows", "run"]
+__all__ = ["Batch", "evaluate_rows", "prepare", "rows", "run"]
 
 #: Feature-extraction settings of :func:`frictionlab.model.limit_cycles.features`'s defaults.
 REL_PROMINENCE, SETTLE_TOL, SMOOTH = 0.02, 2e-3, 9
@@ -139,10 +130,10 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     cycles[i] = cyc
 
 
-@jit
+@jit_nogil
 def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
                   codes, vals, cycles):
-    """Every set of the batch in turn (one thread)."""
+    """Every set of the batch in turn (in the calling thread, the GIL released)."""
     n = len(nt)
     longest = 1
     for i in range(n):
@@ -152,22 +143,6 @@ def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     for i in range(n):
         _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
              buf, sig, codes, vals, cycles)
-
-
-@jit_parallel
-def _batch_threads(threads, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens,
-                   fall, win, codes, vals, cycles):
-    """The sets on ``threads`` numba threads: thread c runs sets c, c + threads, ..."""
-    n = len(nt)
-    for c in prange(threads):
-        longest = 1
-        for i in range(c, n, threads):
-            longest = max(longest, nt[i])
-        buf = np.empty((min(longest, CHUNK_TICKS), NC))
-        sig = np.empty((3, longest))
-        for i in range(c, n, threads):
-            _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
-                 buf, sig, codes, vals, cycles)
 
 
 @dataclass
@@ -265,48 +240,11 @@ def prepare(base: Config, points: Sequence[Mapping[str, Any]], duration: float |
                  np.zeros(n, dtype=np.int64), len(points))
 
 
-def _numba():
-    """numba (imported after its cache directory is set), with ``prange`` bound.
-
-    Sets ``OMP_WAIT_POLICY=PASSIVE`` unless the user has set it, before numba's
-    OpenMP threading layer is loaded (on the first parallel batch): a thread
-    that has dealt its sets sleeps at the end of the batch instead of spinning
-    (measured: the spinning cost 0.1-0.2 ms of CPU per set of a 30 s sweep).
-    """
-    global prange
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    _njit()  # imports frictionlab.model._numba_cache, then numba
-    import numba
-
-    prange = numba.prange
-    return numba
-
-
-def max_threads() -> int:
-    """The most threads a batch can use (numba's ``NUMBA_NUM_THREADS``)."""
-    return int(_numba().config.NUMBA_NUM_THREADS)
-
-
-_lock = threading.Lock()
-
-
-def run(batch: Batch, threads: int = 1) -> Batch:
-    """Run every set of ``batch`` (in place; returns it).
-
-    ``threads`` above 1 runs the sets on that many numba threads (at most
-    :func:`max_threads`), with the GIL released.
-    """
-    if not batch.index:
-        return batch
-    out = (batch.codes, batch.vals, batch.cycles)
-    threads = max(1, min(int(threads), max_threads(), len(batch.index)))
-    if threads == 1:
-        _batch_serial(*batch.arrays, *out)
-        return batch
-    numba = _numba()
-    with _lock:
-        numba.set_num_threads(threads)
-        _batch_threads(threads, *batch.arrays, *out)
+def run(batch: Batch) -> Batch:
+    """Run every set of ``batch`` in the calling thread, the GIL released (in place;
+    returns it)."""
+    if batch.index:
+        _batch_serial(*batch.arrays, batch.codes, batch.vals, batch.cycles)
     return batch
 
 
@@ -339,7 +277,7 @@ def rows(batch: Batch, points: Sequence[Mapping[str, Any]]) -> list[dict[str, An
 
 
 def evaluate_rows(base: Config, points: Sequence[Mapping[str, Any]], duration: float | None,
-                  window: float | None, threads: int = 1) -> list[dict[str, Any]]:
+                  window: float | None) -> list[dict[str, Any]]:
     """Rows of :func:`frictionlab.studies.sweep.evaluate` with the default reduction, in one batch.
 
     Parameters
@@ -349,8 +287,6 @@ def evaluate_rows(base: Config, points: Sequence[Mapping[str, Any]], duration: f
     points : sequence of mappings ``{key: value}``
     duration, window : float or None
         As for :func:`frictionlab.model.simulation.run_features`.
-    threads : int
-        numba threads (1: in the calling thread).
 
     Returns
     -------
@@ -358,4 +294,4 @@ def evaluate_rows(base: Config, points: Sequence[Mapping[str, Any]], duration: f
         One row per point, as :func:`frictionlab.studies.sweep.reduce_features` and
         the sweep engine make it.
     """
-    return rows(run(prepare(base, points, duration, window), threads), points)
+    return rows(run(prepare(base, points, duration, window)), points)

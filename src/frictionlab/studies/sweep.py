@@ -27,12 +27,12 @@ turns its chunk into such rows.  A sweep never crashes because of one point.
 
 Backends (chosen by :func:`evaluate`'s ``workers``, ``dask`` and ``reduce``):
 
-* threads, the default for the default reduction (features): the points go in
-  batches (:data:`THREAD_CHUNK` per thread) to the compiled batch evaluator
-  :mod:`frictionlab.studies.batch`, which runs each batch on ``workers`` numba
-  threads in this process (``None``: all cores; ``1``: the calling thread),
-  simulation and feature extraction compiled, no Python per run and no
-  process start-up.  The next batch is packed while one runs;
+* threads, the default for the default reduction (features): ``workers``
+  threads in this process (``None``: one per core), each taking the next
+  chunk of points (at most :data:`THREAD_CHUNK`, shrinking towards the end)
+  and running it through the compiled batch evaluator
+  :mod:`frictionlab.studies.batch` with the GIL released: simulation and
+  feature extraction compiled, no Python per run and no process start-up;
 * in-process, for a custom ``reduce`` (``workers=1``, or ``workers=None``
   for a sweep of under about half a second of serial work);
 * a local process pool, for a custom ``reduce`` (``workers=N``; ``None``:
@@ -384,7 +384,7 @@ def _run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: floa
         # the default reduction, every point in one compiled batch (no Python per run)
         from .batch import evaluate_rows
 
-        return evaluate_rows(base, points, duration, window, threads=1)
+        return evaluate_rows(base, points, duration, window)
     rows = []
     for p in points:
         try:
@@ -414,7 +414,7 @@ def _warm_up() -> None:
     from .batch import evaluate_rows
 
     run_features(build_config(), 2.0)
-    evaluate_rows(build_config(), [{}], 2.0, None, threads=1)
+    evaluate_rows(build_config(), [{}], 2.0, None)
 
 
 #: Set only in the environment of the forkserver this module starts: importing
@@ -677,41 +677,43 @@ def _guided_chunks(n: int, workers: int, max_chunk: int = MAX_CHUNK) -> list[ran
 
 #: Largest Dask chunk of the default reduction (one compiled batch per chunk).
 DASK_BATCH_CHUNK = 250
-#: Points per thread in one batch of the thread backend (a batch is one
-#: compiled call; the rows are written and progress reported per batch).
+#: Largest chunk of the thread backend (one compiled batch; the rows are written
+#: and progress reported per chunk).
 THREAD_CHUNK = 32
 
 
 def _thread_chunks(base: Config, pts: list[dict[str, Any]], duration: float | None,
                    window: float | None, threads: int,
                    chunks: list[range]) -> Iterator[tuple[list[int], list[dict[str, Any]]]]:
-    """The thread backend: each chunk one compiled batch on ``threads`` numba threads.
+    """The thread backend: ``threads`` threads, each taking the next chunk as soon as
+    it is done with one and running it as one compiled batch, the GIL released.
 
-    The compiled batch releases the GIL, so the next chunk is packed (its
-    configurations built and validated, in Python) while the current one
-    runs on a helper thread, and it is started before the current chunk's
-    rows are yielded: the cores compute while the caller writes the rows
-    (closing the generator early waits for that one chunk).
+    Each thread also packs its chunk and makes its rows (Python, about 5 % of the
+    work), so no thread waits for another, and the cores compute while the caller
+    takes the rows.  With the chunks shrinking towards the end, the threads finish
+    together.  (Dealing every batch's sets to numba's threads in fixed turns, as
+    before, left the cores about 88 % busy: each batch ended when its slower thread
+    did; measured in docs/performance.md.)  Chunks are yielded as they complete;
+    closing the generator early cancels those not yet started and waits for the
+    running ones.
     """
-    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures import ThreadPoolExecutor, as_completed
 
     from . import batch
 
-    def packed(idx: range):
+    def one(idx: range) -> list[dict[str, Any]]:
         sub = [pts[i] for i in idx]
-        return idx, sub, batch.prepare(base, sub, duration, window)
+        return batch.rows(batch.run(batch.prepare(base, sub, duration, window)), sub)
 
-    with ThreadPoolExecutor(1, thread_name_prefix="frictionlab-batch") as ex:
-        cur = packed(chunks[0])
-        fut = ex.submit(batch.run, cur[2], threads)
-        for k in range(len(chunks)):
-            idx, sub, b = cur
-            nxt = packed(chunks[k + 1]) if k + 1 < len(chunks) else None
-            fut.result()
-            if nxt is not None:
-                fut = ex.submit(batch.run, nxt[2], threads)
-                cur = nxt
-            yield list(idx), batch.rows(b, sub)
+    # more threads than cores would only take turns on them
+    threads = min(threads, len(chunks), os.cpu_count() or 1)
+    ex = ThreadPoolExecutor(threads, thread_name_prefix="frictionlab-batch")
+    try:
+        futs = {ex.submit(one, idx): idx for idx in chunks}
+        for fut in as_completed(futs):
+            yield list(futs[fut]), fut.result()
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
 
 
 def iter_evaluate(
@@ -752,7 +754,8 @@ def iter_evaluate(
         backend = "serial" if n_workers == 1 else "pool"
     if backend == "threads":
         yield from _thread_chunks(base, pts, duration, window, n_workers,
-                                  _chunks(n, chunk_size or THREAD_CHUNK * n_workers))
+                                  _chunks(n, chunk_size) if chunk_size
+                                  else _guided_chunks(n, n_workers, THREAD_CHUNK))
         return
     if chunk_size:
         chunks = _chunks(n, chunk_size)
@@ -845,8 +848,8 @@ def evaluate(
         As for :func:`frictionlab.model.simulation.run_features` (defaults:
         ``sim.duration``; the last half of the run).
     workers : int, optional
-        Default reduction: ``N`` numba threads in this process (``1``: the
-        calling thread; ``None``: all cores).  With ``reduce``: ``1``
+        Default reduction: ``N`` threads in this process (``None``: one per
+        core).  With ``reduce``: ``1``
         in-process, ``N`` a local pool of N processes, ``None`` all cores
         except that a sweep of under about half a second of serial work runs
         in-process.  With ``dask="local"``: N Dask workers.
@@ -858,8 +861,8 @@ def evaluate(
         Points per task (default: at most 50 and a quarter of a worker's
         share, shrinking towards the end of the sweep; on Dask with the
         default reduction half a worker's share, at most
-        :data:`DASK_BATCH_CHUNK`; the thread backend: :data:`THREAD_CHUNK`
-        per thread).
+        :data:`DASK_BATCH_CHUNK`; the thread backend: at most
+        :data:`THREAD_CHUNK`, shrinking towards the end).
     reduce : callable, optional
         ``reduce(cfg, duration, window) -> dict`` runs and reduces one point
         (``cfg`` is the point's configuration) in place of
