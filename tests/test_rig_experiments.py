@@ -121,6 +121,35 @@ def test_velocity_scale_through_host_stalls_fake_clock(seed, tmp_path):
     check("velocity-scale", res)
 
 
+#: The UDP tests' short schedules (tests/test_rig_experiments_udp.py), which run where
+#: the host may stall.
+UDP_SCHEDULES = {
+    "stiction": {"step": 0.1, "hold": 0.1, "coulomb_levels": (0.5, 0.7, 0.9), "slide": 0.5},
+    "stribeck": {"references": (0.5, 1.0, 2.0, 4.0, 8.0), "hold": 0.6},
+    "free-oscillation": {"duration": 5.0},
+    "control-scaling": {"levels": (4.0, 6.0, 8.0)},
+}
+
+
+@pytest.mark.parametrize("name", list(UDP_SCHEDULES))
+def test_every_experiment_through_host_stalls_fake_clock(name, tmp_path):
+    """The other experiments with the UDP tests' schedules under the same host stalls
+    as the velocity-scale test above (one deadline in 40 woken 10-60 ms late; the rig's
+    plant moves on meanwhile): each still recovers its parameters."""
+    rng = np.random.default_rng(1)
+
+    def stall(_deadline_ns):
+        return int(rng.integers(10, 60)) * 1_000_000 if rng.random() < 1 / 40 else 0
+
+    st, _exp, _tx, _emu, cfg = run_direct(
+        name, tmp_path, friction="lugre" if name == "stribeck" else "classical",
+        wake_latency=stall, watchdog=0.5, safety=Safety(max_pause=0.5, silent_periods=100),
+        schedule=UDP_SCHEDULES[name])
+    assert st["stop_reason"] == "finished", st["stop_detail"]
+    assert st["missed"] / (st["ticks"] + st["missed"]) > 0.03  # the stalls happened
+    check(name, analyse_run(name, st["log"], cfg))
+
+
 def test_stiction_recovers_hidden_friction_fake_clock(tmp_path):
     st, _exp, _tx, _emu, cfg = run_direct("stiction", tmp_path)
     assert st["stop_reason"] == "finished", st["stop_detail"]
