@@ -21,6 +21,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -173,6 +174,9 @@ def _run_command(cwd: Path, doc: Path, line: int, command: str) -> None:
             if not (command.startswith("frictionlab run") and res.returncode == 1
                     and any(f"stopped: {r}" in res.stderr for r in LOAD_STOPS)):
                 break
+            # shown in pytest's warnings summary: how often a host stalls this long
+            warnings.warn(f"{doc.name}:{line}: a stalled host stopped the run, run again: "
+                          f"{res.stderr.strip().splitlines()[-1][:200]}", stacklevel=1)
     where = f"{doc.name}:{line}: {command}"
     assert res.returncode == 0, f"{where}\nexit {res.returncode}\n{res.stderr[-3000:]}"
     if "--json" in command.split():

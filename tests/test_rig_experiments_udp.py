@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 
 import pytest
 from test_rig_experiments import KNOWN_CHANNEL, TRUE, check
@@ -79,6 +80,9 @@ def identify(name, backend, tmp_path, extra=()):
                             *SLACK, *extra], capture_output=True, text=True, timeout=300)
         if r.returncode != 1 or not any(s in r.stderr for s in LOAD_STOPS):
             break
+        # shown in pytest's warnings summary: how often a host stalls this long
+        warnings.warn(f"{name} over {backend}: a stalled host stopped the run, run again: "
+                      f"{r.stderr.strip().splitlines()[-1][:200]}", stacklevel=1)
     return r
 
 
