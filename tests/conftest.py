@@ -40,12 +40,14 @@ def cli():
 
 
 #: Modules whose tests drive a real-time loop in real time against another process
-#: (marker ``realtime``: scripts/test runs them after the rest, one at a time).
+#: (marker ``realtime``: scripts/test runs them one at a time, while the rest of the
+#: suite computes at the lowest CPU priority; tests marked ``realtime`` directly too).
 REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
                     "tests/test_rig_experiments_udp.py",
                     "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop",
                     "tests/test_console.py::test_a_first_session_loads_nothing_while_the_loop_runs",
-                    "tests/test_console.py::test_idle_connections_cannot_lock_the_operator_out")
+                    "tests/test_console.py::test_idle_connections_cannot_lock_the_operator_out",
+                    "tests/test_scripts.py::test_scripts_run_installs_and_serves_the_console")
 #: Real-time tests that must have the machine to themselves within the suite (marker
 #: ``alone``: scripts/test runs them last, one at a time): a browser beside a console
 #: (chromium takes a CPU of its own while it renders) and a timing statistic compared

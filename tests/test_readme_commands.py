@@ -200,10 +200,45 @@ def _fragment(doc: Path, text: str) -> bool:
     return any(doc.name == name and marker in text for name, marker in PYTHON_FRAGMENTS)
 
 
-#: Per document: its command lines (not skipped), then its Python blocks (not fragments).
-WORK = {p: ([(n, c) for d, n, c in COMMANDS if d == p and not skip_reason(c)],
-            [(n, t) for d, n, t in PYTHON if d == p and not _fragment(d, t)])
-        for p in DOCUMENTS}
+def _block_start(doc: Path, line: int) -> int:
+    """The first line of the fenced block holding ``line``."""
+    return max(start for _lang, start, _text in blocks(doc) if start <= line)
+
+
+def _real_time(doc: Path, line: int, command: str) -> bool:
+    """A line of a real-time run: ``frictionlab run --headless`` (a 200 Hz loop in real
+    time), or a later line of its block (which may read the run's files)."""
+    block = _block_start(doc, line)
+    return any(c.startswith("frictionlab run") and n <= line
+               for d, n, c in COMMANDS if d == doc and _block_start(d, n) == block)
+
+
+def _work(real_time: bool) -> dict:
+    """Per document: its command lines (not skipped), then its Python blocks (not
+    fragments), those of real-time runs or the others."""
+    return {p: ([(n, c) for d, n, c in COMMANDS
+                 if d == p and not skip_reason(c) and _real_time(d, n, c) == real_time],
+                [(n, t) for d, n, t in PYTHON
+                 if d == p and not _fragment(d, t) and ("--headless" in t) == real_time])
+            for p in DOCUMENTS}
+
+
+#: Per document: the lines that compute (scripts/test runs them on every CPU) ...
+WORK = _work(real_time=False)
+#: ... and the real-time runs (marker ``realtime``: run while the machine is not
+#: computing at full speed, as the other real-time tests are; docs/development.md)
+REAL_TIME_WORK = _work(real_time=True)
+
+
+def _run_document(tmp_path: Path, doc: Path, work: dict) -> None:
+    cwd = _folder(tmp_path)
+    commands, python = work[doc]
+    for line, command in commands:
+        _run_command(cwd, doc, line, command)
+    for line, code in python:
+        res = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=_env(),
+                             capture_output=True, text=True, timeout=TIMEOUT)
+        assert res.returncode == 0, f"{doc.name}:{line}\n{res.stderr[-3000:]}"
 
 
 # one test per document: its lines depend on each other (a file one writes, the next
@@ -214,14 +249,35 @@ WORK = {p: ([(n, c) for d, n, c in COMMANDS if d == p and not skip_reason(c)],
 @pytest.mark.parametrize("doc", [pytest.param(p, id=p.name) for p in DOCUMENTS
                                  if WORK[p][0] or WORK[p][1]])
 def test_documented_commands_and_python_run_as_written(tmp_path, doc):
-    cwd = _folder(tmp_path)
-    commands, python = WORK[doc]
-    for line, command in commands:
-        _run_command(cwd, doc, line, command)
-    for line, code in python:
-        res = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=_env(),
-                             capture_output=True, text=True, timeout=TIMEOUT)
-        assert res.returncode == 0, f"{doc.name}:{line}\n{res.stderr[-3000:]}"
+    _run_document(tmp_path, doc, WORK)
+
+
+@pytest.mark.slow
+@pytest.mark.realtime
+@pytest.mark.timeout(1800)
+@pytest.mark.parametrize("doc", [pytest.param(p, id=p.name) for p in DOCUMENTS
+                                 if REAL_TIME_WORK[p][0] or REAL_TIME_WORK[p][1]])
+def test_documented_real_time_runs_work_as_written(tmp_path, doc):
+    _run_document(tmp_path, doc, REAL_TIME_WORK)
+
+
+def test_the_real_time_runs_are_split_off_with_the_lines_reading_their_files():
+    """Every documented real-time run is in the real-time set, with the lines after it in
+    its block (cli.md reads the run's log) and nothing else."""
+    runs = [(d, n) for d, n, c in COMMANDS
+            if c.startswith("frictionlab run") and not skip_reason(c)]
+    assert len(runs) >= 4
+    for d, n in runs:
+        assert n in [line for line, _ in REAL_TIME_WORK[d][0]]
+        assert n not in [line for line, _ in WORK[d][0]]
+    cli = ROOT / "docs" / "cli.md"
+    features = [c for n, c in REAL_TIME_WORK[cli][0] if c.startswith("frictionlab features")]
+    assert features and all("feature-runs" in c or ".dat" in c for c in features)
+    # the split loses and repeats no line
+    for doc in DOCUMENTS:
+        both = [n for n, _ in WORK[doc][0]] + [n for n, _ in REAL_TIME_WORK[doc][0]]
+        assert sorted(both) == [n for d, n, c in COMMANDS if d == doc and not skip_reason(c)]
+    assert any("--headless" in t for _, t in REAL_TIME_WORK[ROOT / "docs" / "logs.md"][1])
 
 
 def test_every_python_fragment_exemption_is_used():

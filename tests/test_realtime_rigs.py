@@ -286,7 +286,9 @@ def test_serial_backend_over_a_pty_pair(cfg):
 
     master, slave = os.openpty()
     tty.setraw(slave)
-    emu = RigEmulator(cfg, MonotonicClock())
+    # a watchdog far beyond a stalled host's pauses: this checks the exchange, and the
+    # watchdog is tested on a fake clock (test_emulator_watchdog_zeroes_the_motor_after_50_ms)
+    emu = RigEmulator(cfg, MonotonicClock(), watchdog=5.0)
     stop = threading.Event()
     th = threading.Thread(target=serve_stream, args=(emu, master, stop), daemon=True)
     th.start()

@@ -42,7 +42,11 @@ def test_swing_up_button_and_phase(browser, console):
 
         def balancing():
             st = console.get("/api/status")[1]
-            sw = st.get("swing_up") or {}
+            if st.get("swing_up") is None:
+                # the page's request has not started the swing-up run yet: this is still
+                # the status of the refused automatic start (stop_reason not_upright)
+                return False
+            sw = st["swing_up"]
             seen.add(sw.get("phase"))
             if not st.get("running") and st.get("stop_reason"):
                 if st["stop_reason"] in ("paused", "rig_silent"):
