@@ -56,8 +56,9 @@ PYTHON_FRAGMENTS = {
     ("compensation.md", "make_compensator"): "shows a call with the loop's signals as names",
     ("logs.md", "pd.read_parquet"): "needs pandas (not a dependency) and names a run's files",
 }
-#: Stop reasons a stalled host (not the command) causes in a real-time run.
-LOAD_STOPS = ("paused", "rig_silent")
+#: Stop reasons a stalled host (not the command) causes in a real-time run, as the run
+#: and the experiments report them.
+LOAD_STOPS = re.compile(r"stopped(?: before it finished)?: (paused|rig_silent)\b")
 #: A run longer than this is a bug (the slowest documented command takes ~30 s).
 TIMEOUT = 600
 
@@ -129,10 +130,16 @@ def _folder(tmp_path: Path) -> Path:
 _SHELL_SYNTAX = re.compile(r"[|&;<>()$`*?{}\\!]")
 
 
+def runs_the_loop(command: str) -> bool:
+    """Does the command run the 200 Hz loop in real time (``frictionlab run``, an
+    experiment on a ``--backend``)?"""
+    return command.startswith("frictionlab run") or "--backend" in command.split()
+
+
 def plain_frictionlab(command: str) -> list[str] | None:
     """The arguments of a plain ``frictionlab ...`` command line (no pipes,
-    redirections, variables or globs: bash would pass it on unchanged; not ``run``
-    or ``rig-sim``), else None.
+    redirections, variables or globs: bash would pass it on unchanged; not ``run``,
+    an experiment on a ``--backend`` or ``rig-sim``), else None.
 
     Such a line runs in-process (:func:`inprocess.run_cli_in_process`); the
     installed ``frictionlab`` executable itself is tested in tests/test_cli.py
@@ -145,7 +152,7 @@ def plain_frictionlab(command: str) -> list[str] | None:
     code = command.split(" #", 1)[0]
     if words[:1] != ["frictionlab"] or _SHELL_SYNTAX.search(code) or "=" in words[0]:
         return None
-    if words[1:2] in (["run"], ["rig-sim"]):
+    if words[1:2] in (["run"], ["rig-sim"]) or runs_the_loop(command):
         # the real-time loop installs signal handlers and leaves threads finishing its
         # logs: it runs as the process it is
         return None
@@ -171,8 +178,8 @@ def _run_command(cwd: Path, doc: Path, line: int, command: str) -> None:
             # a real-time run that a stalled host stopped (as it must on a rig: the
             # safety stops are tested in tests/test_realtime_*) is repeated; what is
             # tested here is that the documented command works
-            if not (command.startswith("frictionlab run") and res.returncode == 1
-                    and any(f"stopped: {r}" in res.stderr for r in LOAD_STOPS)):
+            if not (runs_the_loop(command) and res.returncode == 1
+                    and LOAD_STOPS.search(res.stderr)):
                 break
             # shown in pytest's warnings summary: how often a host stalls this long
             warnings.warn(f"{doc.name}:{line}: a stalled host stopped the run, run again: "
@@ -206,10 +213,10 @@ def _block_start(doc: Path, line: int) -> int:
 
 
 def _real_time(doc: Path, line: int, command: str) -> bool:
-    """A line of a real-time run: ``frictionlab run --headless`` (a 200 Hz loop in real
-    time), or a later line of its block (which may read the run's files)."""
+    """A line of a real-time run (:func:`runs_the_loop`), or a later line of its block
+    (which may read the run's files)."""
     block = _block_start(doc, line)
-    return any(c.startswith("frictionlab run") and n <= line
+    return any(runs_the_loop(c) and n <= line
                for d, n, c in COMMANDS if d == doc and _block_start(d, n) == block)
 
 
@@ -264,9 +271,10 @@ def test_documented_real_time_runs_work_as_written(tmp_path, doc):
 def test_the_real_time_runs_are_split_off_with_the_lines_reading_their_files():
     """Every documented real-time run is in the real-time set, with the lines after it in
     its block (cli.md reads the run's log) and nothing else."""
-    runs = [(d, n) for d, n, c in COMMANDS
-            if c.startswith("frictionlab run") and not skip_reason(c)]
-    assert len(runs) >= 4
+    runs = [(d, n) for d, n, c in COMMANDS if runs_the_loop(c) and not skip_reason(c)]
+    assert len(runs) >= 5
+    assert any("identify experiment" in c and "--backend" in c
+               for c in (c for _, c in REAL_TIME_WORK[ROOT / "README.md"][0]))
     for d, n in runs:
         assert n in [line for line, _ in REAL_TIME_WORK[d][0]]
         assert n not in [line for line, _ in WORK[d][0]]
