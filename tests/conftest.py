@@ -40,8 +40,8 @@ def cli():
 
 
 #: Modules whose tests drive a real-time loop in real time against another process
-#: (marker ``realtime``: scripts/test runs them one at a time, while the rest of the
-#: suite computes at the lowest CPU priority; tests marked ``realtime`` directly too).
+#: (marker ``realtime``: scripts/test runs them after the rest, one at a time; tests
+#: marked ``realtime`` directly too).
 REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
                     "tests/test_rig_experiments_udp.py",
                     "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop",
