@@ -4,7 +4,9 @@ Each command line of a fenced ``bash``/``sh``/``shell``/``console`` block of
 README.md and docs/*.md (continuation lines joined; in ``console`` blocks the
 ``$ `` lines) runs, unchanged, with ``bash`` in a fresh folder holding a copy
 of the repository's ``examples/``, the lines of one document in order and in
-one folder (a later line may use an earlier one's output).  It must exit 0,
+one folder (a later line may use an earlier one's output); a document's
+real-time runs (:func:`runs_the_loop`), with the lines of their block after
+them, run in a test of their own (marker ``realtime``).  It must exit 0,
 and with ``--json`` print exactly one JSON object on stdout.  Only the lines
 of :data:`SKIPPED` do not run: servers that run until stopped, each smoke
 tested elsewhere (named with the reason).  Every ``python`` block runs too
@@ -232,8 +234,8 @@ def _work(real_time: bool) -> dict:
 
 #: Per document: the lines that compute (scripts/test runs them on every CPU) ...
 WORK = _work(real_time=False)
-#: ... and the real-time runs (marker ``realtime``: run while the machine is not
-#: computing at full speed, as the other real-time tests are; docs/development.md)
+#: ... and the real-time runs (marker ``realtime``: phase 2 of scripts/test, one at a
+#: time, not beside the suite computing on every CPU; docs/development.md)
 REAL_TIME_WORK = _work(real_time=True)
 
 
