@@ -16,6 +16,7 @@ tested elsewhere (named with the reason).  Every ``python`` block runs too
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -209,9 +210,14 @@ def _fragment(doc: Path, text: str) -> bool:
     return any(doc.name == name and marker in text for name, marker in PYTHON_FRAGMENTS)
 
 
+@functools.cache
+def _block_starts(doc: Path) -> tuple[int, ...]:
+    return tuple(start for _lang, start, _text in blocks(doc))
+
+
 def _block_start(doc: Path, line: int) -> int:
     """The first line of the fenced block holding ``line``."""
-    return max(start for _lang, start, _text in blocks(doc) if start <= line)
+    return max(start for start in _block_starts(doc) if start <= line)
 
 
 def _real_time(doc: Path, line: int, command: str) -> bool:
