@@ -15,6 +15,15 @@ at h = 5 ms and ``substeps`` 1, 2, 5 and 10 per sample:
   :func:`frictionlab.model.simulation.plant_tick` at its default steps
   (classical friction, 10 substeps, 2 pendulum steps) in the same loop.
 
+It also runs the designs of :mod:`frictionlab.model.plants.furuta_dc_design`
+on the presets in a plain closed loop (the tick, the predictor observer,
+u = -L xhat saturated at the voltage limit, exact measurements, from
+theta = 0.1 rad, classical friction at the preset's levels, 20 s):
+``closed_loop`` gives theta's amplitude and period over the last 10 s and
+the largest |u|, or when it fell; ``substep_error`` the largest relative
+change of amplitude and period of the QUBE-Servo 2's fast-design cycle
+against 100 substeps.
+
 Usage: ``.venv/bin/python benchmarks/furuta_dc.py [--repeats N]``.  The last
 line is a JSON object.
 """
@@ -39,10 +48,18 @@ from scipy.integrate import solve_ivp  # noqa: E402
 from frictionlab.model.friction import KINDS, FrictionParams  # noqa: E402
 from frictionlab.model.plant import PlantParams  # noqa: E402
 from frictionlab.model.plants.furuta_dc import (  # noqa: E402
+    PRESET_FRICTION,
+    PRESETS,
     QUBE2,
     mechanical_energy,
     rhs,
     tick,
+)
+from frictionlab.model.plants.furuta_dc_design import (  # noqa: E402
+    dc_design,
+    dc_observer_step,
+    dc_spec,
+    observer_row,
 )
 from frictionlab.model.simulation import plant_tick  # noqa: E402
 
@@ -122,6 +139,51 @@ def cost(repeats: int) -> dict:
     return out
 
 
+def closed_loop(name: str, spec, substeps: int = 2, duration: float = 20.0) -> dict:
+    p = PRESETS[name]
+    d = dc_design(spec, p)
+    row, pp = observer_row(d), p.record()
+    f = PRESET_FRICTION[name]
+    fp = FrictionParams(coulomb=f["friction.coulomb"], stiction=f["friction.stiction"],
+                        zero_velocity_band=f["friction.zero_velocity_band"]).record()
+    code = KINDS.index("classical")
+    x = np.array([0.1, 0.0, 0.0, 0.0, 0.0])
+    xhat = np.zeros(4)
+    mem, umax = 0.0, 0.0
+    n = round(duration / H)
+    theta = np.empty(n)
+    for k in range(n):
+        u = min(p.voltage_limit, max(-p.voltage_limit, -float(d.L @ xhat)))
+        umax = max(umax, abs(u))
+        dc_observer_step(xhat, x[0], x[2], x[3], u, row)
+        _, mem = tick(x, u, mem, substeps, 1, H, pp, code, fp)
+        theta[k] = x[0]
+        if abs(x[0]) > 1.5:
+            return {"fell_at": k * H}
+    late = theta[n // 2:]
+    y0, y1 = late[:-1], late[1:]
+    i = np.where((y0 < 0) & (y1 >= 0))[0]
+    t = (i + y0[i] / (y0[i] - y1[i])) * H
+    return {"amplitude": float(late.max()), "period": float(np.mean(np.diff(t))),
+            "max_u": umax}
+
+
+def _variants():
+    fast, slow = dc_spec("fast", QUBE2), dc_spec("slow", QUBE2)
+    home = dc_spec("fast", PRESETS["homebuilt"])
+    return [
+        ("qube2", "fast", "fast"), ("qube2", "slow", "slow"),
+        ("qube2", "fast, observer_omega2 30",
+         dataclasses.replace(fast, observer_omega2=30.0)),
+        ("qube2", "slow, observer_omega2 30",
+         dataclasses.replace(slow, observer_omega2=30.0)),
+        ("qube3", "fast", "fast"), ("qube3", "slow", "slow"),
+        ("homebuilt", "fast", "fast"), ("homebuilt", "slow", "slow"),
+        ("homebuilt", "fast, observer_omega1 = observer_omega2 = 60",
+         dataclasses.replace(home, observer_omega1=60.0, observer_omega2=60.0)),
+    ]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
@@ -132,6 +194,17 @@ def main() -> None:
         res["energy_drift"][s] = energy_drift(s)
         print(f"substeps {s:2d}: driven error {res['driven_error'][s]:.2e}, "
               f"energy drift {res['energy_drift'][s]:.2e}")
+    res["closed_loop"] = {}
+    for name, label, spec in _variants():
+        r = closed_loop(name, spec)
+        res["closed_loop"][f"{name}, {label}"] = r
+        print(f"{name}, {label}: " + ", ".join(f"{k} {v:.4g}" for k, v in r.items()))
+    ref = closed_loop("qube2", "fast", substeps=100)
+    res["substep_error"] = {}
+    for s in (1, 2, 5, 10):
+        r = closed_loop("qube2", "fast", substeps=s)
+        res["substep_error"][s] = max(abs(r[k] / ref[k] - 1.0) for k in ("amplitude", "period"))
+        print(f"qube2 fast cycle at {s} substeps: {res['substep_error'][s]:.2%} from 100")
     res["us_per_tick"] = cost(args.repeats)
     for k, v in res["us_per_tick"].items():
         print(f"{k}: {v:.3f} us per tick")
