@@ -96,7 +96,7 @@ def test_the_linearization_is_the_jacobian_of_rhs(name):
 
 @pytest.mark.slow  # python-control's import: 3 s of CPU
 def test_the_linearization_agrees_with_python_control():
-    ct = pytest.importorskip("control")
+    import control as ct  # python-control: 3 s to import, only here
     for p in (QUBE2, QUBE3, HOMEBUILT):
         sys = ct.nlsys(lambda t, x, u, params, p=p: rhs(t, x, u[0], p), None, states=4,
                        inputs=1, outputs=4)
@@ -140,7 +140,7 @@ def test_the_mass_matrix_and_the_friction_torque_in_volts():
             tau = M @ np.array([d[1], d[3]])
             np.testing.assert_allclose(tau, [0.0, -p.torque_constant * F / p.resistance],
                                        atol=1e-12)
-            # the same friction held in the tick: the mean friction it reports is F's law
+            # friction in volts is the same as that much less input voltage
             np.testing.assert_array_equal(rhs(0.0, x, (u, F), p), rhs(0.0, x, u - F, p))
 
 

@@ -59,7 +59,7 @@ def test_the_design_places_the_section_2_4_pattern(name, plant):
 
 @pytest.mark.slow  # python-control's import: 3 s of CPU
 def test_given_gains_replace_the_placement_for_example_an_lqr():
-    ct = pytest.importorskip("control")
+    import control as ct  # python-control: 3 s to import, only here
     A, B = linearization(QUBE2)
     Phi, Gamma = zoh(A, B, 0.005)
     L, _, _ = ct.dlqr(Phi, Gamma, np.diag([50.0, 1.0, 5.0, 1.0]), np.array([[1.0]]))
