@@ -12,7 +12,7 @@ at h = 5 ms and ``substeps`` 1, 2, 5 and 10 per sample:
   damping, back-EMF, friction or input);
 * ``us_per_tick``: CPU time of one tick inside a compiled loop of 6000
   ticks (30 s; min of ``--repeats``), next to the thesis plant's
-  :func:`frictionlab.model.simulation.plant_tick` at its default steps
+  :func:`frictionlab.model.plants.thesis.tick` at its default steps
   (classical friction, 10 substeps, 2 pendulum steps) in the same loop.
 
 It also runs the designs of :mod:`frictionlab.model.plants.furuta_dc_design`
@@ -46,7 +46,6 @@ from numba import njit  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 from frictionlab.model.friction import KINDS, FrictionParams  # noqa: E402
-from frictionlab.model.plant import PlantParams  # noqa: E402
 from frictionlab.model.plants.furuta_dc import (  # noqa: E402
     PRESET_FRICTION,
     PRESETS,
@@ -61,7 +60,8 @@ from frictionlab.model.plants.furuta_dc_design import (  # noqa: E402
     dc_spec,
     observer_row,
 )
-from frictionlab.model.simulation import plant_tick  # noqa: E402
+from frictionlab.model.plants.thesis import PlantParams  # noqa: E402
+from frictionlab.model.plants.thesis import tick as plant_tick  # noqa: E402
 
 H = 0.005
 

@@ -11,7 +11,6 @@ import pytest
 from frictionlab.model.design import discrete_pair
 from frictionlab.model.design import preset as thesis_preset
 from frictionlab.model.friction import KINDS, FrictionParams
-from frictionlab.model.plant import zoh
 from frictionlab.model.plants.furuta_dc import (
     HOMEBUILT,
     PRESET_FRICTION,
@@ -27,6 +26,7 @@ from frictionlab.model.plants.furuta_dc_design import (
     dc_spec,
     observer_row,
 )
+from frictionlab.model.plants.thesis import zoh
 
 
 @pytest.mark.parametrize("name", ["fast", "slow"])

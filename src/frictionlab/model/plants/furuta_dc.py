@@ -11,7 +11,7 @@ pendulum's inertia about its own long axis set to zero: thin rods).
 
 State vector
 ------------
-The same order and signs as the thesis plant (:mod:`frictionlab.model.plant`):
+The same order and signs as the thesis plant (:mod:`frictionlab.model.plants.thesis`):
 
 =====  ===========  ===============================================  ======
 index  name         meaning                                          unit
@@ -319,7 +319,7 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     the thesis plant (docs/model.md).  LuGre's bristle takes the exact update
     at the substep's midpoint velocity predicted with the last friction, and
     with k > 0 the error e = -theta at the predicted midpoint (eq. 19), as in
-    :func:`frictionlab.model.simulation.plant_tick`.
+    :func:`frictionlab.model.plants.thesis.tick`.
 
     Parameters
     ----------

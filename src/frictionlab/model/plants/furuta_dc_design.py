@@ -39,8 +39,8 @@ import numpy as np
 from .._jit import jit
 from ..design import DesignSpec, discrete_pair, match_poles, place, requested_poles
 from ..design import preset as design_preset
-from ..plant import zoh
 from .furuta_dc import QUBE2, FurutaDCParams, linearization
+from .thesis import zoh
 
 __all__ = [
     "MEASURED",
