@@ -24,7 +24,8 @@ the largest |u|, or when it fell; ``substep_error`` the largest relative
 change of amplitude and period of the QUBE-Servo 2's fast-design cycle
 against 100 substeps.
 
-Usage: ``.venv/bin/python benchmarks/furuta_dc.py [--repeats N]``.  The last
+Usage: ``.venv/bin/python benchmarks/furuta_dc.py [--repeats N]``;
+``--plot PNG`` draws the QUBE-Servo 2's fast-design limit cycles instead.  The last
 line is a JSON object.
 """
 
@@ -139,7 +140,9 @@ def cost(repeats: int) -> dict:
     return out
 
 
-def closed_loop(name: str, spec, substeps: int = 2, duration: float = 20.0) -> dict:
+def closed_loop(name: str, spec, substeps: int = 2, duration: float = 20.0,
+                trace: list | None = None) -> dict:
+    """One closed-loop run (module docstring); ``trace`` receives (t, theta, arm, u)."""
     p = PRESETS[name]
     d = dc_design(spec, p)
     row, pp = observer_row(d), p.record()
@@ -151,15 +154,17 @@ def closed_loop(name: str, spec, substeps: int = 2, duration: float = 20.0) -> d
     xhat = np.zeros(4)
     mem, umax = 0.0, 0.0
     n = round(duration / H)
-    theta = np.empty(n)
+    theta, arm, us = np.empty(n), np.empty(n), np.empty(n)
     for k in range(n):
         u = min(p.voltage_limit, max(-p.voltage_limit, -float(d.L @ xhat)))
         umax = max(umax, abs(u))
         dc_observer_step(xhat, x[0], x[2], x[3], u, row)
         _, mem = tick(x, u, mem, substeps, 1, H, pp, code, fp)
-        theta[k] = x[0]
+        theta[k], arm[k], us[k] = x[0], x[2], u
         if abs(x[0]) > 1.5:
             return {"fell_at": k * H}
+    if trace is not None:
+        trace.append((np.arange(1, n + 1) * H, theta, arm, us))
     late = theta[n // 2:]
     y0, y1 = late[:-1], late[1:]
     i = np.where((y0 < 0) & (y1 >= 0))[0]
@@ -184,10 +189,48 @@ def _variants():
     ]
 
 
+def plot(path: str) -> None:
+    """The QUBE-Servo 2's fast-design limit cycle, default observer and a faster
+    arm observer: theta, the arm and u over the last 5 s of 20."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fast = dc_spec("fast", QUBE2)
+    runs = [("fast design (observer_omega2 10 rad/s)", "fast"),
+            ("observer_omega2 30 rad/s", dataclasses.replace(fast, observer_omega2=30.0))]
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5))
+    for label, spec in runs:
+        trace: list = []
+        closed_loop("qube2", spec, trace=trace)
+        t, theta, arm, u = trace[0]
+        keep = t >= 15.0
+        axes[0].plot(t[keep], theta[keep], label=label)
+        axes[1].plot(t[keep], arm[keep], label=label)
+        axes[2].plot(t[keep], u[keep], label=label)
+    axes[0].set_ylabel("theta (rad)")
+    axes[1].set_ylabel("arm (rad)")
+    axes[2].set_ylabel("u (V)")
+    axes[2].set_xlabel("t (s)")
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[0].set_title("QUBE-Servo 2, classical friction F_S 0.2 V, F_C 0.15 V")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    print(f"wrote {path}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--plot", metavar="PNG", help="also draw the QUBE-Servo 2's limit "
+                    "cycles (docs/figures/qube2_limit_cycle.png) and stop")
     args = ap.parse_args()
+    if args.plot:
+        plot(args.plot)
+        return
     res = {"driven_error": {}, "energy_drift": {}}
     for s in (1, 2, 5, 10):
         res["driven_error"][s] = driven_error(s)
