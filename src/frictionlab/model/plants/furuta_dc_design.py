@@ -32,6 +32,7 @@ estimate used at tick k was formed at tick k-1 (read, compute u from
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,8 +167,18 @@ def dc_design(spec: DesignSpec | str = "fast", params: FurutaDCParams = QUBE2,
         The plant (default the QUBE-Servo 2).
     h : float, optional
         Sampling period (s); default ``spec.h``.
+
+    Returns
+    -------
+    DCDesign
+        Frozen, its arrays read-only (cached: the same arguments give the same
+        object).
     """
-    spec = dc_spec(spec, params, h)
+    return _dc_design(dc_spec(spec, params, h), params)
+
+
+@functools.lru_cache(maxsize=256)
+def _dc_design(spec: DesignSpec, params: FurutaDCParams) -> DCDesign:
     A, B = linearization(params)
     Phi, Gamma = zoh(A, B, spec.h)
     if spec.gains is not None:
