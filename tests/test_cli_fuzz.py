@@ -81,7 +81,7 @@ def _fake_controller(cfg, backend="sim", *args, **kwargs):
 WORK = {
     ("design",): (),
     ("keys",): (),
-    ("simulate",): (("frictionlab.model.simulation", "simulate_config", _reach),),
+    ("simulate",): (("frictionlab.runs", "simulate_config", _reach),),
     ("sweep",): (("frictionlab.studies.sweep", "iter_evaluate", _reach),
                  ("frictionlab.studies.sweep", "_get_dask", _reach)),
     ("identify", "limit-cycle"): (

@@ -465,7 +465,7 @@ def features_and_chatter(cfg: Config, duration: float | None,
     cfg : Config
         The run's configuration.
     duration, window : float or None
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
 
     Returns
     -------
@@ -487,7 +487,7 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
     cfg : Config
         The compensated configuration (``cfg.compensation_kind`` != none).
     duration, window : float, optional
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
     controller : Controller, optional
         A controller for the compensated run (e.g. another error signal).
     return_trajectories : bool

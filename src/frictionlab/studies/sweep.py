@@ -14,7 +14,7 @@ Engine
 :func:`evaluate` maps a list of points (``{key: value}`` dicts applied to a
 base :class:`~frictionlab.config.Config`) to result rows, in order.  The unit
 of work is one closed-loop run reduced to a row: by default
-:func:`reduce_features` (:func:`frictionlab.model.simulation.run_features`); a
+:func:`reduce_features` (:func:`frictionlab.runs.run_features`); a
 caller that needs more of each run than its features (compensation tuning:
 the control chatter) passes its own ``reduce``, which runs in the workers
 beside the simulation so that only the row travels back.  Points are shipped
@@ -311,7 +311,7 @@ def reduce_features(cfg: Config, duration: float | None,
     cfg : Config
         The point's configuration.
     duration, window : float or None
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
 
     Returns
     -------
@@ -845,7 +845,7 @@ def evaluate(
     points : sequence of mappings ``{key: value}``
         Parameter sets, applied with :meth:`Config.with_values`.
     duration, window : float, optional
-        As for :func:`frictionlab.model.simulation.run_features` (defaults:
+        As for :func:`frictionlab.runs.run_features` (defaults:
         ``sim.duration``; the last half of the run).
     workers : int, optional
         Default reduction: ``N`` threads in this process (``None``: one per
