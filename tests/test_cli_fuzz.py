@@ -88,7 +88,7 @@ WORK = {
         ("frictionlab.studies.identification.limit_cycle", "fit_limit_cycle", _reach),),
     # the simulated rig is stubbed; a --log is analysed for real
     ("identify", "experiment"): (
-        ("frictionlab.studies.identification.experiments", "_Recorder", _reach),),
+        ("frictionlab.studies.identification.simulated", "run_simulated", _reach),),
     ("compensate", "compare"): (("frictionlab.studies.compensation", "compare", _reach),),
     ("compensate", "tune"): (("frictionlab.studies.compensation", "tune", _reach),),
     ("run",): (("frictionlab.realtime", "RealtimeController", _fake_controller),),

@@ -58,7 +58,7 @@ from urllib.parse import parse_qs, urlsplit
 from ..config import Config
 from ..model.params import ParamError
 from ..model.rig import RigScaling
-from ..model.sensor import ARM_START, adc, sensor_params
+from ..model.sensor import ARM_START, adc, dac, sensor_params, u_from_dac
 from ..model.simulation import SimulatedPlant
 from . import protocol as P
 from .protocol import Frame, FrameError, SensorReading
@@ -268,9 +268,9 @@ class SimRig(Rig):
             self.adc.read(x[0], x[2], x[3], count=False)
 
     def write(self, k: int, u_da: float) -> None:
-        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
+        u_da = dac.py_func(u_da, 1.0)
         self.u_da = u_da
-        self._u = u_da / self.scaling.u_scale
+        self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
 
     def stop_motor(self) -> None:
         self.u_da = 0.0

@@ -64,6 +64,7 @@ from collections import deque
 
 from ..config import Config
 from ..model.rig import ADC_BITS, RigScaling
+from ..model.sensor import dac, u_from_dac
 from ..model.simulation import SimulatedPlant
 from . import protocol as P
 from .osrt import try_realtime_priority
@@ -336,14 +337,14 @@ class RigEmulator:
         self.last_command_seq = frame.seq
         self.counts["commands"] += 1
         self.saturated = not (-1.0 <= u_da <= 1.0)
-        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
+        u_da = dac.py_func(u_da, 1.0)
         if self.held:
             self.held = False
             self.t_state = t
         else:
             self._advance(t)
         self.u_da = u_da
-        self._u = u_da / self.scaling.u_scale
+        self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
         self._t_cmd = t
         self.tripped = False
 
