@@ -83,7 +83,7 @@ WORK = {
     ("keys",): (),
     ("simulate",): (("frictionlab.model.simulation", "simulate_config", _reach),),
     ("sweep",): (("frictionlab.studies.sweep", "iter_evaluate", _reach),
-                 ("frictionlab.studies.sweep", "_get_dask", _reach)),
+                 ("frictionlab.studies.sweep", "get_dask", _reach)),
     ("identify", "limit-cycle"): (
         ("frictionlab.studies.identification.limit_cycle", "fit_limit_cycle", _reach),),
     # the simulated rig is stubbed; a --log is analysed for real
@@ -94,7 +94,7 @@ WORK = {
     ("run",): (("frictionlab.realtime", "RealtimeController", _fake_controller),),
     ("rig-sim",): (("frictionlab.realtime.rigsim", "run_rig_sim", _reach),),
     ("reproduce",): (("frictionlab.studies.reproduce", "run", _reach),
-                     ("frictionlab.studies.sweep", "_get_dask", _reach)),
+                     ("frictionlab.studies.sweep", "get_dask", _reach)),
     ("predict",): (("frictionlab.studies.predict", "predict", _reach),),
     # the log's features are computed for real (a generated log is small)
     ("features",): (),
