@@ -154,6 +154,19 @@ def test_free_oscillation_analysis_on_eq22(omega0, zeta, amp, phase):
     assert r["rest_angle"] == pytest.approx(3.18, abs=1e-3)
 
 
+def test_free_oscillation_ignores_a_lone_noise_peak_after_the_decay():
+    """A peak of the noise seconds after the swing died away is not a period: the
+    consecutive peaks alone give omega_d (with it, the mean spacing was 1.5 periods)."""
+    h = 0.005
+    t = np.arange(0, 12.0, h)
+    theta = 3.14 + 0.1 * np.exp(-0.43 * t) * np.cos(7.05 * t)
+    theta[(t > 10.5) & (t < 10.6)] += 0.009 * np.sin(np.pi * (t[(t > 10.5) & (t < 10.6)] - 10.5)
+                                                     / 0.1)
+    r = ex.analyse_free_oscillation({"t": t, "theta_m": theta})
+    assert _close(r["omega0_peaks"], math.hypot(7.05, 0.43), 0.01)
+    assert all(pt < 10.0 for pt, _ in r["peaks"])
+
+
 def test_free_oscillation_that_grows_warns_instead_of_clipping_silently():
     h = 0.005
     t = np.arange(0, 10.0, h)

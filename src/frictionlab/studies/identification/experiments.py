@@ -39,7 +39,9 @@ angle-scales       ``t``, ``y``, ``x`` (raw) and the run's marks
 
 from __future__ import annotations
 
-from ...realtime.experiment import MAX_LEVELS, SCALING_LEVELS, STRIBECK_REFERENCES
+from importlib import import_module
+from typing import TYPE_CHECKING
+
 from .friction_tests import analyse_stiction, analyse_stribeck, stribeck_model
 from .logsignals import IdentificationError, estimates_only
 from .rig_tests import (
@@ -48,14 +50,26 @@ from .rig_tests import (
     analyse_free_oscillation,
     analyse_velocity_scale,
 )
-from .simulated import (
-    MAX_EXPERIMENT_S,
-    simulate_control_scaling,
-    simulate_experiment,
-    simulate_free_oscillation,
-    simulate_stiction,
-    simulate_stribeck,
-)
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers only
+    from ...realtime.experiment import MAX_LEVELS, SCALING_LEVELS, STRIBECK_REFERENCES
+    from .simulated import (
+        MAX_EXPERIMENT_S,
+        simulate_control_scaling,
+        simulate_experiment,
+        simulate_free_oscillation,
+        simulate_stiction,
+        simulate_stribeck,
+    )
+
+#: Names loaded on first use (start-up: the command line imports this module for
+#: :data:`EXPERIMENTS`; the schedules bring the real-time loop's modules): name ->
+#: module.
+_LAZY = {"MAX_LEVELS": "...realtime.experiment", "SCALING_LEVELS": "...realtime.experiment",
+         "STRIBECK_REFERENCES": "...realtime.experiment",
+         **{n: ".simulated" for n in ("MAX_EXPERIMENT_S", "simulate_control_scaling",
+                                      "simulate_experiment", "simulate_free_oscillation",
+                                      "simulate_stiction", "simulate_stribeck")}}
 
 __all__ = [
     "EXPERIMENTS",
@@ -82,3 +96,12 @@ __all__ = [
 #: Experiment names of ``frictionlab identify experiment``.
 EXPERIMENTS = ("stiction", "stribeck", "free-oscillation", "control-scaling",
                "velocity-scale", "angle-scales")
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(module, __package__), name)
+    globals()[name] = value
+    return value

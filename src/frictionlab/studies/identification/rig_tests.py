@@ -32,7 +32,7 @@ from .logsignals import (
 )
 
 __all__ = ["analyse_angle_scales", "analyse_control_scaling", "analyse_free_oscillation",
-           "analyse_velocity_scale", "parabolic_peak", "unwrap_raw"]
+           "analyse_velocity_scale", "consecutive_peaks", "parabolic_peak", "unwrap_raw"]
 
 
 def parabolic_peak(y: np.ndarray, i: int) -> tuple[float, float]:
@@ -48,6 +48,22 @@ def parabolic_peak(y: np.ndarray, i: int) -> tuple[float, float]:
 
 
 
+def consecutive_peaks(pk_t: np.ndarray, pk_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The longest run of peaks one period apart: spacings at most 1.5 times their
+    median.  A lone peak of the noise after the swing has died away (or a missing
+    one) would otherwise stretch the mean spacing of eq. (24)."""
+    if len(pk_t) < 3:
+        return pk_t, pk_y
+    ok = np.diff(pk_t) <= 1.5 * float(np.median(np.diff(pk_t)))
+    best, start = (0, 0), 0
+    for i, good in enumerate(ok.tolist()):
+        if not good:
+            start = i + 1
+        elif i + 1 - start > best[1] - best[0]:
+            best = (start, i + 1)
+    return pk_t[best[0]:best[1] + 1], pk_y[best[0]:best[1] + 1]
+
+
 def analyse_free_oscillation(log: Any, *, max_amplitude: float = 0.15,
                              min_amplitude: float | None = None) -> dict:
     r"""Natural frequency and damping from damped free oscillations (App. A.1-A.2).
@@ -56,7 +72,9 @@ def analyse_free_oscillation(log: Any, *, max_amplitude: float = 0.15,
     2. Peaks of :math:`\theta - \theta_0` between ``min_amplitude`` (default
        3 noise standard deviations, at least 0.005 rad) and
        ``max_amplitude`` (the thesis discarded peaks above 0.15 rad as
-       nonlinear) are located with sub-sample (parabolic) precision.
+       nonlinear) are located with sub-sample (parabolic) precision; the
+       longest run of them one period apart is used (:func:`consecutive_peaks`:
+       a lone peak of the noise after the swing has died away is not a period).
     3. Eq. (24): :math:`\omega_d = 2\pi/T` with T the mean peak spacing;
        eq. (25): the log of the peak heights is fitted by a straight line of
        slope :math:`-\zeta\omega_0`; then
@@ -101,7 +119,11 @@ def analyse_free_oscillation(log: Any, *, max_amplitude: float = 0.15,
         raise IdentificationError(
             f"only {len(pk_t)} oscillation peak(s) between {min_amp:.3g} and "
             f"{max_amplitude:g} rad; need at least 3 (is the pendulum swinging freely?)")
-    pk_t, pk_y = np.array(pk_t), np.array(pk_y)
+    pk_t, pk_y = consecutive_peaks(np.array(pk_t), np.array(pk_y))
+    if len(pk_t) < 3:
+        raise IdentificationError(
+            f"only {len(pk_t)} consecutive oscillation peak(s) between {min_amp:.3g} and "
+            f"{max_amplitude:g} rad; need at least 3 (is the pendulum swinging freely?)")
     period = float(np.mean(np.diff(pk_t)))
     wd = 2.0 * math.pi / period
     slope, _, _ = line_fit(pk_t, np.log(pk_y))

@@ -11,7 +11,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from ...config import ConfigValueError
+from ...config import ConfigValueError, build_config
+from ...model.simulation import run_features
+from ..batch import evaluate_rows
 
 __all__ = ["DASK_FORMS", "check_dask_address", "drop_pool", "get_dask", "get_pool",
            "interrupts_deferred", "local_dask_config", "pool_worker_init", "shutdown",
@@ -20,10 +22,6 @@ __all__ = ["DASK_FORMS", "check_dask_address", "drop_pool", "get_dask", "get_poo
 
 def warm_up() -> None:
     """Load the compiled simulator and batch evaluator once (from numba's on-disk cache)."""
-    from ...config import build_config
-    from ...model.simulation import run_features
-    from ..batch import evaluate_rows
-
     run_features(build_config(), 2.0)
     evaluate_rows(build_config(), [{}], 2.0, None)
 

@@ -10,6 +10,9 @@ from typing import Any
 
 from ...config import Config
 from ...model.limit_cycles import FEATURES
+from ...model.simulation import run_features
+from ..batch import evaluate_rows
+from ..swingup_sim import simulate_swingup, swingup_outcome
 
 __all__ = ["STATUSES", "SWINGUP_COLUMNS", "Reduce", "check_reduce", "error_row",
            "reduce_features", "reduce_swingup", "run_chunk"]
@@ -57,8 +60,6 @@ def reduce_features(cfg: Config, duration: float | None,
         (``None`` where undefined) and ``status`` (``limit_cycle``,
         ``settled`` or ``fell``).
     """
-    from ...model.simulation import run_features
-
     feats = run_features(cfg, duration, window)
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
     out["status"] = feats.status
@@ -74,8 +75,6 @@ def reduce_swingup(cfg: Config, duration: float | None,
     never reached the balancing phase) and ``caught`` (1 when it did, else 0)
     and ``catch_time`` (s, the catch that led to balancing; ``None`` if none).
     """
-    from ..swingup_sim import simulate_swingup, swingup_outcome
-
     res = simulate_swingup(cfg, duration)
     status, feats = swingup_outcome(res, window)
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
@@ -119,8 +118,6 @@ def run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: float
     """
     if reduce is None:
         # the default reduction, every point in one compiled batch (no Python per run)
-        from ..batch import evaluate_rows
-
         return evaluate_rows(base, points, duration, window)
     rows = []
     for p in points:
