@@ -131,6 +131,9 @@ class RigExperiment(ABC):
     name = "experiment"
     #: Signals the analysis needs (log columns).
     signals: tuple[str, ...] = ("t", "u", "arm_dot_m")
+    #: Whether the schedule reads the raw ``y, x, v`` (a runner that has only the SI
+    #: signals at hand may pass NaN for them otherwise).
+    reads_raw = False
 
     def __init__(self, h: float, u_scale: float | None = None, limits: Limits | None = None):
         self.h = float(h)
@@ -471,6 +474,7 @@ class AngleScales(RigExperiment):
 
     name = "angle-scales"
     signals = ("t", "y", "x")
+    reads_raw = True
 
     def __init__(self, h, u_scale=None, limits=None, *, wait: float = 120.0,
                  settle: float = 1.0, lap_seconds: float = 2.0):

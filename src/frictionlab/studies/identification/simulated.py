@@ -6,7 +6,8 @@ A simulated experiment is the schedule a rig run executes, the same
 here against the simulator's plant instead of through the 200 Hz loop: in each
 tick the plant's state is measured (:func:`frictionlab.model.sensor.measure`,
 ``sim.noise``, ``sim.quantization``, ``rig.*``; the raw ``y, x, v`` by
-:func:`~frictionlab.model.sensor.adc`), the experiment's ``step`` returns u,
+:func:`~frictionlab.model.sensor.adc` for a schedule that reads them), the
+experiment's ``step`` returns u,
 u goes through the DAC law (:func:`~frictionlab.model.sensor.dac`, then
 :func:`~frictionlab.model.sensor.u_from_dac` on the rig's side) and the plant
 steps with it.  That is what the loop does with the in-process simulated rig
@@ -126,6 +127,9 @@ def run_simulated(experiment: RigExperiment, cfg: Config, *,
     rows: list[np.ndarray] = []
     max_rows = round(max_seconds / h)
     step = experiment.step
+    # the raw readings only for a schedule that reads them (a second sensor call per tick)
+    raw = experiment.reads_raw
+    y = xr = v = math.nan
     # the laws as plain Python: called per tick from Python, no dispatch
     to_da, from_da = dac.py_func, u_from_dac.py_func
     x0 = 0.0
@@ -138,7 +142,8 @@ def run_simulated(experiment: RigExperiment, cfg: Config, *,
         x = state.x
         theta, arm, arm_dot = float(x[0]), float(x[2]), float(x[3])
         th_m, arm_m, ad_m, x0 = measure(sensor, theta, arm, arm_dot, n, x0)
-        y, xr, v = adc(sensor, theta, arm, arm_dot, n)
+        if raw:
+            y, xr, v = adc(sensor, theta, arm, arm_dot, n)
         try:
             u = step(n * h, th_m, arm_m, ad_m, y, xr, v)
         except ExperimentEnd as end:
