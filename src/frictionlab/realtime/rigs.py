@@ -238,6 +238,7 @@ class SimRig(Rig):
                             cfg.sim.noise, cfg.sim.seed)
         self.state = self.plant.init()
         self.plant.step(self.state, 0.0)  # compile before the loop starts
+        u_from_dac.py_func(0.0, 1.0)  # and the DAC law (it calls the compiled dac)
         self._k: int | None = None
         self.u_da = 0.0
         self._u = 0.0

@@ -167,6 +167,7 @@ class RigEmulator:
         self.state = self._plant(1).init()
         for n in range(1, 2 * cfg.substeps + 1):  # compile and cache the usual chunks
             self._plant(n).step(self.state, 0.0)
+        u_from_dac.py_func(0.0, 1.0)  # and the DAC law (it calls the compiled dac)
         self.t_state = self._t0
         self.u_da = 0.0
         self._u = 0.0
