@@ -13,7 +13,6 @@ from typing import Any
 
 from ...config import ConfigValueError, build_config
 from ...model.simulation import run_features
-from ..batch import evaluate_rows
 
 __all__ = ["DASK_FORMS", "check_dask_address", "drop_pool", "get_dask", "get_pool",
            "interrupts_deferred", "local_dask_config", "pool_worker_init", "shutdown",
@@ -22,6 +21,8 @@ __all__ = ["DASK_FORMS", "check_dask_address", "drop_pool", "get_dask", "get_poo
 
 def warm_up() -> None:
     """Load the compiled simulator and batch evaluator once (from numba's on-disk cache)."""
+    from ..batch import evaluate_rows  # start-up: not with the command line
+
     run_features(build_config(), 2.0)
     evaluate_rows(build_config(), [{}], 2.0, None)
 

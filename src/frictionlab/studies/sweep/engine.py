@@ -12,7 +12,6 @@ from contextlib import closing
 from typing import Any
 
 from ...config import Config
-from .. import batch
 from .backends import check_dask_address, drop_pool, get_dask, get_pool, interrupts_deferred
 from .work import Reduce, check_reduce, error_row, run_chunk
 
@@ -104,6 +103,8 @@ def _thread_chunks(base: Config, pts: list[dict[str, Any]], duration: float | No
     running ones.
     """
     from concurrent.futures import ThreadPoolExecutor, as_completed
+
+    from .. import batch  # start-up: loads with the first sweep, not the command line
 
     def one(idx: range) -> list[dict[str, Any]]:
         sub = [pts[i] for i in idx]

@@ -11,8 +11,6 @@ from typing import Any
 from ...config import Config
 from ...model.limit_cycles import FEATURES
 from ...model.simulation import run_features
-from ..batch import evaluate_rows
-from ..swingup_sim import simulate_swingup, swingup_outcome
 
 __all__ = ["STATUSES", "SWINGUP_COLUMNS", "Reduce", "check_reduce", "error_row",
            "reduce_features", "reduce_swingup", "run_chunk"]
@@ -75,6 +73,10 @@ def reduce_swingup(cfg: Config, duration: float | None,
     never reached the balancing phase) and ``caught`` (1 when it did, else 0)
     and ``catch_time`` (s, the catch that led to balancing; ``None`` if none).
     """
+    # start-up: the swing-up simulation loads with the first swing-up sweep, not with
+    # the command line (which imports this package)
+    from ..swingup_sim import simulate_swingup, swingup_outcome
+
     res = simulate_swingup(cfg, duration)
     status, feats = swingup_outcome(res, window)
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
@@ -117,7 +119,10 @@ def run_chunk(base: Config, points: Sequence[Mapping[str, Any]], duration: float
     configuration is invalid, or whose run or reduction raises, is an error row.
     """
     if reduce is None:
-        # the default reduction, every point in one compiled batch (no Python per run)
+        # the default reduction, every point in one compiled batch (no Python per run);
+        # start-up: the batch evaluator loads with the first sweep, not the command line
+        from ..batch import evaluate_rows
+
         return evaluate_rows(base, points, duration, window)
     rows = []
     for p in points:
