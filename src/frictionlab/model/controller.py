@@ -76,7 +76,7 @@ from .friction import (
 )
 from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
-from .plant import PlantParams
+from .plants.thesis import PlantParams
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 
 __all__ = [

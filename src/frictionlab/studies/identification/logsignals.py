@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ...model.plant import PlantParams
+from ...model.plants.thesis import PlantParams
 
 __all__ = ["ARM_LENGTH", "IdentificationError", "constant_runs", "estimates_only", "line_fit",
            "log_signal", "log_time", "noise_level", "ordered", "quantum"]

@@ -36,7 +36,7 @@ import numpy as np
 
 from ...config import Config
 from ...model.sensor import adc, dac, measure, u_from_dac
-from ...model.simulation import COLUMNS, NC, SimulatedPlant, Trajectory, make_sensor
+from ...model.simulation import COLUMNS, NC, Trajectory
 from ...realtime.experiment import (
     SCALING_LEVELS,
     STRIBECK_REFERENCES,
@@ -45,6 +45,7 @@ from ...realtime.experiment import (
     make_experiment,
 )
 from ...realtime.loop import ExperimentEnd
+from ...runs import make_sensor, simulated_plant
 from .logsignals import IdentificationError
 
 __all__ = [
@@ -116,7 +117,7 @@ def run_simulated(experiment: RigExperiment, cfg: Config, *,
     IdentificationError
         The schedule did not end within ``max_seconds``.
     """
-    plant = SimulatedPlant(cfg)
+    plant = simulated_plant(cfg)
     h = plant.h
     if abs(experiment.h - h) > 1e-12 * h:
         raise ValueError(f"the experiment's period {experiment.h:g} s is not the "
@@ -164,7 +165,7 @@ def run_simulated(experiment: RigExperiment, cfg: Config, *,
     data = np.array(rows) if rows else np.zeros((0, NC))
     marks = dict(experiment.marks)
     traj = Trajectory(np.arange(len(data)), h, data, "ok", cfg,
-                      {"experiment": experiment.name, "marks": marks})
+                      {"experiment": experiment.name, "marks": marks}, noise=cfg.sim.noise)
     return SimulatedRun(traj, reason, detail, marks)
 
 

@@ -12,7 +12,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from ...config import ConfigValueError, build_config
-from ...model.simulation import run_features
+from ...runs import run_features
 
 __all__ = ["DASK_FORMS", "check_dask_address", "drop_pool", "get_dask", "get_pool",
            "interrupts_deferred", "local_dask_config", "pool_worker_init", "shutdown",

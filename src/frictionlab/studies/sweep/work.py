@@ -10,7 +10,7 @@ from typing import Any
 
 from ...config import Config
 from ...model.limit_cycles import FEATURES
-from ...model.simulation import run_features
+from ...runs import run_features
 
 __all__ = ["STATUSES", "SWINGUP_COLUMNS", "Reduce", "check_reduce", "error_row",
            "reduce_features", "reduce_swingup", "run_chunk"]
