@@ -106,7 +106,7 @@ from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
 from .model.friction import KINDS, NP, friction_row, friction_view
 from .model.plants import THESIS, plant_step
-from .model.sensor import reading
+from .model.sensor import reading, wrap_angle
 from .model.simulation import plant_tick_rows
 from .runs import make_sensor
 
@@ -325,7 +325,7 @@ class _Settings:
             return np.column_stack([s.raw_theta(measured[:, 0]), s.raw_arm(measured[:, 1]),
                                     s.raw_arm_velocity(measured[:, 2])])
         if self.swing:
-            measured[:, 0] = (measured[:, 0] + math.pi) % (2.0 * math.pi) - math.pi
+            measured[:, 0] = wrap_angle.py_func(measured[:, 0])
         return measured
 
     def ended(self, plants: _Plants, x):

@@ -284,9 +284,9 @@ def check_engine_args(args) -> None:
     """Refuse, before any work, a worker count or a Dask address that cannot be used."""
     check_workers(args.workers)
     if args.dask is not None:
-        from ..studies.sweep import _check_dask_address
+        from ..studies.sweep import check_dask_address
 
-        _check_dask_address(args.dask)
+        check_dask_address(args.dask)
 
 
 def check_workers(value: int | None, option: str = "--workers") -> None:

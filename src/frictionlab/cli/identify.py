@@ -390,6 +390,16 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
     return read_log(st["log"], cfg.design.h), summary
 
 
+def _save_sidecar(log_path: str, name: str, marks: dict) -> None:
+    """Beside a saved simulated log, the sidecar a rig run writes for the analysis
+    (``<log>.json``: the experiment's name and marks), so that ``--log`` on the file
+    cuts the free oscillation where its free decay starts."""
+    from pathlib import Path
+
+    Path(log_path).with_suffix(".json").write_text(
+        json.dumps({"experiment": {"name": name, "marks": marks}}) + "\n")
+
+
 def cmd_experiment(args) -> int:
     from ..studies.identification import experiments as ex
 
@@ -458,22 +468,13 @@ def cmd_experiment(args) -> int:
             source = args.backend
         marks = dict(exp.marks)
     else:
-        if name == "stiction":
-            log = ex.simulate_stiction(cfg, step=args.step, hold=args.hold)
-        elif name == "stribeck":
-            refs = (_float_list(args.references, "--references") if args.references
-                    else ex.STRIBECK_REFERENCES)
-            log = ex.simulate_stribeck(cfg, references=refs, gain=args.gain, hold=args.hold)
-        elif name == "free-oscillation":
-            log = ex.simulate_free_oscillation(cfg, amplitude=args.amplitude,
-                                               duration=args.duration or 12.0)
-        else:
-            levels = (_float_list(args.levels, "--levels") if args.levels
-                      else ex.SCALING_LEVELS)
-            log = ex.simulate_control_scaling(cfg, levels=levels)
+        # the rig's schedule (its options and limits) on the simulated rig, in-process
+        log = ex.simulate_experiment(name, cfg, _limits(args), **_rig_options(args))
+        marks = dict(log.meta["marks"])
         source = "simulated"
         if args.save:
             log.save(args.save)
+            _save_sidecar(args.save, name, marks)
     from ..studies.identification.onrig import analyse_log
 
     try:
@@ -653,24 +654,24 @@ def register_cli(sub) -> None:
     e.add_argument("--gain", type=float, default=20.0,
                    help="stribeck, velocity-scale: P gain of the velocity loop (default 20)")
     e.add_argument("--amplitude", type=float, default=None,
-                   help="free-oscillation: initial deflection in rad (default 0.25; on a "
-                        "rig the swing the excitation reaches, default 0.12)")
+                   help="free-oscillation: the swing in rad the excitation reaches before "
+                        "the free decay (default 0.12)")
     e.add_argument("--max-amplitude", type=float, default=0.15,
                    help="free-oscillation: peaks above this are not used (default 0.15)")
     e.add_argument("--duration", type=float, default=None,
                    help="free-oscillation: recorded seconds of free decay (default 12)")
     e.add_argument("--levels", metavar="U1,U2,...",
-                   help="control-scaling: constant u values (default 3,4,5,7,9; on a rig "
-                        "their signs alternate)")
+                   help="control-scaling: constant u values (default 3,4,5,7,9; their "
+                        "signs alternate)")
     e.add_argument("--coulomb-levels", metavar="F1,F2,...",
-                   help="stiction on a rig: fractions of the breakaway u held while the arm "
+                   help="stiction: fractions of the breakaway u held while the arm "
                         "slides (default 0.3,0.4,...,0.9)")
     e.add_argument("--slide", type=float, default=0.8,
-                   help="stiction on a rig: seconds each Coulomb level is held (default 0.8)")
+                   help="stiction: seconds each Coulomb level is held (default 0.8)")
     e.add_argument("--push", type=float, default=1.5,
-                   help="stiction on a rig: arm speed in rad/s of the motor's push before a "
+                   help="stiction: arm speed in rad/s of the motor's push before a "
                         "slide (default 1.5)")
-    g = e.add_argument_group("on a rig (--backend)")
+    g = e.add_argument_group("limits (every run) and the rig (--backend)")
     g.add_argument("--log-dir", default="runs",
                    help="where the run is logged (default ./runs)")
     g.add_argument("--max-speed", type=float, default=15.0, metavar="RAD/S",
@@ -705,8 +706,6 @@ def _experiment_entry(args) -> int:
     if args.hold is None:
         args.hold = 2.0 if args.experiment in ("stribeck", "velocity-scale") else 0.25
     args.amplitude_given = args.amplitude is not None
-    if args.amplitude is None:
-        args.amplitude = 0.25
     finite("--slide", args.slide, 0.0)
     finite("--push", args.push, 0.0)
     finite("--step", args.step, 0.0)

@@ -108,8 +108,9 @@ class RigScaling(Validated):
                                             self.velocity_bias)
 
     def u_da(self, u):
-        """DAC value for the control signal u (m/s^2), saturated at [-1, 1]."""
-        return np.clip(self.u_scale * np.asarray(u, dtype=float), -1.0, 1.0)
+        """DAC value for the control signal u (m/s^2), saturated at [-1, 1]
+        (:func:`frictionlab.model.sensor.dac`, element-wise)."""
+        return _elementwise(_S.dac.py_func, u, self.u_scale)
 
     # --- SI -> raw (the emulated rig) -------------------------------------
     def raw_theta(self, theta):
@@ -129,8 +130,9 @@ class RigScaling(Validated):
                        -1.0, 1.0)
 
     def u_from_da(self, u_da):
-        """Control signal (m/s^2) the DAC value corresponds to."""
-        return np.clip(np.asarray(u_da, dtype=float), -1.0, 1.0) / self.u_scale
+        """Control signal (m/s^2) the DAC value corresponds to
+        (:func:`frictionlab.model.sensor.u_from_dac`, element-wise)."""
+        return _elementwise(_S.u_from_dac.py_func, u_da, self.u_scale)
 
     @property
     def u_max(self) -> float:
@@ -141,6 +143,16 @@ class RigScaling(Validated):
         """SI size of one ADC step for (theta, Omega, Omega_dot)."""
         q = ADC_STEP
         return self.theta_scale * q, self.arm_scale * q, self.velocity_scale * q
+
+
+def _elementwise(law, values, u_scale):
+    """``law(value, u_scale)`` for each of ``values`` (a scalar gives a numpy scalar)."""
+    a = np.asarray(values, dtype=float)
+    out = np.empty_like(a)
+    flat = out.reshape(-1)
+    for i, v in enumerate(a.reshape(-1).tolist()):
+        flat[i] = law(v, u_scale)
+    return out[()] if out.ndim == 0 else out
 
 
 def wrap_raw(r):

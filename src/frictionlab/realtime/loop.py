@@ -432,6 +432,7 @@ class Loop:
         arm_si = sensor.arm_from_raw.py_func
         velocity_si = sensor.velocity_from_raw.py_func
         unwrap = sensor.unwrap.py_func
+        dac = sensor.dac.py_func
         ts, tb = sc.theta_scale, sc.theta_bias
         as_ = sc.arm_scale
         vs, vb = sc.velocity_scale, sc.velocity_bias
@@ -656,11 +657,7 @@ class Loop:
                                     "from the estimates theta, theta', arm, arm', z = "
                                     f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, "
                                     f"{armd_hat:.4g}, {z_hat:.4g}", r)
-                u_da = us * u
-                if u_da > 1.0:
-                    u_da = 1.0
-                elif u_da < -1.0:
-                    u_da = -1.0
+                u_da = dac(u, us)
                 if now() - deadline > pause_ns:
                     # suspended (or stalled) inside the tick: the reading is stale
                     raise _Stop("paused", f"the tick's output was due "

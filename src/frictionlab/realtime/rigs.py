@@ -58,7 +58,7 @@ from urllib.parse import parse_qs, urlsplit
 from ..config import Config
 from ..model.params import ParamError
 from ..model.rig import RigScaling
-from ..model.sensor import ARM_START, adc, sensor_params
+from ..model.sensor import ARM_START, adc, dac, sensor_params, u_from_dac
 from ..runs import simulated_plant
 from . import protocol as P
 from .protocol import Frame, FrameError, SensorReading
@@ -238,6 +238,7 @@ class SimRig(Rig):
                             cfg.sim.noise, cfg.sim.seed)
         self.state = self.plant.init()
         self.plant.step(self.state, 0.0)  # compile before the loop starts
+        u_from_dac.py_func(0.0, 1.0)  # and the DAC law (it calls the compiled dac)
         self._k: int | None = None
         self.u_da = 0.0
         self._u = 0.0
@@ -268,9 +269,9 @@ class SimRig(Rig):
             self.adc.read(x[0], x[2], x[3], count=False)
 
     def write(self, k: int, u_da: float) -> None:
-        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
+        u_da = dac.py_func(u_da, 1.0)
         self.u_da = u_da
-        self._u = u_da / self.scaling.u_scale
+        self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
 
     def stop_motor(self) -> None:
         self.u_da = 0.0

@@ -64,6 +64,7 @@ from collections import deque
 
 from ..config import Config
 from ..model.rig import ADC_BITS, RigScaling
+from ..model.sensor import dac, u_from_dac
 from ..model.simulation import SimulatedPlant
 from ..runs import simulated_plant
 from . import protocol as P
@@ -167,6 +168,7 @@ class RigEmulator:
         self.state = self._plant(1).init()
         for n in range(1, 2 * cfg.substeps + 1):  # compile and cache the usual chunks
             self._plant(n).step(self.state, 0.0)
+        u_from_dac.py_func(0.0, 1.0)  # and the DAC law (it calls the compiled dac)
         self.t_state = self._t0
         self.u_da = 0.0
         self._u = 0.0
@@ -337,14 +339,14 @@ class RigEmulator:
         self.last_command_seq = frame.seq
         self.counts["commands"] += 1
         self.saturated = not (-1.0 <= u_da <= 1.0)
-        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
+        u_da = dac.py_func(u_da, 1.0)
         if self.held:
             self.held = False
             self.t_state = t
         else:
             self._advance(t)
         self.u_da = u_da
-        self._u = u_da / self.scaling.u_scale
+        self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
         self._t_cmd = t
         self.tripped = False
 

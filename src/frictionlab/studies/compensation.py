@@ -93,6 +93,7 @@ from ..model.controller import (
     new_state,
 )
 from ..model.friction import LUGRE, FrictionParams, copy_friction, with_levels
+from ..model.plants.thesis import PlantParams
 from ..model.rig import RigScaling
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
@@ -274,8 +275,8 @@ class AdaptiveCompensator(LuGreCompensator):
     """
 
     kind: ClassVar[str] = "adaptive"
-    arm_length: float = 0.21
-    u_max: float = 1.0 / 0.022
+    arm_length: float = PlantParams().arm_length
+    u_max: float = RigScaling().u_max
 
     def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0, e: float = 0.0,
              u_prev: float = 0.0) -> tuple[float, CompensatorState]:
