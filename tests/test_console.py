@@ -149,7 +149,9 @@ def test_push_range(kick, ok):
 
 @pytest.mark.parametrize("name, clean", [("run1", "run1"), ("run1.dat", "run1"),
                                          (" a-b_c ", "a-b_c"), ("../etc/passwd", None),
-                                         ("a b", None), ("", None), (".hidden", None)])
+                                         ("a b", None), ("", None), (".hidden", None),
+                                         ("name\n", None), ("x\n.dat", None),
+                                         ("run1.dat\n", None), ("a\tb", None)])
 def test_record_names(name, clean):
     if clean is None:
         with pytest.raises(ValidationError):
@@ -1124,10 +1126,10 @@ def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
         assert not ctl.running and client.get("/api/status").json()["ticks"] == 0
         r = client.post("/api/experiment", json={**body, "options": {"bogus": 1},
                                                   "confirm": True})
-        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "options"
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "options.bogus"
         r = client.post("/api/experiment", json={**body, "limits": {"max_u_da": 2},
                                                   "confirm": True})
-        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "limits"
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "limits.max_u_da"
         r = client.post("/api/experiment", json={"name": "nonsense", "confirm": True})
         assert r.status_code == 422
         r = client.post("/api/experiment", json={**body, "confirm": True})

@@ -57,8 +57,10 @@ def change_error(exc: ChangeError) -> HTTPException:
 
 #: Short reasons beside a field, from a check's verdict and numbers.
 VERDICT_TEXT = {
-    "unstable": lambda c: f"the loop would be unstable (eigenvalue modulus "
-                          f"{c.spectral_radius:.4g} > 1)",
+    "unstable": lambda c: (f"the loop would be unstable (eigenvalue modulus "
+                           f"{c.spectral_radius:.4g} > 1)" if c.spectral_radius > 1 else
+                           f"the loop would have no stability margin (eigenvalue modulus "
+                           f"{c.spectral_radius:.6g}: its slowest mode hardly decays)"),
     "compensator_unstable": lambda c: f"the compensator would make the loop unstable "
                                       f"(spectral radius {c.compensator_radius:.4g} > 1)",
     "saturating": lambda c: f"u would saturate (predicted peak {c.peak_u:.3g} > "

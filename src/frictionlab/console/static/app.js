@@ -359,7 +359,7 @@
     }
     if (!r.ok) {
       const e = (r.data && r.data.errors && r.data.errors[0]) || {};
-      if (e.field === "options") setError($("experiment-options"), e.message);
+      if (e.field && e.field.startsWith("options")) setError($("experiment-options"), e.message);
       setMsg("experiment-msg", "refused: " + ((r.data && r.data.detail) || "invalid input"), true);
       return;
     }
