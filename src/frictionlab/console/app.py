@@ -64,7 +64,8 @@ log = logging.getLogger("frictionlab.console")
 def create_app(controller, token: str | None = None, log_dir=None, *,
                loopback_only: bool = True, autostart: bool = False, on_exit=None,
                frame_period: float = 0.05, status_period: float = 0.5,
-               lc_window: float = 5.0, max_body: int | None = None) -> Guard:
+               lc_window: float = 5.0, max_body: int | None = None,
+               body_timeout: float | None = None) -> Guard:
     """The console application for ``controller`` (an ASGI app).
 
     Parameters
@@ -86,6 +87,8 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
         See :class:`Hub`.
     max_body : int, optional
         Request size limit (default :data:`.security.MAX_BODY`).
+    body_timeout : float, optional
+        Seconds a request body has to arrive (default :data:`.security.BODY_TIMEOUT`).
 
     Returns
     -------
@@ -138,8 +141,9 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
         app.include_router(module.router(ctx))
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
 
-    return Guard(app, token, loopback_only=loopback_only,
-                 **({} if max_body is None else {"max_body": max_body}))
+    limits = {k: v for k, v in (("max_body", max_body), ("body_timeout", body_timeout))
+              if v is not None}
+    return Guard(app, token, loopback_only=loopback_only, **limits)
 
 
 #: Requests served once, to nobody, before the loop starts (see :func:`_warm_up`).

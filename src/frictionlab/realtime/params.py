@@ -276,7 +276,7 @@ class ControlParams:
             field = exc.field if isinstance(exc, ParamError) else ""
             touched = [k for k in keys if k.startswith(("design.", "compensation."))]
             own = [field] if field.startswith(("compensation.", "design.")) else []
-            named = own or touched or keys or ["compensation"]
+            named = touched or own or keys or ["compensation"]
             message = str(exc)
             if not isinstance(exc, ParamError):  # numpy's words: say what was refused
                 message = (f"{', '.join(_describe_raw(spec, params[kind], k) for k in named)}"

@@ -119,8 +119,9 @@ def worst_case_seconds(exp) -> float:
     step = getattr(exp, "step_u", None)
     if step is None:
         return 0.0
-    levels = math.ceil(exp.u_max / step) if step > 0 else math.inf
-    return 2.0 * levels * exp.hold_s
+    # the staircase rounds each level to 1e-12 m/s^2: a smaller step never climbs
+    levels = exp.u_max / step if step >= 1e-12 else math.inf
+    return 2.0 * (math.ceil(levels) if math.isfinite(levels) else levels) * exp.hold_s
 
 
 def router(ctx: Context) -> APIRouter:
