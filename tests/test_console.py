@@ -341,6 +341,48 @@ def test_stream_figures_measure_a_synthetic_limit_cycle():
     assert fig["period"] == pytest.approx(period, rel=0.02)
 
 
+def _figures_of(theta_of_t, seconds: float = 6.0) -> dict:
+    ctl = _FakeController()
+    stream = SampleStream(ctl, h=0.005, history=10.0)
+    stream.open()
+    for k in range(round(seconds / 0.005)):
+        ctl.sub.put(_sample(k, theta=theta_of_t(k * 0.005)))
+    stream.poll()
+    return stream.figures(5.0)
+
+
+@pytest.mark.parametrize("theta, running, kw, state", [
+    # a limit cycle while balancing: the only case with figures
+    (lambda t: 0.08 * math.sin(2 * math.pi * t / 0.9), True, {}, "balancing"),
+    # after an experiment: hanging, swinging a little about pi (wrapped either way)
+    (lambda t: math.pi + 0.3 * math.sin(2 * math.pi * t), False, {}, "hanging"),
+    (lambda t: -math.pi + 0.3 * math.sin(2 * math.pi * t), True, {"experiment": True},
+     "hanging"),
+    # an experiment moving the pendulum: never a limit cycle
+    (lambda t: 0.05 * math.sin(2 * math.pi * t), True, {"experiment": True}, "swinging"),
+    # swinging up
+    (lambda t: 2.5 * math.sin(2 * math.pi * t / 1.5), True, {"phase": "swinging"},
+     "swinging"),
+    (lambda t: 0.1 * math.sin(2 * math.pi * t), True, {"phase": "caught"}, "catching"),
+    # fell: the last angle is beyond the limit, the loop stopped
+    (lambda t: 0.01 * math.exp(t), False, {}, "fallen"),
+    (lambda t: 0.01, False, {}, "stopped"),
+])
+def test_the_status_says_what_the_pendulum_does_and_figures_only_while_balancing(
+        theta, running, kw, state):
+    from frictionlab.console.stream import honest_figures, pendulum_state
+
+    fig = _figures_of(theta)
+    got = pendulum_state(fig, running=running, upright=0.35, **kw)
+    assert got == state
+    shown = honest_figures(fig, got)
+    if state == "balancing":
+        assert shown["status"] == "limit_cycle" and shown["peak_to_peak"] > 0
+    else:
+        assert shown["status"] == state and shown["status"] != "limit_cycle"
+        assert shown["peak_to_peak"] is None and shown["period"] is None
+
+
 def test_hub_fans_frames_out_and_drops_the_oldest_for_a_slow_page():
     ctl = _FakeController()
     stream = SampleStream(ctl, h=0.005)

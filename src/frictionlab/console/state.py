@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..io.jsonsafe import json_safe
 from .hub import Hub
+from .stream import honest_figures, pendulum_state
 
 __all__ = ["ConsoleState", "Context"]
 
@@ -79,8 +80,13 @@ class Context:
                 # controller, not inferred from an earlier status that may be stale)
                 with contextlib.suppress(RuntimeError, ValueError, OSError):
                     self.pending(controller.record_stop(None))
+        sw = st.get("swing_up") or {}
+        state = pendulum_state(hub.figures if hub is not None else {},
+                               running=bool(st.get("running")),
+                               upright=float((st.get("safety") or {}).get("angle_limit", 0.35)),
+                               phase=sw.get("phase"), experiment=bool(st.get("experiment")))
         st["console"] = {
-            "limit_cycle": hub.figures if hub is not None else {},
+            "limit_cycle": honest_figures(hub.figures if hub is not None else {}, state),
             "clients": len(hub.clients) if hub is not None else 0,
             "frames_sent": hub.frames_sent if hub is not None else 0,
             "frames_dropped": hub.frames_dropped if hub is not None else 0,

@@ -256,7 +256,13 @@
     $("lc-ptp").dataset.value = lc.peak_to_peak ?? "";
     $("lc-period").textContent = fmt(lc.period);
     $("lc-period").dataset.value = lc.period ?? "";
-    $("lc-status").textContent = lc.status ? lc.status.replace("_", " ") : "-";
+    // the figures only while balancing: a hanging, swinging or fallen pendulum is said as such
+    const pend = lc.pendulum || "unknown";
+    $("limit-cycle").dataset.pendulum = pend;
+    $("lc-figures").hidden = pend !== "balancing";
+    $("lc-status").textContent = pend === "balancing"
+      ? (lc.status ? lc.status.replace("_", " ") : "-")
+      : (PENDULUM_TEXT[pend] || pend);
 
     const comp = st.compensation || {};
     const friction = st.friction ? `${st.friction} friction` : "real rig";
@@ -318,6 +324,15 @@
     $("push").title = emulated ? "disturb the pendulum" : "only on simulated rigs";
     showExperiment(st, running);
   }
+
+  const PENDULUM_TEXT = {
+    hanging: "pendulum hanging (limit-cycle figures are measured while balancing)",
+    swinging: "pendulum swinging (limit-cycle figures are measured while balancing)",
+    catching: "pendulum caught, settling",
+    fallen: "pendulum fallen",
+    stopped: "stopped",
+    unknown: "-",
+  };
 
   // --- Experiments panel: progress while it runs, the estimate when done ----------------------
   function showExperiment(st, running) {
