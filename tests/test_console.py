@@ -1152,6 +1152,67 @@ def test_swing_up_button_starts_a_swing_up_and_the_phase_is_shown(tmp_path):
     ctl.close()
 
 
+@pytest.mark.slow
+def test_swing_up_from_a_stopped_default_console_starts_hanging(tmp_path):
+    """The default console (its pendulum upright): Stop, then Swing up.  The run's log
+    starts with the pendulum hanging (first |theta| > 2.5 rad), the catch comes after at
+    least 0.3 s, then it balances."""
+    from frictionlab.io.logs import read_log
+
+    cfg = build_config("fast", "classical")
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05, autostart=True)
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        while client.get("/api/status").json()["t"] < 0.5:
+            assert ctl.running
+        assert client.post("/api/stop", json={}).status_code == 200
+        r = client.post("/api/swingup", json={})
+        assert r.status_code == 200, r.json()
+        while (st := client.get("/api/status").json())["t"] < 6.0:
+            assert st["running"], (st["stop_reason"], st["stop_detail"])
+        assert st["swing_up"]["phase"] == "balancing"
+        assert st["swing_up"]["swing_up_time"] >= 0.3
+        assert client.post("/api/stop", json={}).status_code == 200
+        log = read_log(st["log"], cfg.design.h)
+    ctl.close()
+    assert abs(log["theta_m"][0]) > 2.5
+    # balancing at the end (the last row, the stop, has no reading)
+    assert np.nanmax(np.abs(np.angle(np.exp(1j * log["theta_m"][-200:])))) < 0.35
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("emulated", [True, False])
+def test_swing_up_on_a_framed_rig_hangs_an_emulated_pendulum_and_leaves_a_real_one(
+        tmp_path, emulated):
+    """Swing up on ``rig-sim`` (its session starts upright): the emulator's hand lets the
+    pendulum hang before the first command.  A rig that plays no hand (a real one) is left
+    where it is: the swing-up starts from there."""
+    from frictionlab.io.logs import read_log
+    from frictionlab.realtime.rigs import FramedRig
+    from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
+
+    class HandRig(FramedRig):  # rig-sim over UDP, its CONTROL frames handed over directly
+        def hand(self, action):
+            assert emu.control({"cmd": "hand", **action})["ok"]
+
+    cfg = build_config("fast", "classical")
+    clock = FakeClock()
+    emu = RigEmulator(cfg, clock)
+    rig = (HandRig if emulated else FramedRig)(DirectTransport(emu, clock), "direct",
+                                               clock=clock)
+    ctl = RealtimeController(cfg, rig, log_dir=tmp_path, clock=clock, realtime=False,
+                             manage_gc=False, duration=0.5)
+    ctl.start(swing_up=True, hanging=True)
+    assert ctl.wait(60)
+    theta0 = read_log(ctl.last_stats["log"], cfg.design.h)["theta_m"][0]
+    ctl.close()
+    if emulated:
+        assert abs(theta0) > 3.0 and any(a["fault"] == "hand_hang" for a in emu.applied)
+    else:
+        assert abs(theta0) < 0.2 and not emu.applied
+
+
 def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
     """The Experiments panel: refused without confirm (the motor moves), bad options and
     limits refused at their field, a confirmed run goes through the loop on the connected

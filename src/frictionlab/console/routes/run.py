@@ -44,7 +44,9 @@ def router(ctx: Context) -> APIRouter:
             if swing_up is None:
                 controller.start()
             else:
-                controller.start(swing_up=swing_up)
+                # Swing up starts with the pendulum hanging at rest on an emulated rig
+                # (sim, rig-sim over UDP); a real rig starts from where the pendulum is
+                controller.start(swing_up=swing_up, hanging=True)
         except RuntimeError as exc:  # includes RigError
             code = 409 if isinstance(exc, ControllerStateError) else 502
             raise http_error(code, str(exc)) from None
