@@ -640,7 +640,7 @@ def test_refusals_are_located_by_key_not_by_message(app_and_controller, monkeypa
 
 
 @pytest.mark.slow
-def test_run_record_download_and_exit(app_and_controller, tmp_path):
+def test_run_record_download_and_exit(app_and_controller, tmp_path, cli):
     client, ctl, exits = app_and_controller
     assert client.post("/api/record/start", json={}).status_code == 409  # not running
     r = client.post("/api/start", json={})
@@ -668,6 +668,13 @@ def test_run_record_download_and_exit(app_and_controller, tmp_path):
     csv = client.get("/api/files/trial.csv").text.splitlines()
     assert csv[0].startswith("t,") and len(csv) == rows + 1
     assert client.post("/api/record/name", json={"name": "again"}).status_code == 409
+    # the recording has the run's sidecar: `features` needs no --design, no design.h
+    side = json.loads((tmp_path / "trial.json").read_text())
+    assert side["h"] == 0.005 and side["current"]["design"]["preset"] == "fast"
+    assert side["recording"]["rows"] == rows
+    res = cli("features", str(tmp_path / "trial.dat"), "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["design"] == "fast"
     assert client.get("/api/files/..%2Fsecret.dat").status_code == 404
     assert client.get("/api/files/missing.dat").status_code == 404
 
@@ -686,6 +693,14 @@ def test_run_record_download_and_exit(app_and_controller, tmp_path):
     assert r.status_code == 200 and exits == [True]
     assert client.post("/api/start", json={}).status_code == 409
     assert not ctl.running
+
+
+@pytest.mark.parametrize("name", ["nope.csv", "nope.dat"])
+def test_features_of_a_missing_log_says_it_is_missing_once(cli, tmp_path, name):
+    path = str(tmp_path / name)
+    res = cli("features", path)
+    assert res.returncode == 2
+    assert res.stderr.strip() == f"frictionlab features: error: {path}: no such file"
 
 
 def test_stop_while_recording_asks_for_the_name(app_and_controller, tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
 
@@ -106,13 +107,19 @@ def _log_experiment(path: str, h: float | None, window: float | None = None,
                     design: str | None = None, what: str = "--measured") -> dict:
     from ..io.runlog import run_log_features
 
+    # `frictionlab features: error: ...` names the command already; --measured is an option
+    label = "" if what == "features:" else f"{what} "
+    if not os.path.isfile(path):  # the missing file, before any sidecar or design
+        raise UsageError(f"{label}{path}: no such file")
     try:
         return run_log_features(path, window=window, h=h, design=design)
     except ParamError as exc:
         hint = _LOG_HINTS[what].get(exc.field)
-        raise UsageError(f"{what} {exc}" + (f" ({hint})" if hint else "")) from None
+        raise UsageError(f"{label}{exc}" + (f" ({hint})" if hint else "")) from None
     except ValueError as exc:
-        raise UsageError(f"{what} {path}: {exc}") from None
+        text = str(exc)
+        raise UsageError(f"{label}{text if text.startswith(path) else f'{path}: {text}'}"
+                         ) from None
 
 
 def load_measured(paths, sets=()) -> list:

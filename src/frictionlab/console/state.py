@@ -9,15 +9,19 @@ stream hub and :meth:`Context.full_status`.
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..io.jsonsafe import json_safe
+from ..realtime.datalog import write_json_atomic
 from .hub import Hub
 from .stream import honest_figures, pendulum_state
 
 __all__ = ["ConsoleState", "Context"]
+
+log = logging.getLogger("frictionlab.console")
 
 
 class ConsoleState:
@@ -64,8 +68,25 @@ class Context:
         return self.state.log_dir
 
     def pending(self, rec: dict) -> None:
-        """Hold ``rec`` (a stopped recording) until the page names it."""
+        """Hold ``rec`` (a stopped recording) until the page names it, with its sidecar.
+
+        The sidecar is the run's (design, ``h``, parameters, events) as the recording
+        ended, plus ``recording`` (its rows and the run it is part of), written
+        beside the recording's files as ``<name>.json``: ``frictionlab features
+        NAME.dat`` then needs no options.
+        """
+        side = Path(rec["dat"]).with_suffix(".json")
+        meta_fn = getattr(self.controller, "sidecar", None)
+        if meta_fn is not None:
+            meta = meta_fn()
+            meta["recording"] = {"rows": int(rec.get("rows", 0)), "run_id": meta.get("run_id"),
+                                 "files": {"dat": str(rec["dat"]), "csv": str(rec["csv"])}}
+            try:
+                write_json_atomic(side, meta)
+            except OSError as exc:  # the recording itself is still saved
+                log.warning("frictionlab console: no sidecar for the recording: %s", exc)
         self.state.pending = {"dat": str(rec["dat"]), "csv": str(rec["csv"]),
+                              "json": str(side) if side.exists() else None,
                               "rows": int(rec.get("rows", 0))}
 
     def full_status(self) -> dict:

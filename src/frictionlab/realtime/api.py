@@ -547,6 +547,12 @@ class RealtimeController:
             return self.cfg.friction_kind
         return None
 
+    def sidecar(self) -> dict:
+        """The run's sidecar (``<run_id>.json``) as of now: configuration, ``h``, the
+        initial and current design and compensation, events, statistics.  A Save Data
+        recording gets one beside it, so that ``frictionlab features`` reads it alone."""
+        return self._meta()
+
     def _meta(self) -> dict:
         loop = self._loop
         w = self._writer

@@ -51,7 +51,8 @@ def router(ctx: Context) -> APIRouter:
         if rec is None:
             raise http_error(409, "no stopped recording is waiting for a name", "name")
         folder = Path(rec["dat"]).parent
-        targets = {ext: folder / f"{req.name}.{ext}" for ext in ("dat", "csv")}
+        exts = ("dat", "csv", "json") if rec.get("json") else ("dat", "csv")
+        targets = {ext: folder / f"{req.name}.{ext}" for ext in exts}
         for path in targets.values():
             if path.exists():
                 raise http_error(409, f"{path.name} exists in {folder}; choose another name",
@@ -61,6 +62,7 @@ def router(ctx: Context) -> APIRouter:
         console.pending = None
         console.saved = {"name": req.name, "rows": rec["rows"],
                          "dat": str(targets["dat"]), "csv": str(targets["csv"]),
+                         "json": str(targets["json"]) if "json" in targets else None,
                          "urls": {"dat": f"/api/files/{req.name}.dat",
                                   "csv": f"/api/files/{req.name}.csv"},
                          "time": time.strftime("%Y-%m-%dT%H:%M:%S")}
