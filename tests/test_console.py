@@ -7,6 +7,7 @@ The console in a real browser is tested in ``tests/browser``.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import json
 import math
@@ -784,6 +785,48 @@ def test_closing_line_names_the_stop_reason_and_the_log():
                          "log": "runs/run-1.csv"}))
     assert line == " (signal; 1413 ticks, 2 missed; log runs/run-1.csv)"
     assert _summary(Ctl({"stop_reason": None, "ticks": 0})) == " (the loop did not run)"
+
+
+@pytest.mark.slow
+def test_the_address_is_printed_when_the_console_answers(tmp_path):
+    """`serve` prints the address after the start-up's one-time work (the warm-up, the
+    automatic start of the loop), once the server accepts connections: the first
+    request at the printed address is answered, and nothing was still starting."""
+    cfg = build_config("fast", "classical")
+    # paced by the real clock (a fake one would run the loop flat out beside the server);
+    # the lockstep simulated plant waits for a stalled host instead of stopping
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, realtime=False, manage_gc=False,
+                             sim_lockstep=True)
+    printed = threading.Event()
+    at_print = {}
+
+    class Out:
+        def write(self, text):
+            m = re.search(r"(http://\S+)", text)
+            if m and not printed.is_set():
+                at_print.update(url=m.group(1), running=ctl.running)
+                printed.set()
+
+        def flush(self):
+            pass
+
+    th = threading.Thread(target=serve, args=(ctl,), kwargs={"port": 0, "out": Out(),
+                                                            "autostart": True}, daemon=True)
+    th.start()
+    try:
+        assert printed.wait(120), "no address printed"
+        assert at_print["running"]  # the loop had started when the address appeared
+        with urllib.request.urlopen(at_print["url"] + "api/status", timeout=30) as resp:
+            assert resp.status == 200 and json.loads(resp.read())["running"]
+    finally:
+        req = urllib.request.Request(at_print.get("url", "http://127.0.0.1:1/") + "api/exit",
+                                     data=b"{}", method="POST",
+                                     headers={"Content-Type": "application/json"})
+        with contextlib.suppress(OSError):
+            urllib.request.urlopen(req, timeout=30).read()
+        th.join(60)
+        ctl.close()
+    assert not th.is_alive()
 
 
 # --- first-call work before the loop starts -------------------------------------------------
