@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -118,6 +119,17 @@ class Context:
             "saved": console.saved,
             "token_required": self.token is not None,
             "exited": console.exited,
-            "experiment": None if console.experiment is None else dict(console.experiment),
+            "experiment": _experiment_view(console.experiment),
         }
         return json_safe(st)
+
+
+def _experiment_view(exp: dict | None) -> dict | None:
+    """The Experiments panel's last experiment for the status: ``elapsed`` seconds while
+    it runs (the page shows them from its first phase on), not the start instant."""
+    if exp is None:
+        return None
+    out = {k: v for k, v in exp.items() if k != "started"}
+    if exp.get("state") == "running" and exp.get("started") is not None:
+        out["elapsed"] = round(time.monotonic() - exp["started"], 1)
+    return out
