@@ -23,6 +23,7 @@ from .common import (
     check_output_path,
     emit_json,
     error_message,
+    feature_lines,
     finite,
     note_text,
     parse_sets,
@@ -544,8 +545,8 @@ def cmd_features(args) -> int:
         print(f"frictionlab features: note: {note}", file=sys.stderr)
     print(f"{out['name']}: {out['design']} design, {out['status']} "
           f"(last {out['window']:.3g} s)")
-    for k, v in out["features"].items():
-        print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+    for line in feature_lines(out["features"]):
+        print(line)
     return 0
 
 
