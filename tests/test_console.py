@@ -365,6 +365,9 @@ def _figures_of(theta_of_t, seconds: float = 6.0) -> dict:
     (lambda t: 2.5 * math.sin(2 * math.pi * t / 1.5), True, {"phase": "swinging"},
      "swinging"),
     (lambda t: 0.1 * math.sin(2 * math.pi * t), True, {"phase": "caught"}, "catching"),
+    # balancing after a catch, the swing still in the window: no figures yet
+    (lambda t: 2.5 if t < 2.0 else 0.05 * math.sin(2 * math.pi * t), True,
+     {"phase": "balancing"}, "catching"),
     # fell: the last angle is beyond the limit, the loop stopped
     (lambda t: 0.01 * math.exp(t), False, {}, "fallen"),
     (lambda t: 0.01, False, {}, "stopped"),

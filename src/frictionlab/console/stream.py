@@ -207,7 +207,8 @@ class SampleStream:
         data = self.buffer.last(n)
         out = {"window": window, "span": 0.0, "status": None, "peak_to_peak": None,
                "period": None, "peak1": None, "max_u": None, "max_arm_velocity": None,
-               "max_angle": None, "last_angle": None, "min_angle_last_second": None}
+               "max_angle": None, "last_angle": None, "min_angle_last_second": None,
+               "max_angle_last_second": None}
         if data.shape[1] < 3:
             return out
         t, theta, arm_dot, u = data[0], data[1], data[3], data[4]
@@ -224,7 +225,8 @@ class SampleStream:
                     "period": f.period, "peak1": f.peak1, "max_u": f.max_u,
                     "max_arm_velocity": f.max_arm_velocity,
                     "max_angle": float(wrapped.max()), "last_angle": float(wrapped[-1]),
-                    "min_angle_last_second": float(wrapped[t >= t[-1] - 1.0].min())})
+                    "min_angle_last_second": float(wrapped[t >= t[-1] - 1.0].min()),
+                    "max_angle_last_second": float(wrapped[t >= t[-1] - 1.0].max())})
         return out
 
 
@@ -239,10 +241,12 @@ def pendulum_state(fig: dict, *, running: bool, upright: float, phase: str | Non
     """What the pendulum is doing, from the last figures' angles and the run.
 
     ``"balancing"`` (running the balancing controller, and the angle stayed within
-    ``upright`` rad of upright over the whole window), ``"hanging"`` (within
-    :data:`HANGING_BAND` of pi over the last second), ``"swinging"`` (running, neither),
-    ``"fallen"`` (stopped, neither upright nor hanging), ``"stopped"`` (stopped upright),
-    ``"catching"`` (a swing-up caught it and is settling), or ``"unknown"`` (no samples).
+    ``upright`` rad of upright over the whole window), ``"catching"`` (upright over
+    the last second, not yet over the whole window: a swing-up caught it, the
+    figures would still measure the swing), ``"hanging"`` (within
+    :data:`HANGING_BAND` of pi over the last second), ``"swinging"`` (running, none of
+    these), ``"fallen"`` (stopped, neither upright nor hanging), ``"stopped"``
+    (stopped upright), or ``"unknown"`` (no samples).
 
     Parameters
     ----------
@@ -261,12 +265,11 @@ def pendulum_state(fig: dict, *, running: bool, upright: float, phase: str | Non
         return "unknown" if running else "stopped"
     if fig["min_angle_last_second"] >= math.pi - HANGING_BAND:
         return "hanging"
-    upright_all = fig["max_angle"] <= upright
     if not running:
         return "stopped" if fig["last_angle"] <= upright else "fallen"
-    if experiment or not upright_all or phase == "swinging":
+    if experiment or phase == "swinging" or fig["max_angle_last_second"] > upright:
         return "swinging"
-    if phase == "caught":
+    if phase == "caught" or fig["max_angle"] > upright:
         return "catching"
     return "balancing"
 

@@ -333,7 +333,7 @@
   const PENDULUM_TEXT = {
     hanging: "pendulum hanging (limit-cycle figures are measured while balancing)",
     swinging: "pendulum swinging (limit-cycle figures are measured while balancing)",
-    catching: "pendulum caught, settling",
+    catching: "pendulum caught, settling (limit-cycle figures once the window holds only balancing)",
     fallen: "pendulum fallen",
     stopped: "stopped",
     unknown: "-",
