@@ -78,24 +78,27 @@ def test_the_printed_address_answers_at_once(console):
 
 
 def test_every_trace_and_toggle_is_told_apart(page, shots):
-    styles = {}
-    for b in page.locator("#signal-toggles button").all():
-        key = b.get_attribute("data-signal")
-        line = b.locator(".swatch line")
-        styles[key] = (line.get_attribute("stroke"), line.get_attribute("stroke-dasharray"))
-        if b.get_attribute("aria-pressed") == "false":
-            b.click()  # every trace on
-    assert len(set(styles.values())) == len(styles), styles  # colour and dash: all distinct
+    # every toggle's drawn line and the plot's series, read in one evaluation; all on
+    styles = page.evaluate("""() => Object.fromEntries(
+        [...document.querySelectorAll('#signal-toggles button')].map((b) => {
+          if (b.getAttribute('aria-pressed') === 'false') b.click();
+          const line = b.querySelector('.swatch line');
+          const key = b.dataset.signal, plot = window.__console.style(key);
+          return [key, {stroke: line.getAttribute('stroke'),
+                        dash: line.getAttribute('stroke-dasharray'),
+                        color: plot.color, plotDash: plot.dash ? plot.dash.join(' ') : null}];
+        }))""")
+    pairs = {(v["stroke"], v["dash"]) for v in styles.values()}
+    assert len(pairs) == len(styles) == 9, styles  # colour and dash: no two alike
     # the pairs the issue named: the angle and rate estimates, F-hat and u
-    assert styles["theta_hat"][0] != styles["theta_dot_hat"][0]
-    assert styles["theta_hat"][1] != styles["theta_dot_hat"][1]
-    assert styles["friction_hat"][0] != styles["u"][0] and styles["u"][1] is None
-    # the plot draws what the toggles show
-    for key, (color, dash) in styles.items():
-        got = page.evaluate(f"() => window.__console.style('{key}')")
-        assert got["color"] == color
-        assert (got["dash"] and " ".join(map(str, got["dash"]))) == (dash or None)
-    page.wait_for_timeout(1500)  # a second and a half of plot with every trace (for the eye)
+    assert styles["theta_hat"]["stroke"] != styles["theta_dot_hat"]["stroke"]
+    assert styles["theta_hat"]["dash"] != styles["theta_dot_hat"]["dash"]
+    assert styles["friction_hat"]["stroke"] != styles["u"]["stroke"]
+    assert styles["u"]["dash"] is None and styles["friction_hat"]["dash"]
+    for key, v in styles.items():  # the plot draws what the toggles show
+        assert (v["color"], v["plotDash"]) == (v["stroke"], v["dash"]), key
+    expect(page.locator('#signal-toggles button[aria-pressed="false"]')).to_have_count(0)
+    page.wait_for_timeout(1000)  # a second of plot with every trace (for the eye)
     page.locator("#plot-panel").screenshot(path=str(shots / "1-traces.png"))
 
 
@@ -108,19 +111,24 @@ def test_balancing_shows_the_limit_cycle_figures(page):
 
 def test_the_adaptive_panel_fields_fit(page, shots):
     page.locator("#friction-type").select_option("adaptive")
-    panel = page.locator("#friction-panel").bounding_box()
-    inputs = page.locator("#friction-fields input")
-    expect(inputs.first).to_be_visible()
-    assert inputs.count() >= 10
-    for i in range(inputs.count()):
-        box = inputs.nth(i).bounding_box()
-        assert box["x"] >= panel["x"] and box["x"] + box["width"] <= panel["x"] + panel[
-            "width"] + 0.5, inputs.nth(i).get_attribute("data-field")
-    row = page.locator('#friction-fields input[data-field="adaptation_max_innovation"]')
-    label = page.locator("#friction-fields .field").filter(
-        has=page.locator('input[data-field="adaptation_max_innovation"]')).locator("label")
-    lb, ib = label.bounding_box(), row.bounding_box()
-    assert lb["x"] + lb["width"] <= ib["x"] + 0.5  # the label ends before its input
+    expect(page.locator('#friction-fields input[data-field="adaptation_max_innovation"]')
+           ).to_be_visible()
+    # every row's label ends before its input, every input inside the panel
+    rows = page.evaluate("""() => {
+        const panel = document.querySelector('#friction-panel').getBoundingClientRect();
+        return [...document.querySelectorAll('#friction-fields .field')]
+          .filter((r) => !r.hidden && r.querySelector('input')).map((r) => {
+            const l = r.querySelector('label').getBoundingClientRect();
+            const i = r.querySelector('input').getBoundingClientRect();
+            return {field: r.querySelector('input').dataset.field, labelEnd: l.right,
+                    inputStart: i.left, inputEnd: i.right, panelStart: panel.left,
+                    panelEnd: panel.right};
+          });
+    }""")
+    assert len(rows) >= 10 and "adaptation_max_innovation" in [r["field"] for r in rows]
+    for r in rows:
+        assert r["labelEnd"] <= r["inputStart"] + 0.5, r
+        assert r["panelStart"] <= r["inputStart"] and r["inputEnd"] <= r["panelEnd"] + 0.5, r
     page.locator("#friction-panel").screenshot(path=str(shots / "2-adaptive-panel.png"))
     page.locator("#friction-type").select_option("lugre")
 
@@ -152,6 +160,28 @@ def test_swing_up_from_a_stopped_console_starts_hanging(console, page, shots):
     expect(page.locator("#swing-phase")).to_have_attribute("data-phase", "balancing",
                                                            timeout=10_000)
     page.locator("#statusbar").screenshot(path=str(shots / "3-swung-up.png"))
+
+
+def test_a_saved_recording_analyses_with_no_options(console, page):
+    # balancing after the swing-up: record 3 s
+    page.locator("#save").click()
+    expect(page.locator("#save")).to_have_attribute("aria-pressed", "true", timeout=10_000)
+    t0 = status(page)["t"]
+    wait_until(lambda: status(page)["t"] > t0 + 3, 90.0, what="3 s recorded")
+    page.locator("#save").click()
+    expect(page.locator("#save-prompt")).to_be_visible(timeout=10_000)
+    page.locator("#save-name").fill("trial1")
+    page.locator("#save-write").click()
+    expect(page.locator("#save-links")).to_contain_text("trial1.dat", timeout=10_000)
+    folder = console.log_dir
+    assert (folder / "trial1.json").is_file()
+    res = run_cli_in_process(["features", "trial1.dat", "--json"], cwd=folder)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["design"] == "fast" and np.isfinite(out["features"]["max_u"])
+    missing = run_cli_in_process(["features", "nope.csv"], cwd=folder)
+    assert missing.returncode == 2
+    assert missing.stderr.strip() == "frictionlab features: error: nope.csv: no such file"
 
 
 def test_an_experiment_in_the_operator_s_words(console, page, shots):
@@ -186,28 +216,3 @@ def test_an_experiment_in_the_operator_s_words(console, page, shots):
     assert status(page)["console"]["limit_cycle"]["peak_to_peak"] is None
     page.locator("#experiment-panel").screenshot(path=str(shots / "6-experiment-done.png"))
     page.locator("#statusbar").screenshot(path=str(shots / "7-hanging-status.png"))
-
-
-def test_a_saved_recording_analyses_with_no_options(console, page):
-    # the pendulum hangs after the experiment: swing it up, then record while balancing
-    page.locator("#swingup").click()
-    wait_until(lambda: (status(page).get("swing_up") or {}).get("phase") == "balancing"
-               and status(page)["running"], 120.0, what="balancing again")
-    page.locator("#save").click()
-    expect(page.locator("#save")).to_have_attribute("aria-pressed", "true", timeout=10_000)
-    wait_until(lambda: status(page)["t"] > (status(page)["swing_up"]["swing_up_time"] or 0) + 4,
-               90.0, what="4 s recorded")
-    page.locator("#save").click()
-    expect(page.locator("#save-prompt")).to_be_visible(timeout=10_000)
-    page.locator("#save-name").fill("trial1")
-    page.locator("#save-write").click()
-    expect(page.locator("#save-links")).to_contain_text("trial1.dat", timeout=10_000)
-    folder = console.log_dir
-    assert (folder / "trial1.json").is_file()
-    res = run_cli_in_process(["features", "trial1.dat", "--json"], cwd=folder)
-    assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout)
-    assert out["design"] == "fast" and np.isfinite(out["features"]["max_u"])
-    missing = run_cli_in_process(["features", "nope.csv"], cwd=folder)
-    assert missing.returncode == 2
-    assert missing.stderr.strip() == "frictionlab features: error: nope.csv: no such file"
