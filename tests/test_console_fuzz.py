@@ -222,6 +222,24 @@ def test_a_stable_design_needs_a_margin(console):
     assert _settings(client) == before
 
 
+def test_a_design_the_simulated_pendulum_falls_with_is_refused_unless_confirmed(console):
+    """omega0 = 7.5 against the plant's 6.8 passes the linear check, but with friction
+    the limit cycle grows and the pendulum falls: the simulation refuses it (confirm
+    applies it, as any unsafe change)."""
+    client, _ctl = console
+    before = _settings(client)
+    r = client.post("/api/design", json={"omega0": 7.5})
+    assert r.status_code == 422 and r.json()["confirm_required"], r.text
+    out = r.json()
+    assert out["check"]["verdict"] == "falls" and out["check"]["spectral_radius"] < 1
+    assert [e["field"] for e in out["errors"]] == ["omega0"]
+    assert "falls" in out["detail"] and 6.8 <= out["safe"]["omega0"] < 7.5
+    assert _settings(client) == before
+    r = client.post("/api/design", json={"omega0": out["safe"]["omega0"]})
+    assert r.status_code == 200 and r.json()["status"]["loop_check"]["verdict"] == "ok"
+    assert client.post("/api/design", json={"preset": "fast"}).status_code == 200
+
+
 @pytest.mark.parametrize("options, field", [
     ({"scaling": 1.0}, "options.scaling"),
     ({"step": 1e-300}, "options.step"),

@@ -65,5 +65,7 @@ VERDICT_TEXT = {
                                       f"(spectral radius {c.compensator_radius:.4g} > 1)",
     "saturating": lambda c: f"u would saturate (predicted peak {c.peak_u:.3g} > "
                             f"{c.u_max:.3g} m/s^2)",
+    "falls": lambda c: "the simulated pendulum would fall (" + c.reasons[0].split(", ")[-1]
+                       + ")",
     "ok": lambda c: "passes",
 }

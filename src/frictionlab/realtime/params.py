@@ -53,12 +53,15 @@ from ..config import Config, ConfigError
 from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller, Gains
 from ..model.design import PRESETS, Design, DesignSpec, design, preset
 from ..model.friction import FrictionParams, friction_row
-from ..model.loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
+from ..model.loopcheck import DEFAULT_DISTURBANCE, DEFAULT_NOISE, LoopCheck, check_loop
 from ..model.params import ParamError
+from ..runs import simulate_config
 
 __all__ = [
     "CHANGE_KEYS",
     "COMPENSATOR_MODELS",
+    "FALL_CHECK_ANGLE",
+    "FALL_CHECK_SECONDS",
     "MIN_DECAY_RATE",
     "ChangeError",
     "ControlParams",
@@ -81,6 +84,11 @@ _SAFE_STEPS = 12
 #: eigenvalue modulus of 1 - 1e-9 is stable on paper and holds nothing up: pole pairs at
 #: omega = 1e-300 rad/s give exactly that, and the pendulum falls.
 MIN_DECAY_RATE = 0.1
+#: Seconds the settings that pass the linear check are simulated (the run's plant model
+#: and friction, from DEFAULT_DISTURBANCE rad), and the angle (rad) counted as a fall
+#: there: the loop's default angle limit (``Safety.angle_limit``).
+FALL_CHECK_SECONDS = 10.0
+FALL_CHECK_ANGLE = 0.35
 
 
 class ChangeError(ConfigError):
@@ -346,7 +354,31 @@ class ControlParams:
                       f"modulus {r:.9g}) takes {tau:.3g} s to decay by e, more than "
                       f"{1 / MIN_DECAY_RATE:g} s")
             chk = dataclasses.replace(chk, verdict="unstable", reasons=(reason, *chk.reasons))
+        if chk.ok and (t := self.fall_time) is not None:
+            # the linear check cannot see friction's limit cycle grow: the simulator can
+            chk = dataclasses.replace(chk, verdict="falls", reasons=(
+                f"simulated with the run's plant model and friction from a "
+                f"{DEFAULT_DISTURBANCE:g} rad start, the pendulum falls (|theta| > "
+                f"{self._fall_angle:g} rad) after {t:.2g} s",))
         return chk
+
+    @property
+    def _fall_angle(self) -> float:
+        return min(self.cfg.sim.fall_angle, FALL_CHECK_ANGLE)
+
+    @functools.cached_property
+    def fall_time(self) -> float | None:
+        """When the pendulum falls (s) in a :data:`FALL_CHECK_SECONDS` s simulation of
+        these settings on the run's plant model and friction (``cfg``: ``plant.*``,
+        ``friction.*``, ``sim.noise``), starting :data:`~frictionlab.model.loopcheck.
+        DEFAULT_DISTURBANCE` rad from upright; None if it stays within
+        :data:`FALL_CHECK_ANGLE` rad.  A design ``omega0`` of 7.5 against the plant's
+        6.8 passes the linear check, yet its friction limit cycle grows and the
+        pendulum falls after about 3 s: this finds it."""
+        cfg = self.cfg.with_values({"sim.initial_angle": DEFAULT_DISTURBANCE,
+                                    "sim.fall_angle": self._fall_angle})
+        traj = simulate_config(cfg, FALL_CHECK_SECONDS, controller=self.controller)
+        return len(traj) * traj.h if traj.status == "fell" else None
 
     def changed_keys(self, new: ControlParams) -> tuple[str, ...]:
         """The keys whose values differ from ``self`` in ``new`` (see the module docstring)."""
