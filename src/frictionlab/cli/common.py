@@ -176,6 +176,17 @@ def safety_from_args(args, **limits):
         raise UsageError(str(exc).replace(exc.field, option, 1)) from None
 
 
+#: Units of the limit-cycle features a plain-text output prints (as in ``--json``: SI).
+FEATURE_UNITS = {"peak1": "rad", "peak2": "rad", "valley": "rad", "period": "s",
+                 "max_u": "m/s^2", "max_arm_velocity": "rad/s", "peak_to_peak": "rad"}
+
+
+def feature_lines(features: dict) -> list[str]:
+    """The plain-text lines of limit-cycle ``features``: name, value, unit."""
+    return [f"  {k:18s} {'-' if v is None else f'{v:.4g}'} {FEATURE_UNITS.get(k, '')}".rstrip()
+            for k, v in features.items()]
+
+
 def emit_json(obj) -> None:
     sys.stdout.write(json.dumps(_clean(obj)) + "\n")
     sys.stdout.flush()

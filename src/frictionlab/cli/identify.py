@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
 
@@ -22,6 +23,7 @@ from .common import (
     check_output_path,
     emit_json,
     error_message,
+    feature_lines,
     finite,
     note_text,
     parse_sets,
@@ -106,13 +108,19 @@ def _log_experiment(path: str, h: float | None, window: float | None = None,
                     design: str | None = None, what: str = "--measured") -> dict:
     from ..io.runlog import run_log_features
 
+    # `frictionlab features: error: ...` names the command already; --measured is an option
+    label = "" if what == "features:" else f"{what} "
+    if not os.path.isfile(path):  # the missing file, before any sidecar or design
+        raise UsageError(f"{label}{path}: no such file")
     try:
         return run_log_features(path, window=window, h=h, design=design)
     except ParamError as exc:
         hint = _LOG_HINTS[what].get(exc.field)
-        raise UsageError(f"{what} {exc}" + (f" ({hint})" if hint else "")) from None
+        raise UsageError(f"{label}{exc}" + (f" ({hint})" if hint else "")) from None
     except ValueError as exc:
-        raise UsageError(f"{what} {path}: {exc}") from None
+        text = str(exc)
+        raise UsageError(f"{label}{text if text.startswith(path) else f'{path}: {text}'}"
+                         ) from None
 
 
 def load_measured(paths, sets=()) -> list:
@@ -538,8 +546,8 @@ def cmd_features(args) -> int:
         print(f"frictionlab features: note: {note}", file=sys.stderr)
     print(f"{out['name']}: {out['design']} design, {out['status']} "
           f"(last {out['window']:.3g} s)")
-    for k, v in out["features"].items():
-        print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+    for line in feature_lines(out["features"]):
+        print(line)
     return 0
 
 

@@ -98,6 +98,8 @@ HAND = {
     "direction": "+1 or -1: the lap's direction (default +1)",
     "push": "add this many rad/s to the pendulum's velocity",
     "push_arm": "add this many rad/s to the arm's velocity",
+    "hang": "true: let the pendulum hang at rest (the arm stays where it is), as a session "
+            "of rig-sim --hanging starts; the console's Swing up sends it",
 }
 
 
@@ -109,6 +111,8 @@ def hand_error(msg: dict) -> str | None:
         return f"unknown hand key {unknown[0]!r}; known: {', '.join(HAND)}"
     if not keys:
         return f"hand: say what to do ({', '.join(HAND)})"
+    if "hang" in keys and keys["hang"] is not True:
+        return f"hand hang: true, got {keys['hang']!r}"
     if "lap" in keys and keys["lap"] not in ("pendulum", "arm"):
         return f"hand lap: 'pendulum' or 'arm', got {keys['lap']!r}"
     for k in ("seconds", "direction", "push", "push_arm"):
@@ -248,6 +252,12 @@ class RigEmulator:
 
     def _apply_hand(self, msg: dict, t: int) -> None:
         self._advance(t)
+        if msg.get("hang"):
+            x = self.state.x.copy()
+            x[0], x[1], x[3] = math.pi, 0.0, 0.0
+            self.state = dataclasses.replace(self.state, x=x, memory=0.0)
+            self._hand = None
+            self._applied("hand_hang", -1, math.pi)
         if "push" in msg:
             self.state = self._plant(1).push(self.state, float(msg["push"]))
             self._applied("hand_push", -1, float(msg["push"]))
