@@ -76,6 +76,7 @@ def test_backend_strings_parse_and_refuse():
     assert open_rig("qube3://0", cfg).board_type == "qube_servo3_usb"
 
 
+@pytest.mark.slow
 def test_without_the_sdk_the_command_says_what_to_install(cli, tmp_path, monkeypatch):
     unload_fake()
     monkeypatch.setitem(sys.modules, "quanser", None)  # not installed
@@ -161,7 +162,7 @@ def test_rig_signs_flip_an_encoder(hw, clock, monkeypatch, arm_sign, pendulum_si
 @pytest.mark.slow
 def test_a_swing_up_run_keeps_the_safe_sequence(hw, clock, tmp_path):
     """Watchdog armed before the amplifier, amplifier before volts, |V| <= 10, the end."""
-    ctl, st = run(clock, tmp_path, duration=1.5, swing_up=True)
+    _ctl, st = run(clock, tmp_path, duration=1.5, swing_up=True)
     assert st["stop_reason"] == "duration"
     board = hw.BOARDS[-1]
     calls = calls_of(board)
@@ -220,7 +221,7 @@ def test_a_stop_request_zeroes_the_motor_at_the_next_tick(hw, clock, tmp_path):
                                           ("stall_error", "motor_stall")])
 def test_a_board_fault_stops_the_run(hw, clock, tmp_path, monkeypatch, fault, reason):
     monkeypatch.setenv("FAKE_QUANSER_FAULTS", f'{{"{fault}_at": 0.3}}')
-    ctl, st = run(clock, tmp_path, duration=1.0, swing_up=True)
+    _ctl, st = run(clock, tmp_path, duration=1.0, swing_up=True)
     assert st["stop_reason"] == reason and st["board_fault"] == reason
     board = hw.BOARDS[-1]
     calls = calls_of(board)
@@ -249,7 +250,7 @@ def test_an_expired_watchdog_zeroes_the_motor_and_stops_the_run(hw, clock, tmp_p
     clock_start = 1_000_000_000
     clk = FakeClock(clock_start, wake_latency=latency)
     hw.CLOCK = clk.now_ns
-    ctl, st = run(clk, tmp_path, backend="qube2://0?watchdog=0.02", duration=1.0,
+    _ctl, st = run(clk, tmp_path, backend="qube2://0?watchdog=0.02", duration=1.0,
                   swing_up=True)
     assert st["stop_reason"] == "watchdog_expired"
     board = hw.BOARDS[-1]
@@ -277,7 +278,7 @@ def test_a_board_error_on_a_read_stops_as_rig_fault(hw, clock, tmp_path, monkeyp
         return real(self, *args)
 
     monkeypatch.setattr(hw.HIL, "read_encoder", flaky)
-    ctl, st = run(clock, tmp_path, duration=1.0, swing_up=True)
+    _ctl, st = run(clock, tmp_path, duration=1.0, swing_up=True)
     assert st["stop_reason"] == "rig_fault" and "USB transfer failed" in st["stop_detail"]
     check_safe_sequence(calls_of(hw.BOARDS[-1]))
 
@@ -384,3 +385,26 @@ def test_emulated_board_refuses_what_the_sdk_refuses(hw, clock):
     card.close()
     with pytest.raises(hw.HILError):
         hw.HIL("qube_servo2_usb", "5")
+
+
+def test_a_write_the_expired_board_refuses_stops_the_next_tick(hw, clock):
+    """Suspended between a tick's reading and its output (SIGSTOP): the board has
+    zeroed the motor and refuses the late command; the next tick stops as
+    ``watchdog_expired`` without enabling anything again."""
+    from frictionlab.realtime.qube import RigStop
+
+    rig, board = open_rig_on(hw, clock)
+    rig.sample(0, 0)
+    rig.write(0, 0.3)
+    clock.advance(100_000_000)  # the process was stopped here
+    rig.write(1, 0.3)  # refused, not raised
+    with pytest.raises(RigStop) as stop:
+        rig.sample(2, 0)
+    assert stop.value.reason == "watchdog_expired"
+    rig.write(2, 0.0)
+    rig.close()
+    calls = calls_of(board)
+    expired = index(calls, "event", lambda a: a[0] == "watchdog_expired")
+    assert index(calls[expired:], "write_digital", lambda a: a[1][0] == 1) is None
+    assert board.voltage == 0.0 and not board.enabled
+    check_safe_sequence(calls)

@@ -221,6 +221,7 @@ class QubeRig(Rig):
         self.armed = False        # watchdog expiration states set and watchdog started
         self.enabled = False      # amplifier enabled by us
         self.fault: str | None = None  # a board fault seen (latched: no more output)
+        self._refused = None  # the HILError of a refused write, reported by the next sample
         self.u_da = 0.0
         self.voltage = 0.0
         self.led: str | None = None
@@ -304,6 +305,8 @@ class QubeRig(Rig):
     # --- the tick --------------------------------------------------------------------
     def sample(self, k: int, deadline_ns: int) -> SensorReading:
         card = self.card
+        if self._refused is not None:
+            self._stop_after_refusal()
         try:
             if not self.armed:
                 self._arm()
@@ -334,6 +337,20 @@ class QubeRig(Rig):
         v = 1.0 if v > 1.0 else (-1.0 if v < -1.0 else v)
         return SensorReading(y, x, v, self.u_da, 0)
 
+    def _stop_after_refusal(self) -> None:
+        """The board refused the last write: say why (its watchdog, or an error)."""
+        exc = self._refused
+        try:
+            expired = bool(self.card.watchdog_is_expired())
+        except Exception:
+            expired = False
+        self.fault = None
+        if expired:
+            self._latch("watchdog_expired", "the board's watchdog expired (no reload within "
+                        f"{self.timeout * 1e3:g} ms) and refused the tick's output: it had "
+                        "set 0 V with the amplifier off")
+        self._latch("rig_fault", f"the board refused the motor command: {_message(exc)}")
+
     def _status_fault(self) -> tuple[str, str] | None:
         d = self._din
         if d[0]:
@@ -362,7 +379,14 @@ class QubeRig(Rig):
         enable = self.enabled or (volts != 0.0 and self.armed)
         if not enable:
             volts = 0.0
-        self._output(volts, enable)
+        try:
+            self._output(volts, enable)
+        except self.hw.HILError as exc:
+            # refused (the watchdog expired in the meantime) or lost: nothing more is
+            # written, and the next tick's sample stops the run with the reason
+            self._refused = exc
+            self.fault = "rig_fault"
+            return
         theta = self.theta
         colour = "green" if abs(math.remainder(theta, _TWO_PI)) < UPRIGHT_LED else "yellow"
         if colour != self.led and self.armed:

@@ -81,7 +81,7 @@ import math
 import os
 import time
 
-__all__ = ["BOARDS", "CLOCK", "Board", "DigitalState", "HIL", "HILError"]
+__all__ = ["BOARDS", "CLOCK", "HIL", "Board", "DigitalState", "HILError"]
 
 # --- Quanser's published QUBE-Servo 2 parameters ----------------------------------
 R_M = 8.4          # armature resistance, ohm
@@ -163,7 +163,7 @@ def accelerations(alpha, theta_dot, alpha_dot, torque):
 def energy(x):
     """Total mechanical energy of the state (theta, alpha, theta', alpha') (J; zero
     hanging at rest), for the tests of the emulation itself."""
-    _th, al, thd, ald = x
+    _, al, thd, ald = x
     s, c = math.sin(al), math.cos(al)
     kin = 0.5 * (_J0 + _J_P * s * s) * thd * thd - _A * c * thd * ald + 0.5 * _J_P * ald * ald
     return kin + _GP * (c + 1.0)
@@ -174,7 +174,7 @@ def rk4(x, v_motor, dt):
     (None: the amplifier is off, no current)."""
 
     def f(s):
-        th, al, thd, ald = s
+        _, al, thd, ald = s
         tau = 0.0 if v_motor is None else K_T * (v_motor - K_M * thd) / R_M
         a1, a2 = accelerations(al, thd, ald, tau)
         return (thd, ald, a1, a2)
@@ -238,7 +238,7 @@ class Board:
         self._flushed = self.t0
         path = os.environ.get("FAKE_QUANSER_LOG")
         if path:
-            self._log = open(path, "a")  # noqa: SIM115 - closed at close() or exit
+            self._log = open(path, "a")
             atexit.register(self._flush)
         BOARDS.append(self)
         self._record("open", card_type, identifier)
