@@ -408,3 +408,41 @@ def test_a_write_the_expired_board_refuses_stops_the_next_tick(hw, clock):
     assert index(calls[expired:], "write_digital", lambda a: a[1][0] == 1) is None
     assert board.voltage == 0.0 and not board.enabled
     check_safe_sequence(calls)
+
+
+# --- the identification workflow on a QUBE (docs/qube.md) ---------------------------------
+
+
+def identify_on_qube(clock, tmp_path, name, **options):
+    from frictionlab.studies.identification.onrig import (
+        analyse_run,
+        make_rig_experiment,
+        run_on_rig,
+    )
+
+    cfg = qube_cfg(("design.omega0", 10.68), ("plant.omega0", 10.68))
+    exp = make_rig_experiment(name, cfg, **options)
+    st = run_on_rig(exp, cfg, "qube2://0", log_dir=tmp_path, clock=clock, realtime=False)
+    assert st["stop_reason"] == "finished", st["stop_detail"]
+    return analyse_run(name, st["log"], cfg)
+
+
+@pytest.mark.slow
+def test_free_oscillation_finds_the_qube_pendulum(hw, clock, tmp_path):
+    """App. A on the QUBE: omega_0 of a uniform rod, sqrt(3 g / 2 L_p), within 2 %
+    (the arm, held by the experiment's PD loop in volts, gives a little)."""
+    est = identify_on_qube(clock, tmp_path, "free-oscillation", duration=4.0)
+    assert est["omega0"] == pytest.approx(math.sqrt(1.5 * hw.G / hw.L_P), rel=0.02)
+    assert est["rest_angle"] == pytest.approx(math.pi, abs=0.01)
+
+
+@pytest.mark.slow
+def test_stribeck_on_the_bare_arm_sees_back_emf_plus_bearing(hw, clock, tmp_path,
+                                                            monkeypatch):
+    """App. E.2 with the pendulum module off: the viscous level in volts is the
+    motor's k_m plus the bearing's damping D_r R_m / k_t; no Coulomb friction."""
+    monkeypatch.setenv("FAKE_QUANSER_STATE", '{"pendulum_module": false}')
+    est = identify_on_qube(clock, tmp_path, "stribeck", references=[1.0, 2.0, 3.0, 4.0],
+                           gain=2.0, hold=1.5)
+    assert est["viscous"] == pytest.approx(hw.K_M + hw.D_R * hw.R_M / hw.K_T, rel=0.05)
+    assert abs(est["coulomb"]) < 0.02

@@ -54,7 +54,7 @@ accelerates the upright pendulum positively.  With
 with the motor torque :math:`\tau = k_t (V - k_m\dot\theta)/R_m` while the
 amplifier is enabled (and 0 while it is off: an open circuit).  Encoder 1 reads
 :math:`\alpha - \pi` (zero hanging), so hanging, a positive voltage step makes
-it count down at first.  Integrated by RK4 in steps of at most 0.5 ms.
+it count down at first.  Integrated by RK4 in steps of at most 1 ms.
 
 Faults (``FAKE_QUANSER_FAULTS``, a JSON object; or :meth:`Board.inject`):
 ``amplifier_fault_at`` (s of board time after ``open``: digital input 0 goes
@@ -63,7 +63,9 @@ high and the amplifier turns off), ``stall_at`` (digital input 1),
 motor at more than ``STALL_VOLTS`` with the arm slower than ``STALL_SPEED`` for
 ``STALL_TIME`` (input 1), and for twice that (input 2, amplifier off).
 ``FAKE_QUANSER_STATE`` (JSON: ``arm``, ``arm_rate``, ``pendulum``,
-``pendulum_rate`` in rad and rad/s, the pendulum from hanging) sets the start.
+``pendulum_rate`` in rad and rad/s, the pendulum from hanging) sets the start;
+``"pendulum_module": false`` takes the pendulum off (it is held by magnets on a
+real QUBE): the arm turns alone.
 
 Every call is recorded (:attr:`Board.calls`: ``(t_s, name, args)``, board time
 in seconds) and, with ``FAKE_QUANSER_LOG=PATH``, appended to PATH as JSON
@@ -96,7 +98,7 @@ D_P = 0.00005      # pendulum viscous damping, N m s/rad
 G = 9.81
 COUNTS = 2048      # encoder counts per revolution
 V_RANGE = 15.0     # the amplifier's output range, V
-DT_MAX = 0.0005    # largest integration step, s
+DT_MAX = 0.001     # largest integration step, s
 STALL_VOLTS, STALL_SPEED, STALL_TIME = 5.0, 0.5, 1.0
 
 TACH = 14000
@@ -169,13 +171,16 @@ def energy(x):
     return kin + _GP * (c + 1.0)
 
 
-def rk4(x, v_motor, dt):
+def rk4(x, v_motor, dt, pendulum=True):
     """One RK4 step of (theta, alpha, theta', alpha') with motor voltage ``v_motor``
-    (None: the amplifier is off, no current)."""
+    (None: the amplifier is off, no current); ``pendulum`` False: the pendulum
+    module taken off (the arm alone, alpha frozen)."""
 
     def f(s):
         _, al, thd, ald = s
         tau = 0.0 if v_motor is None else K_T * (v_motor - K_M * thd) / R_M
+        if not pendulum:
+            return (thd, 0.0, (tau - D_R * thd) / _J_R, 0.0)
         a1, a2 = accelerations(al, thd, ald, tau)
         return (thd, ald, a1, a2)
 
@@ -219,6 +224,7 @@ class Board:
         st = json.loads(os.environ.get("FAKE_QUANSER_STATE") or "{}")
         self.x = (float(st.get("arm", 0.0)), math.pi + float(st.get("pendulum", 0.0)),
                   float(st.get("arm_rate", 0.0)), float(st.get("pendulum_rate", 0.0)))
+        self.pendulum = bool(st.get("pendulum_module", True))
         self.counts0 = [self._counts()[0], self._counts()[1]]
         self.voltage = 0.0        # analog output 0 as last written (V)
         self.enabled = False      # digital output 0
@@ -255,7 +261,7 @@ class Board:
     def _integrate(self, t_end: int) -> None:
         while self.t < t_end:
             dt = min(DT_MAX, (t_end - self.t) / 1e9)
-            self.x = rk4(self.x, self._motor(), dt)
+            self.x = rk4(self.x, self._motor(), dt, self.pendulum)
             self.t = min(t_end, self.t + max(1, round(dt * 1e9)))
             self._stall_check()
 
