@@ -32,6 +32,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -83,6 +84,14 @@ def thetas(rows) -> list[tuple[float, float]]:
             if r["theta_m"] not in ("", "nan")]
 
 
+#: Stop reasons a stalled host (not the backend) causes before the test's own event.
+LOAD_STOPS = ("paused", "rig_silent", "watchdog_expired")
+
+
+class HostStalled(Exception):
+    """The run stopped on a stalled host before the test could act (run it again)."""
+
+
 def wait_balancing(tmp_path: Path, proc, timeout: float = 60.0) -> None:
     """Until the log shows the pendulum within 0.2 rad of upright for 1 s."""
     end = time.monotonic() + timeout
@@ -92,9 +101,28 @@ def wait_balancing(tmp_path: Path, proc, timeout: float = 60.0) -> None:
                                  for _t, v in th[-200:]):
             return
         if proc.poll() is not None:
-            raise AssertionError(f"the run ended before balancing: {proc.stderr.read()}")
+            out, err = proc.communicate()
+            reason = json.loads(out).get("stop_reason") if out.strip() else None
+            if reason in LOAD_STOPS:
+                raise HostStalled(reason)
+            raise AssertionError(f"the run ended before balancing ({reason}): {err}")
         time.sleep(0.05)
     raise AssertionError("not balancing in time")
+
+
+def with_retries(test, tmp_path: Path, attempts: int = 3):
+    """Run ``test(folder)``; a run a stalled host stopped before the test's event
+    (:data:`LOAD_STOPS`) is run again in a fresh folder, with a warning, at most
+    twice (docs/development.md, "A busy machine")."""
+    for n in range(attempts):
+        folder = tmp_path / f"try{n}"
+        folder.mkdir()
+        try:
+            return test(folder)
+        except HostStalled as exc:
+            if n == attempts - 1:
+                raise AssertionError(f"a stalled host stopped every attempt: {exc}") from None
+            warnings.warn(f"a stalled host stopped the run ({exc}), run again", stacklevel=2)
 
 
 def finish(proc, timeout: float = 30.0) -> dict:
@@ -106,8 +134,13 @@ def finish(proc, timeout: float = 30.0) -> dict:
 @pytest.mark.slow
 @pytest.mark.realtime
 def test_swings_up_and_balances_on_the_emulated_qube(tmp_path):
-    proc = start(tmp_path, "qube2://0?watchdog=0.5", 12, *SLACK)
-    st = finish(proc, timeout=120)
+    def attempt(folder):
+        st = finish(start(folder, "qube2://0?watchdog=0.5", 12, *SLACK), timeout=120)
+        if st["stop_reason"] in LOAD_STOPS:
+            raise HostStalled(st["stop_reason"])
+        return folder, st
+
+    tmp_path, st = with_retries(attempt, tmp_path)
     assert st["stop_reason"] == "duration", st
     assert st["swing_up"]["phase"] == "balancing"
     th = thetas(log_rows(tmp_path))
@@ -122,11 +155,14 @@ def test_swings_up_and_balances_on_the_emulated_qube(tmp_path):
 @pytest.mark.slow
 @pytest.mark.realtime
 def test_sigint_while_balancing_zeroes_the_motor_and_closes_the_board(tmp_path):
-    proc = start(tmp_path, "qube2://0?watchdog=0.5", 60, *SLACK)
-    wait_balancing(tmp_path, proc)
-    t_sig = time.monotonic()
-    os.kill(proc.pid, signal.SIGINT)
-    st = finish(proc)
+    def attempt(folder):
+        proc = start(folder, "qube2://0?watchdog=0.5", 60, *SLACK)
+        wait_balancing(folder, proc)
+        t_sig = time.monotonic()
+        os.kill(proc.pid, signal.SIGINT)
+        return folder, t_sig, finish(proc)
+
+    tmp_path, t_sig, st = with_retries(attempt, tmp_path)
     assert st["stop_reason"] == "signal"
     calls = read_record(tmp_path / "board.jsonl")
     after = [v for _i, m, v in voltages(calls) if m > t_sig]
@@ -142,15 +178,18 @@ def test_sigint_while_balancing_zeroes_the_motor_and_closes_the_board(tmp_path):
 def test_sigstop_the_board_watchdog_zeroes_the_motor(tmp_path):
     """Stopped for 0.6 s: the board's watchdog (0.2 s here) expires while the process
     cannot run; after SIGCONT the run stops within 2 s, never enabling again."""
-    proc = start(tmp_path, "qube2://0?watchdog=0.2", 60, "--max-pause", "0.15",
-                 "--silent-periods", "30")
-    wait_balancing(tmp_path, proc)
-    t_stop = time.monotonic()
-    os.kill(proc.pid, signal.SIGSTOP)
-    time.sleep(0.6)
-    t_cont = time.monotonic()
-    os.kill(proc.pid, signal.SIGCONT)
-    st = finish(proc)
+    def attempt(folder):
+        proc = start(folder, "qube2://0?watchdog=0.2", 60, "--max-pause", "0.15",
+                     "--silent-periods", "30")
+        wait_balancing(folder, proc)
+        t_stop = time.monotonic()
+        os.kill(proc.pid, signal.SIGSTOP)
+        time.sleep(0.6)
+        t_cont = time.monotonic()
+        os.kill(proc.pid, signal.SIGCONT)
+        return folder, t_stop, t_cont, finish(proc)
+
+    tmp_path, t_stop, t_cont, st = with_retries(attempt, tmp_path)
     assert st["stop_reason"] in ("paused", "watchdog_expired"), st
     calls = read_record(tmp_path / "board.jsonl")
     expired = index(calls, "event", lambda a: a[0] == "watchdog_expired")
