@@ -232,3 +232,7 @@ def test_an_amplifier_fault_while_balancing_stops_the_run(tmp_path, monkeypatch)
     writes_after = [m for _i, m, _v in voltages(calls) if m >= t_fault]
     assert writes_after and writes_after[0] - t_fault <= 0.005 + 1e-9  # the next tick
     check_safe_sequence(calls)
+    # the LED: blue (open), yellow (swinging), green (balancing), red (the board's fault)
+    leds = [tuple(c[3][1]) for c in calls if c[2] == "write_other"]
+    assert leds[0] == (0.0, 0.0, 1.0) and leds[-1] == (1.0, 0.0, 0.0)
+    assert leds.index((1.0, 1.0, 0.0)) < leds.index((0.0, 1.0, 0.0))
