@@ -446,3 +446,49 @@ def test_stribeck_on_the_bare_arm_sees_back_emf_plus_bearing(hw, clock, tmp_path
                            gain=2.0, hold=1.5)
     assert est["viscous"] == pytest.approx(hw.K_M + hw.D_R * hw.R_M / hw.K_T, rel=0.05)
     assert abs(est["coulomb"]) < 0.02
+
+
+@pytest.mark.slow
+def test_a_program_that_dies_with_the_motor_on_still_stops_and_closes(tmp_path):
+    """A script that drives the backend and ends with an uncaught exception, never
+    closing it: at exit the backend writes 0 V, turns the amplifier off, stops the
+    watchdog and closes the board."""
+    import os
+    import subprocess
+
+    from qube_helpers import FAKE, read_record
+
+    script = (
+        "from frictionlab.config import build_config\n"
+        "from frictionlab.realtime.qube import QUBE_RIG, QubeRig\n"
+        "rig = QubeRig('qube2://0?watchdog=1', build_config(sets=list(QUBE_RIG.items())))\n"
+        "rig.open(h=0.005)\n"
+        "rig.sample(0, 0)\n"
+        "rig.write(0, 0.4)\n"
+        "raise RuntimeError('the script died with the motor at 4 V')\n")
+    env = {**os.environ, "PYTHONPATH": FAKE, "FAKE_QUANSER_LOG": str(tmp_path / "b.jsonl")}
+    res = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 1 and "died with the motor" in res.stderr
+    calls = read_record(tmp_path / "b.jsonl")
+    assert any(v == 4.0 for _i, _m, v in voltages(calls))
+    check_safe_sequence(calls)
+
+
+def test_odd_commands_and_a_failing_set_up_leave_the_motor_off(hw, clock, monkeypatch):
+    rig, board = open_rig_on(hw, clock)
+    rig.sample(0, 0)
+    rig.write(0, math.nan)  # never from the loop, which zeroes a NaN u itself
+    assert board.voltage == 0.0 and not board.enabled
+    rig.write(1, 7.0)  # beyond the DAC: clipped to 10 V
+    assert board.voltage == 10.0 and board.enabled
+    rig.close()
+
+    def broken(self, *args):
+        raise hw.HILError(-2, "encoder reset failed")
+
+    monkeypatch.setattr(hw.HIL, "set_encoder_counts", broken)
+    with pytest.raises(RigError, match="encoder reset failed"):
+        QubeRig("qube2://0", qube_cfg()).open(h=0.005)
+    board = hw.BOARDS[-1]
+    assert board.closed and not board.enabled and board.voltage == 0.0
