@@ -1,4 +1,4 @@
-"""Rig backends: one small interface, three implementations.
+"""Rig backends: one small interface, four implementations.
 
 A rig is what the loop reads the raw signals (y, x, v of App. B) from and
 writes the DAC value u_DA to.  The interface (:class:`Rig`):
