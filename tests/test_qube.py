@@ -492,3 +492,43 @@ def test_odd_commands_and_a_failing_set_up_leave_the_motor_off(hw, clock, monkey
         QubeRig("qube2://0", qube_cfg()).open(h=0.005)
     board = hw.BOARDS[-1]
     assert board.closed and not board.enabled and board.voltage == 0.0
+
+
+def turn_by_hand(hw, clock, start_s, joint):
+    """The operator's hand on the emulated QUBE: one lap of ``joint`` over 1 s from
+    ``start_s`` (s of board time), the other joint held, then at rest."""
+    t0 = hw.BOARDS[-1].t0 if hw.BOARDS else clock.now_ns()
+    for i in range(1001):
+        def move(i=i):
+            b = hw.BOARDS[-1]
+            b.advance()
+            x = list(b.x)
+            turning = 0.0 if i == 1000 else 2 * math.pi
+            if joint == "pendulum":
+                x = [0.0, math.pi + 2 * math.pi * i / 1000, 0.0, turning]
+            else:
+                x = [2 * math.pi * i / 1000, 3 * math.pi, turning, 0.0]
+            b.x = tuple(x)
+        clock.call_at(t0 + int((start_s + i / 1000) * 1e9), move)
+
+
+@pytest.mark.slow
+def test_angle_scales_on_a_qube_is_a_check_of_the_encoders(hw, clock, tmp_path):
+    """App. B.1/B.2 by hand: the laps give back the scales in use (pi, pi) and the
+    hanging reading 0.5: on a QUBE the step checks the encoders, sets nothing."""
+    from frictionlab.studies.identification.onrig import (
+        analyse_run,
+        make_rig_experiment,
+        run_on_rig,
+    )
+
+    cfg = qube_cfg()
+    exp = make_rig_experiment("angle-scales", cfg, wait=20.0, settle=0.5)
+    turn_by_hand(hw, clock, 0.8, "pendulum")
+    turn_by_hand(hw, clock, 3.0, "arm")
+    st = run_on_rig(exp, cfg, "qube2://0", log_dir=tmp_path, clock=clock, realtime=False)
+    assert st["stop_reason"] == "finished", st["stop_detail"]
+    est = analyse_run("angle-scales", st["log"], cfg)
+    assert est["theta_scale"] == pytest.approx(math.pi, rel=1e-3)
+    assert est["arm_scale"] == pytest.approx(math.pi, rel=1e-3)
+    assert est["theta_bias"] == pytest.approx(0.5, abs=1e-3)
