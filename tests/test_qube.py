@@ -532,3 +532,14 @@ def test_angle_scales_on_a_qube_is_a_check_of_the_encoders(hw, clock, tmp_path):
     assert est["theta_scale"] == pytest.approx(math.pi, rel=1e-3)
     assert est["arm_scale"] == pytest.approx(math.pi, rel=1e-3)
     assert est["theta_bias"] == pytest.approx(0.5, abs=1e-3)
+
+
+def test_a_board_failing_while_waiting_for_the_lift_is_a_rig_error(hw, clock, monkeypatch):
+    def broken(self, *args):
+        raise hw.HILError(-3, "USB unplugged")
+
+    monkeypatch.setattr(hw.HIL, "read_encoder", broken)
+    with pytest.raises(RigError, match="USB unplugged"):
+        QubeRig("qube2://0?wait=upright", qube_cfg()).open(h=0.005, cancel=lambda: False)
+    board = hw.BOARDS[-1]
+    assert board.closed and not board.enabled

@@ -87,8 +87,7 @@ from ..model.params import ParamError
 from .protocol import SensorReading
 from .rigbase import BadReading, Rig, RigError
 
-__all__ = ["BOARD_TYPES", "COUNTS", "QUBE_RIG", "V_MAX", "QubeRig", "RigStop",
-           "parse_qube", "qube_rig_values"]
+__all__ = ["BOARD_TYPES", "COUNTS", "QUBE_RIG", "V_MAX", "QubeRig", "RigStop", "parse_qube"]
 
 #: Backend scheme -> Quanser board type.
 BOARD_TYPES = {"qube2": "qube_servo2_usb", "qube3": "qube_servo3_usb"}
@@ -167,14 +166,6 @@ def parse_qube(spec: str) -> tuple[str, str, dict]:
                              f"{spec!r}: unknown option {key}={value} (watchdog=S, "
                              "wait=upright)")
     return scheme, ident, options
-
-
-def qube_rig_values(spec) -> dict:
-    """The ``rig.*`` values a backend string implies (:data:`QUBE_RIG` for a QUBE, else
-    none)."""
-    if isinstance(spec, str) and urlsplit(spec).scheme in BOARD_TYPES:
-        return dict(QUBE_RIG)
-    return {}
 
 
 def _hil_module(scheme: str):
@@ -281,7 +272,12 @@ class QubeRig(Rig):
             raise RigError(f"{self.name}: {bad[1]} before the run (power the QUBE off and on; "
                            "docs/qube.md)")
         if self.options.get("wait") == "upright":
-            self._wait_upright(cancel)
+            try:
+                self._wait_upright(cancel)
+            except hw.HILError as exc:
+                self.close()
+                raise RigError(f"{self.name}: the board failed while waiting for the "
+                               f"pendulum: {_message(exc)}") from None
 
     def _wait_upright(self, cancel) -> None:
         """Read the pendulum (motor off) until it is lifted within WAIT_UPRIGHT."""
@@ -381,16 +377,15 @@ class QubeRig(Rig):
             volts = 0.0
         try:
             self._output(volts, enable)
+            colour = ("green" if abs(math.remainder(self.theta, _TWO_PI)) < UPRIGHT_LED
+                      else "yellow")
+            if colour != self.led and self.armed:
+                self._set_led(colour)
         except self.hw.HILError as exc:
             # refused (the watchdog expired in the meantime) or lost: nothing more is
             # written, and the next tick's sample stops the run with the reason
             self._refused = exc
             self.fault = "rig_fault"
-            return
-        theta = self.theta
-        colour = "green" if abs(math.remainder(theta, _TWO_PI)) < UPRIGHT_LED else "yellow"
-        if colour != self.led and self.armed:
-            self._set_led(colour)
 
     def _output(self, volts: float, enable: bool) -> None:
         """Enable the amplifier first if asked (it is off from :meth:`open` on), then
