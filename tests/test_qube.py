@@ -543,3 +543,30 @@ def test_a_board_failing_while_waiting_for_the_lift_is_a_rig_error(hw, clock, mo
         QubeRig("qube2://0?wait=upright", qube_cfg()).open(h=0.005, cancel=lambda: False)
     board = hw.BOARDS[-1]
     assert board.closed and not board.enabled
+
+
+def test_a_blocked_arm_under_voltage_stops_as_a_stall(hw, clock, monkeypatch):
+    """The board's own stall detection (more than 5 V, the arm still): the next
+    sample stops the run as ``motor_stall`` and the motor is off."""
+    from frictionlab.realtime.qube import RigStop
+
+    monkeypatch.setenv("FAKE_QUANSER_STATE", '{"arm_blocked": true}')
+    rig, board = open_rig_on(hw, clock)
+    with pytest.raises(RigStop) as stop:
+        for k in range(400):  # 2 s at 6 V
+            rig.sample(k, 0)
+            rig.write(k, 0.6)
+            clock.advance(H_NS)
+    assert stop.value.reason == "motor_stall" and 0.5 <= k * 0.005 <= 0.55
+    assert board.voltage == 0.0 and not board.enabled
+    rig.close()
+    check_safe_sequence(calls_of(board))
+
+
+def test_a_qube3_gets_its_card_options_before_any_output(hw, clock):
+    rig, board = open_rig_on(hw, clock, spec="qube3://0")
+    assert board.card_type == "qube_servo3_usb"
+    assert board.options["pwm_en"] == "0" and board.options["deadband_compensation"] == "0"
+    names = [c[1] for c in board.calls]
+    assert names.index("set_card_specific_options") < names.index("write_analog")
+    rig.close()

@@ -62,6 +62,9 @@ the watchdog and closes the board, each step on its own so that one failing
 does not skip the others, and is also registered to run at interpreter exit.
 Killed outright (SIGKILL), the board's watchdog zeroes the motor by itself.
 
+A QUBE-Servo 3 is given :data:`QUBE3_OPTIONS` when it is opened (Quanser's card
+options for it, deadband compensation off).
+
 The LED: blue, connected with the motor off (before the first tick, while
 waiting for the pendulum to be lifted, and after a run that stopped without a
 board fault); yellow, the loop drives the motor with the pendulum away from
@@ -101,6 +104,11 @@ WATCHDOG_PERIODS = 5
 UPRIGHT_LED = 0.3
 #: ``?wait=upright``: the run starts once the pendulum is lifted within this of upright (rad).
 WAIT_UPRIGHT = 0.1
+#: The QUBE-Servo 3's card-specific options: those of Quanser's own Python module for it
+#: (the amplifier in linear voltage mode, ``pwm_en=0``) except its deadband compensation,
+#: off: the friction the controller sees and compensates is then the rig's own.
+QUBE3_OPTIONS = ("deadband_compensation=0;pwm_en=0;enc0_velocity=3.0;enc1_velocity=3.0;"
+                 "min_diode_compensation=0.3;max_diode_compensation=1.5")
 
 #: The ``rig.*`` values the backend implies (u in volts; see the module docstring).
 QUBE_RIG = {"rig.theta_scale": math.pi, "rig.theta_bias": 0.5, "rig.arm_scale": math.pi,
@@ -257,6 +265,8 @@ class QubeRig(Rig):
         self._closed = False
         atexit.register(self.close)
         try:
+            if self.scheme == "qube3":
+                card.set_card_specific_options(QUBE3_OPTIONS, hw.MAX_STRING_LENGTH)
             self._output(0.0, False)
             self._digital[0] = 0
             card.write_digital(_DOUT, 1, self._digital)

@@ -61,11 +61,12 @@ Faults (``FAKE_QUANSER_FAULTS``, a JSON object; or :meth:`Board.inject`):
 high and the amplifier turns off), ``stall_at`` (digital input 1),
 ``stall_error_at`` (input 2, amplifier off).  A real stall is detected too: the
 motor at more than ``STALL_VOLTS`` with the arm slower than ``STALL_SPEED`` for
-``STALL_TIME`` (input 1), and for twice that (input 2, amplifier off).
+``STALL_TIME`` (input 1), and for ``STALL_ERROR_TIME`` more (input 2, amplifier off).
 ``FAKE_QUANSER_STATE`` (JSON: ``arm``, ``arm_rate``, ``pendulum``,
 ``pendulum_rate`` in rad and rad/s, the pendulum from hanging) sets the start;
 ``"pendulum_module": false`` takes the pendulum off (it is held by magnets on a
-real QUBE): the arm turns alone.
+real QUBE): the arm turns alone; ``"arm_blocked": true`` holds the arm still (an
+obstacle: a stall under voltage).
 
 Every call is recorded (:attr:`Board.calls`: ``(t_s, name, args)``, board time
 in seconds) and, with ``FAKE_QUANSER_LOG=PATH``, appended to PATH as JSON
@@ -83,7 +84,7 @@ import math
 import os
 import time
 
-__all__ = ["BOARDS", "CLOCK", "HIL", "Board", "DigitalState", "HILError"]
+__all__ = ["BOARDS", "CLOCK", "HIL", "MAX_STRING_LENGTH", "Board", "DigitalState", "HILError"]
 
 # --- Quanser's published QUBE-Servo 2 parameters ----------------------------------
 R_M = 8.4          # armature resistance, ohm
@@ -99,7 +100,10 @@ G = 9.81
 COUNTS = 2048      # encoder counts per revolution
 V_RANGE = 15.0     # the amplifier's output range, V
 DT_MAX = 0.001     # largest integration step, s
-STALL_VOLTS, STALL_SPEED, STALL_TIME = 5.0, 0.5, 1.0
+#: Stall detection: more than 5 V with the arm (nearly) still for STALL_TIME gives "stall
+#: detected"; that for STALL_ERROR_TIME more, "stall error" (Quanser: about 3 s), the
+#: amplifier then off.
+STALL_VOLTS, STALL_SPEED, STALL_TIME, STALL_ERROR_TIME = 5.0, 0.5, 0.5, 3.0
 
 TACH = 14000
 LED = (11000, 11001, 11002)
@@ -115,6 +119,10 @@ QERR_NOT_OPEN = -44
 QERR_WATCHDOG_EXPIRED = -1073
 QERR_BAD_CHANNEL = -45
 QERR_NO_EXPIRATION_STATE = -46
+
+
+#: The SDK's "use the whole string" length for string arguments.
+MAX_STRING_LENGTH = 2147483647
 
 
 class HILError(Exception):
@@ -171,14 +179,17 @@ def energy(x):
     return kin + _GP * (c + 1.0)
 
 
-def rk4(x, v_motor, dt, pendulum=True):
+def rk4(x, v_motor, dt, pendulum=True, blocked=False):
     """One RK4 step of (theta, alpha, theta', alpha') with motor voltage ``v_motor``
     (None: the amplifier is off, no current); ``pendulum`` False: the pendulum
-    module taken off (the arm alone, alpha frozen)."""
+    module taken off (the arm alone, alpha frozen); ``blocked``: the arm held still
+    (an obstacle; the pendulum swings about the still arm)."""
 
     def f(s):
         _, al, thd, ald = s
         tau = 0.0 if v_motor is None else K_T * (v_motor - K_M * thd) / R_M
+        if blocked:
+            return (0.0, ald, 0.0, (_GP * math.sin(al) - D_P * ald) / _J_P)
         if not pendulum:
             return (thd, 0.0, (tau - D_R * thd) / _J_R, 0.0)
         a1, a2 = accelerations(al, thd, ald, tau)
@@ -225,10 +236,12 @@ class Board:
         self.x = (float(st.get("arm", 0.0)), math.pi + float(st.get("pendulum", 0.0)),
                   float(st.get("arm_rate", 0.0)), float(st.get("pendulum_rate", 0.0)))
         self.pendulum = bool(st.get("pendulum_module", True))
+        self.blocked = bool(st.get("arm_blocked", False))
         self.counts0 = [self._counts()[0], self._counts()[1]]
         self.voltage = 0.0        # analog output 0 as last written (V)
         self.enabled = False      # digital output 0
         self.led = [0.0, 0.0, 0.0]
+        self.options: dict = {}
         self.faults = {k: float(v) for k, v in
                        json.loads(os.environ.get("FAKE_QUANSER_FAULTS") or "{}").items()}
         self.amp_fault = self.stall = self.stall_error = False
@@ -261,7 +274,7 @@ class Board:
     def _integrate(self, t_end: int) -> None:
         while self.t < t_end:
             dt = min(DT_MAX, (t_end - self.t) / 1e9)
-            self.x = rk4(self.x, self._motor(), dt, self.pendulum)
+            self.x = rk4(self.x, self._motor(), dt, self.pendulum, self.blocked)
             self.t = min(t_end, self.t + max(1, round(dt * 1e9)))
             self._stall_check()
 
@@ -274,7 +287,7 @@ class Board:
             if held >= STALL_TIME and not self.stall:
                 self.stall = True
                 self._event("stall_detected")
-            if held >= 2 * STALL_TIME and not self.stall_error:
+            if held >= STALL_TIME + STALL_ERROR_TIME and not self.stall_error:
                 self.stall_error = True
                 self._event("stall_error")
         else:
@@ -460,6 +473,14 @@ class HIL:
             if ch not in LED:
                 raise HILError(QERR_BAD_CHANNEL, f"no other output {ch}")
             b.led[LED.index(ch)] = v
+
+    def set_card_specific_options(self, options, size):
+        b = self._b()
+        b._record("set_card_specific_options", str(options), int(size))
+        if not isinstance(options, str) or b.card_type != "qube_servo3_usb":
+            raise HILError(QERR_BAD_CHANNEL, f"options {options!r} not supported by "
+                           f"{b.card_type}")
+        b.options = dict(item.split("=", 1) for item in options.split(";") if item)
 
     def set_encoder_counts(self, channels, num_channels, buffer):
         b = self._b()
