@@ -92,6 +92,11 @@ class HostStalled(Exception):
     """The run stopped on a stalled host before the test could act (run it again)."""
 
 
+class TimingMiss(HostStalled):
+    """A timing statistic a loaded host missed (the signal's handler ran late): the
+    one kind of assertion that may be retried (docs/development.md)."""
+
+
 def wait_balancing(tmp_path: Path, proc, timeout: float = 60.0) -> None:
     """Until the log shows the pendulum within 0.2 rad of upright for 1 s."""
     end = time.monotonic() + timeout
@@ -160,17 +165,21 @@ def test_sigint_while_balancing_zeroes_the_motor_and_closes_the_board(tmp_path):
         wait_balancing(folder, proc)
         t_sig = time.monotonic()
         os.kill(proc.pid, signal.SIGINT)
-        return folder, t_sig, finish(proc)
+        st = finish(proc)
+        assert st["stop_reason"] == "signal"
+        calls = read_record(folder / "board.jsonl")
+        check_safe_sequence(calls)
+        assert any(v != 0.0 for _i, m, v in voltages(calls) if m < t_sig)
+        after = [v for _i, m, v in voltages(calls) if m > t_sig]
+        assert after and after[-1] == 0.0
+        closed = next(m for _t, m, n, _a in calls if n == "close")
+        # timing: the handler runs in the main thread, which a loaded host may
+        # schedule late (the loop ticks on meanwhile): measured, retried
+        if any(v != 0.0 for v in after[2:]) or not closed - t_sig < 1.0:
+            raise TimingMiss(f"writes after the signal {after[:8]}, closed after "
+                             f"{closed - t_sig:.3f} s")
 
-    tmp_path, t_sig, st = with_retries(attempt, tmp_path)
-    assert st["stop_reason"] == "signal"
-    calls = read_record(tmp_path / "board.jsonl")
-    after = [v for _i, m, v in voltages(calls) if m > t_sig]
-    assert any(v != 0.0 for _i, m, v in voltages(calls) if m < t_sig)
-    assert after and all(v == 0.0 for v in after[2:]), after[:5]
-    closed = next(m for _t, m, n, _a in calls if n == "close")
-    assert closed - t_sig < 1.0
-    check_safe_sequence(calls)
+    with_retries(attempt, tmp_path)
 
 
 @pytest.mark.slow
