@@ -118,7 +118,7 @@ INSTALL_HINT = ("the {scheme} backend needs Quanser's HIL API for Python (module
                 "quanser.hardware), which is not installed: install the Quanser SDK (Linux: "
                 "sudo apt-get install quanser-sdk from Quanser's repository) and its Python "
                 "package into frictionlab's environment (pip install --find-links "
-                "/opt/quanser/python quanser_api); see docs/qube.md")
+                "SDK_PYTHON_FOLDER quanser_api); see docs/qube.md")
 
 _FORMS = "qube2://ID or qube3://ID[?watchdog=S][&wait=upright] (ID usually 0)"
 
