@@ -104,8 +104,8 @@ WATCHDOG_PERIODS = 5
 UPRIGHT_LED = 0.3
 #: ``?wait=upright``: the run starts once the pendulum is lifted within this of upright (rad).
 WAIT_UPRIGHT = 0.1
-#: The QUBE-Servo 3's card-specific options: those of Quanser's own Python module for it
-#: (the amplifier in linear voltage mode, ``pwm_en=0``) except its deadband compensation,
+#: The QUBE-Servo 3's card-specific options: those Quanser's own Python module gives it
+#: (``pwm_en=0``, encoder velocity and diode settings) except its deadband compensation,
 #: off: the friction the controller sees and compensates is then the rig's own.
 QUBE3_OPTIONS = ("deadband_compensation=0;pwm_en=0;enc0_velocity=3.0;enc1_velocity=3.0;"
                  "min_diode_compensation=0.3;max_diode_compensation=1.5")
