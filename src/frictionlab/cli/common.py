@@ -231,7 +231,8 @@ def config_from_args(args) -> Config:
     friction model or compensator ignores."""
     from ..config import inert_keys, load_toml
 
-    items = [*(load_toml(args.config) if args.config else []), *parse_sets(args.sets)]
+    items = [*backend_rig_items(args), *(load_toml(args.config) if args.config else []),
+             *parse_sets(args.sets)]
     cfg = build_config(
         design=args.design,
         friction=getattr(args, "friction", "classical"),
@@ -247,6 +248,18 @@ def config_from_args(args) -> Config:
                 why = f"with the {cfg.compensation_kind!r} compensator"
             note(args, f"frictionlab: note: {key} has no effect {why}")
     return cfg
+
+
+def backend_rig_items(args) -> list[tuple[str, float]]:
+    """The ``rig.*`` values ``--backend`` implies, applied before ``--config`` and
+    ``--set`` (a QUBE-Servo's: u in volts, its encoders' channels; none for the others)."""
+    spec = getattr(args, "backend", None)
+    if not isinstance(spec, str) or not spec.startswith(("qube2:", "qube3:")):
+        return []
+    # start-up time: the real-time package is imported only when a QUBE is named
+    from ..realtime.qube import QUBE_RIG
+
+    return list(QUBE_RIG.items())
 
 
 def hanging_start(args, cfg: Config) -> Config:

@@ -8,7 +8,7 @@ import os
 import signal
 import sys
 
-from ..config import PLANT_FRICTION_KINDS, build_config
+from ..config import PLANT_FRICTION_KINDS, build_config, load_toml
 from ..model.limit_cycles import FEATURES
 from ..model.params import ParamError
 from ..studies.identification.experiments import EXPERIMENTS, IdentificationError
@@ -18,6 +18,7 @@ from .common import (
     add_engine_args,
     add_key_args,
     add_stall_args,
+    backend_rig_items,
     check_engine_args,
     check_output_dir,
     check_output_path,
@@ -413,8 +414,10 @@ def cmd_experiment(args) -> int:
 
     name = args.experiment
     friction = args.friction or _DEFAULT_FRICTION[name]
-    cfg = build_config(design=args.design, friction=friction, config_file=args.config,
-                       sets=parse_sets(args.sets))
+    cfg = build_config(design=args.design, friction=friction,
+                       sets=[*backend_rig_items(args),
+                             *(load_toml(args.config) if args.config else []),
+                             *parse_sets(args.sets)])
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     if args.plot and name in ("velocity-scale", "angle-scales"):
@@ -642,7 +645,8 @@ def register_cli(sub) -> None:
     src.add_argument("--log", metavar="FILE", help="analyse a recorded log (.csv or .dat)")
     src.add_argument("--simulate", action="store_true",
                      help="run the experiment on the simulated rig (default)")
-    src.add_argument("--backend", metavar="sim|udp://HOST:PORT|serial://DEVICE", default=None,
+    src.add_argument("--backend", default=None,
+                     metavar="sim|udp://HOST:PORT|serial://DEVICE|qube2://ID|qube3://ID",
                      help="run the experiment on a rig through the real-time loop (the loop "
                           "of `frictionlab run`: same timing, safety and logging), then "
                           "analyse its log")

@@ -80,6 +80,14 @@ class RigScaling(Validated):
     u_scale: float = param(-0.022, "k_u: signed DAC value per m/s^2 of u, u_DA = u_scale*u "
                            "(App. B.4; negative on the thesis's rig; not 0)", "1/(m/s^2)",
                            lo=-1.0, hi=1.0)
+    arm_sign: int = param(1, "direction of the arm encoder against the arm angle Omega "
+                          "(encoder rigs, e.g. the QUBE-Servo: +1 as the maker wires it, "
+                          "-1 for an encoder counting the other way)", "1", lo=-1, hi=1,
+                          integer=True)
+    pendulum_sign: int = param(1, "direction of the pendulum encoder against theta (encoder "
+                               "rigs, e.g. the QUBE-Servo: +1 as the maker wires it, -1 for "
+                               "an encoder counting the other way)", "1", lo=-1, hi=1,
+                               integer=True)
     arm_bias: float = 0.0  # x_0 (not a key): arm reading at Omega = 0
 
     def __post_init__(self) -> None:
@@ -88,6 +96,10 @@ class RigScaling(Validated):
             raise ParamError("rig.u_scale", 0.0, "[-1, 1] without 0",
                              "rig.u_scale = 0 would give the motor no control signal; "
                              "allowed [-1, 1] without 0")
+        for key in ("arm_sign", "pendulum_sign"):
+            if getattr(self, key) == 0:
+                raise ParamError(f"rig.{key}", 0, "+1 or -1",
+                                 f"rig.{key} = 0: the sign must be +1 or -1")
         b = check_range("arm_bias", self.arm_bias, -1.0, 1.0)
         object.__setattr__(self, "arm_bias", b)
 
