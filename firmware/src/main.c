@@ -82,7 +82,7 @@ uint8_t reset_flags __attribute__((section(".noinit")));
 
 static rig_t rig;
 static frame_decoder_t decoder;
-static quad_t pend_q, arm_q;
+static qdec_t pend_q, arm_q;
 static volatile uint8_t rx_buf[RX_SIZE];
 static volatile uint8_t rx_head, rx_tail;
 static volatile uint8_t ms_pending;

@@ -1,6 +1,6 @@
 #include "quad.h"
 
-void quad_init(quad_t *q, uint8_t ab)
+void quad_init(qdec_t *q, uint8_t ab)
 {
     q->count = 0;
     q->state = ab & 3;

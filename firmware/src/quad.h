@@ -15,13 +15,13 @@ typedef struct {
     volatile int32_t count;
     volatile uint8_t state;   /* last (A << 1) | B */
     volatile uint8_t errors;  /* two-state jumps seen (saturates at 255) */
-} quad_t;
+} qdec_t;
 
 /* Start from the channels' present levels, count 0. */
-void quad_init(quad_t *q, uint8_t ab);
+void quad_init(qdec_t *q, uint8_t ab);
 
 /* A channel changed: ab = (A << 1) | B now.  Called from the pin interrupt. */
-static inline void quad_update(quad_t *q, uint8_t ab)
+static inline void quad_update(qdec_t *q, uint8_t ab)
 {
     /* QUAD_STEP[prev * 4 + now]: +1 forwards, -1 backwards, 0 unchanged; 2 = jump. */
     static const int8_t QUAD_STEP[16] = {
