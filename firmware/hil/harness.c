@@ -103,10 +103,12 @@ static avr_cycle_count_t t_cycle0;      /* emulated time origin (the pty opened)
 static int realtime;
 static int stopped;
 static double wall0;
+static int free_run; /* benchmark: no waiting for the wall clock */
 
 /* report */
 static double mark_ms = -1, last_nonzero_ms = -1, hang_ms = -1, hang_last_nonzero_ms = -1;
 static double max_lag_ms;
+static double last_rx_ms, last_tx_ms;
 static long plant_steps, resets, tx_bytes, rx_bytes;
 static double hang_at = -1;
 static long hand_edge_us = 20; /* the hand's edge spacing while raising the pendulum */
@@ -217,6 +219,7 @@ static void uart_out_cb(avr_irq_t *irq, uint32_t value, void *param)
     if (txlen < sizeof txbuf)
         txbuf[txlen++] = (uint8_t)value;
     tx_bytes++;
+    last_tx_ms = emu_ms();
 }
 
 static void uart_xon_cb(avr_irq_t *irq, uint32_t value, void *param)
@@ -256,6 +259,7 @@ static void inject_rx(void)
             held = 0;
         avr_raise_irq(uart_in, b);
         rx_bytes++;
+        last_rx_ms = emu_ms();
     }
 }
 
@@ -456,7 +460,7 @@ int hil_run_ms(void)
     while (avr->cycle < target && !stopped) {
         read_pty();
         double ahead = emu_ms() - (now_ms() - wall0);
-        if (ahead > 0) {
+        if (ahead > 0 && !free_run) {
             /* ahead of the wall clock: wait, but wake for bytes at once */
             struct pollfd p = {pty_master, POLLIN, 0};
             struct timespec ts = {(time_t)(ahead / 1e3), (long)(fmod(ahead, 1e3) * 1e6)};
@@ -470,6 +474,19 @@ int hil_run_ms(void)
         flush_tx();
     }
     return stopped ? -1 : 0;
+}
+
+/* Benchmarks: run as fast as the host can (1) or at wall-clock speed (0). */
+void hil_free_run(int on)
+{
+    free_run = on;
+}
+
+/* Emulated times (ms) the last byte went into the UART and came out of it. */
+void hil_last_io(double *rx, double *tx)
+{
+    *rx = last_rx_ms;
+    *tx = last_tx_ms;
 }
 
 /* The controller was stopped now. */

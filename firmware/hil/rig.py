@@ -58,6 +58,7 @@ class ThesisPlant:
         self.u_scale = cfg.rig.u_scale
         self.plant = SimulatedPlant(cfg)
         self.state = self.plant.init(args.theta0)
+        self.plant.step(self.state, 0.0)  # compiled now, not in the real-time loop
 
     def angles(self) -> tuple[float, float]:
         return float(self.state.x[0]), float(self.state.x[2])
@@ -119,6 +120,8 @@ def main(argv=None) -> int:
                    help="edge spacing while the hand raises the pendulum (us)")
     p.add_argument("--hang-at", type=float, default=-1.0,
                    help="with rig-hang.elf: the firmware hangs S seconds after the pty opened")
+    p.add_argument("--no-realtime", action="store_true",
+                   help="stay at normal priority (no SCHED_FIFO)")
     args = p.parse_args(argv)
     plant = PLANTS[args.plant](args)
     # simavr prints on stdout: this process's own lines go to the real stdout
@@ -134,6 +137,15 @@ def main(argv=None) -> int:
                     args.hang_at):
         print(f"rig.py: {lib.hil_error().decode()}", file=sys.stderr)
         return 1
+    if not args.no_realtime:
+        # like rig-sim: SCHED_FIFO on the CPU the controller's loop uses by default (a
+        # request and its reply hand over on one CPU); the emulation needs about 6 % of
+        # a CPU (docs/performance.md), the rest of the time it sleeps
+        from frictionlab.realtime.osrt import default_cpu, try_realtime_priority
+
+        note = try_realtime_priority(40, default_cpu())
+        if note:
+            print(f"rig.py: {note}", file=sys.stderr)
     print("pty", lib.hil_pty().decode(), file=out, flush=True)
     duty, held, set_counts, run_ms = lib.hil_duty, lib.hil_held, lib.hil_set_counts, lib.hil_run_ms
     while not stop:

@@ -201,9 +201,10 @@ static void hardware_init(void)
     TCCR2B = _BV(CS22);
     OCR2A = (uint8_t)(F_CPU / 64 / 1000 - 1);
     TIMSK2 = _BV(OCIE2A);
-    /* UART0: BAUD 8N1 with double speed */
-    UBRR0 = (uint16_t)(F_CPU / (8UL * BAUD) - 1);
+    /* UART0: BAUD 8N1 with double speed (U2X first: an emulator derives the
+     * baud rate when UBRR is written) */
     UCSR0A = _BV(U2X0);
+    UBRR0 = (uint16_t)(F_CPU / (8UL * BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
     set_sleep_mode(SLEEP_MODE_IDLE);

@@ -69,22 +69,25 @@ void rig_tick_ms(rig_t *r)
     }
 }
 
-static float wrap_counts(int32_t count, int32_t n, int32_t offset)
+/* 2 m / n - 1 for m = (count + offset) mod n in [0, n): the integer remainder
+ * keeps every count exact; a multiplication, not a division (the reply's
+ * latency) */
+static float wrap_counts(int32_t count, int32_t n, int32_t offset, float two_over_n)
 {
     int32_t m = (count + offset) % n;
     if (m < 0)
         m += n;
-    return 2.0f * (float)m / (float)n - 1.0f;
+    return (float)m * two_over_n - 1.0f;
 }
 
 float rig_raw_pendulum(int32_t count)
 {
-    return wrap_counts(count, PEND_COUNTS, 0);
+    return wrap_counts(count, PEND_COUNTS, 0, (float)(2.0 / PEND_COUNTS));
 }
 
 float rig_raw_arm(int32_t count)
 {
-    return wrap_counts(count, ARM_COUNTS, ARM_COUNTS / 2);
+    return wrap_counts(count, ARM_COUNTS, ARM_COUNTS / 2, (float)(2.0 / ARM_COUNTS));
 }
 
 float rig_raw_velocity(int32_t delta)
