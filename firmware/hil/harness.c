@@ -92,6 +92,7 @@ static avr_t *avr;
 static const pins_t *pins;
 static encoder_t enc[2];
 static int pty_master = -1, pty_slave = -1;
+static char link_name[128];
 static avr_irq_t *uart_in;
 static int uart_full;
 static uint8_t txbuf[4096];
@@ -109,6 +110,12 @@ static int free_run; /* benchmark: no waiting for the wall clock */
 static double mark_ms = -1, last_nonzero_ms = -1, hang_ms = -1, hang_last_nonzero_ms = -1;
 static double max_lag_ms;
 static double last_rx_ms, last_tx_ms;
+/* wall-clock time from the last bytes read from the pty to the next bytes
+ * written to it (the rig's reply time as the host delivers it) */
+#define NREPLY 65536
+static float reply_wall_ms[NREPLY];
+static long n_reply;
+static double read_wall = -1;
 static long plant_steps, resets, tx_bytes, rx_bytes;
 static double hang_at = -1;
 static long hand_edge_us = 20; /* the hand's edge spacing while raising the pendulum */
@@ -238,6 +245,11 @@ static void flush_tx(void)
 {
     if (!txlen || pty_master < 0)
         return;
+    if (read_wall >= 0) {
+        if (n_reply < NREPLY)
+            reply_wall_ms[n_reply++] = (float)(now_ms() - read_wall);
+        read_wall = -1;
+    }
     /* nobody reading (between sessions): the bytes are lost, as on a wire */
     (void)!write(pty_master, txbuf, txlen);
     txlen = 0;
@@ -273,6 +285,7 @@ static void read_pty(void)
         ssize_t r = read(pty_master, buf, room < sizeof buf ? room : sizeof buf);
         if (r <= 0)
             break;
+        read_wall = now_ms();
         for (ssize_t i = 0; i < r; i++) {
             rxq[(rxq_head + rxq_len) % sizeof rxq] = buf[i];
             rxq_len++;
@@ -296,6 +309,7 @@ static int open_pty(void)
     cfmakeraw(&t);
     tcsetattr(pty_slave, TCSANOW, &t);
     fcntl(pty_master, F_SETFL, fcntl(pty_master, F_GETFL) | O_NONBLOCK);
+    snprintf(link_name, sizeof link_name, "%s", name);
     return 0;
 }
 
@@ -420,7 +434,7 @@ int hil_open(const char *elf, const char *mcu, int32_t pend0, int32_t arm0,
 
 const char *hil_pty(void)
 {
-    return pty_master >= 0 ? ptsname(pty_master) : "";
+    return link_name;
 }
 
 const char *hil_error(void)
@@ -496,9 +510,22 @@ void hil_mark(void)
         mark_ms = emu_ms();
 }
 
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
 /* The report as a JSON object. */
 int hil_report(char *buf, int n)
 {
+    double p50 = 0, p99 = 0, pmax = 0;
+    if (n_reply) {
+        qsort(reply_wall_ms, (size_t)n_reply, sizeof(float), cmp_float);
+        p50 = reply_wall_ms[n_reply / 2];
+        p99 = reply_wall_ms[(n_reply * 99) / 100];
+        pmax = reply_wall_ms[n_reply - 1];
+    }
     char mark[64] = "null", hang[64] = "null";
     if (mark_ms >= 0)
         snprintf(mark, sizeof mark, "%.3f",
@@ -510,7 +537,10 @@ int hil_report(char *buf, int n)
                     "{\"emulated_s\": %.4f, \"plant_steps\": %ld, \"resets\": %ld, "
                     "\"rx_bytes\": %ld, \"tx_bytes\": %ld, \"max_lag_ms\": %.3f, "
                     "\"released\": %s, \"pwm_nonzero_after_mark_ms\": %s, "
-                    "\"pwm_nonzero_after_hang_ms\": %s}",
+                    "\"pwm_nonzero_after_hang_ms\": %s, "
+                    "\"reply_wall_ms\": {\"n\": %ld, \"p50\": %.3f, \"p99\": %.3f, "
+                    "\"max\": %.3f}, \"uart_full\": %d, \"rx_queued\": %ld}",
                     emu_ms() / 1e3, plant_steps, resets, rx_bytes, tx_bytes, max_lag_ms,
-                    held ? "false" : "true", mark, hang);
+                    held ? "false" : "true", mark, hang, n_reply, p50, p99, pmax, uart_full,
+                    (long)rxq_len);
 }

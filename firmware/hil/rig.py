@@ -138,12 +138,16 @@ def main(argv=None) -> int:
         print(f"rig.py: {lib.hil_error().decode()}", file=sys.stderr)
         return 1
     if not args.no_realtime:
-        # like rig-sim: SCHED_FIFO on the CPU the controller's loop uses by default (a
-        # request and its reply hand over on one CPU); the emulation needs about 6 % of
-        # a CPU (docs/performance.md), the rest of the time it sleeps
+        # SCHED_FIFO like rig-sim, but on another CPU than the controller's loop (which
+        # takes the last one): the emulation needs the CPU continuously (about 6 % of
+        # it, docs/performance.md) and the loop's start-up and pre-deadline wait at a
+        # higher priority on a shared CPU held it back by half a second
         from frictionlab.realtime.osrt import default_cpu, try_realtime_priority
 
-        note = try_realtime_priority(40, default_cpu())
+        last = default_cpu()
+        cpus = sorted(os.sched_getaffinity(0))
+        cpu = next((c for c in cpus if c != last), last)
+        note = try_realtime_priority(40, cpu)
         if note:
             print(f"rig.py: {note}", file=sys.stderr)
     print("pty", lib.hil_pty().decode(), file=out, flush=True)
