@@ -109,6 +109,7 @@ static int free_run; /* benchmark: no waiting for the wall clock */
 /* report */
 static double mark_ms = -1, last_nonzero_ms = -1, hang_ms = -1, hang_last_nonzero_ms = -1;
 static double max_lag_ms;
+static double duty_at_mark, duty_at_hang;
 static double last_rx_ms, last_tx_ms;
 /* wall-clock time from the last bytes read from the pty to the next bytes
  * written to it (the rig's reply time as the host delivers it) */
@@ -208,6 +209,7 @@ static avr_cycle_count_t monitor(avr_t *a, avr_cycle_count_t when, void *param)
     }
     if (hang_at >= 0 && hang_ms < 0 && t >= hang_at * 1e3) {
         hang_ms = t;
+        duty_at_hang = duty();
         hanging = 1;
         avr_raise_irq(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(pins->hang_port),
                                     pins->hang_bit), 1);
@@ -506,8 +508,10 @@ void hil_last_io(double *rx, double *tx)
 /* The controller was stopped now. */
 void hil_mark(void)
 {
-    if (mark_ms < 0)
+    if (mark_ms < 0) {
         mark_ms = emu_ms();
+        duty_at_mark = duty();
+    }
 }
 
 static int cmp_float(const void *a, const void *b)
@@ -537,10 +541,11 @@ int hil_report(char *buf, int n)
                     "{\"emulated_s\": %.4f, \"plant_steps\": %ld, \"resets\": %ld, "
                     "\"rx_bytes\": %ld, \"tx_bytes\": %ld, \"max_lag_ms\": %.3f, "
                     "\"released\": %s, \"pwm_nonzero_after_mark_ms\": %s, "
-                    "\"pwm_nonzero_after_hang_ms\": %s, "
+                    "\"pwm_nonzero_after_hang_ms\": %s, \"duty_at_mark\": %.4f, "
+                    "\"duty_at_hang\": %.4f, "
                     "\"reply_wall_ms\": {\"n\": %ld, \"p50\": %.3f, \"p99\": %.3f, "
                     "\"max\": %.3f}, \"uart_full\": %d, \"rx_queued\": %ld}",
                     emu_ms() / 1e3, plant_steps, resets, rx_bytes, tx_bytes, max_lag_ms,
-                    held ? "false" : "true", mark, hang, n_reply, p50, p99, pmax, uart_full,
+                    held ? "false" : "true", mark, hang, duty_at_mark, duty_at_hang, n_reply, p50, p99, pmax, uart_full,
                     (long)rxq_len);
 }

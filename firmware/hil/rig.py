@@ -121,7 +121,8 @@ def main(argv=None) -> int:
     p.add_argument("--hang-at", type=float, default=-1.0,
                    help="with rig-hang.elf: the firmware hangs S seconds after the pty opened")
     p.add_argument("--no-realtime", action="store_true",
-                   help="stay at normal priority (no SCHED_FIFO)")
+                   help="normal priority (default: SCHED_FIFO on another CPU than the "
+                        "controller's loop)")
     args = p.parse_args(argv)
     plant = PLANTS[args.plant](args)
     # simavr prints on stdout: this process's own lines go to the real stdout
@@ -132,16 +133,10 @@ def main(argv=None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     signal.signal(signal.SIGUSR1, lambda *_: lib.hil_mark())
-    c = counts(*plant.angles())
-    if lib.hil_open(args.elf.encode(), args.mcu.encode(), c[0], c[1], args.hand_edge_us,
-                    args.hang_at):
-        print(f"rig.py: {lib.hil_error().decode()}", file=sys.stderr)
-        return 1
-    if not args.no_realtime:
+    if not args.no_realtime:  # before the clock starts: the import takes a while
         # SCHED_FIFO like rig-sim, but on another CPU than the controller's loop (which
-        # takes the last one): the emulation needs the CPU continuously (about 6 % of
-        # it, docs/performance.md) and the loop's start-up and pre-deadline wait at a
-        # higher priority on a shared CPU held it back by half a second
+        # takes the last one), so that the loop's own work never holds the emulation
+        # back; it needs about 6 % of that CPU (docs/performance.md)
         from frictionlab.realtime.osrt import default_cpu, try_realtime_priority
 
         last = default_cpu()
@@ -150,6 +145,11 @@ def main(argv=None) -> int:
         note = try_realtime_priority(40, cpu)
         if note:
             print(f"rig.py: {note}", file=sys.stderr)
+    c = counts(*plant.angles())
+    if lib.hil_open(args.elf.encode(), args.mcu.encode(), c[0], c[1], args.hand_edge_us,
+                    args.hang_at):
+        print(f"rig.py: {lib.hil_error().decode()}", file=sys.stderr)
+        return 1
     print("pty", lib.hil_pty().decode(), file=out, flush=True)
     duty, held, set_counts, run_ms = lib.hil_duty, lib.hil_held, lib.hil_set_counts, lib.hil_run_ms
     while not stop:

@@ -1,0 +1,163 @@
+"""The rig firmware's AVR build in the simavr emulator (firmware/hil): against
+the real controller (``firmware/test-hil``), the encoders at high speed, and
+the AVR's hardware watchdog.  Needs avr-gcc, avr-libc and libsimavr-dev
+(scripts/install-system-deps).  The portable core's unit tests:
+tests/test_firmware.py."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from frictionlab.io.logs import read_log
+from frictionlab.realtime import protocol as P
+
+FIRMWARE = Path(__file__).resolve().parents[1] / "firmware"
+BUILD = FIRMWARE / "build"
+COUNTS = 2400
+PERIOD_MS = 5.0
+
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
+
+
+def test_hil(*args: str) -> dict:
+    res = subprocess.run([str(FIRMWARE / "test-hil"), *args], capture_output=True, text=True,
+                         timeout=300, env={"PYTHON": sys.executable, "PATH": "/usr/bin:/bin"},
+                         process_group=0)
+    assert res.returncode == 0, res.stderr[-3000:] + res.stdout[-3000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+test_hil.__test__ = False  # a helper, not a test
+
+
+def test_the_controller_balances_the_emulated_rig(tmp_path):
+    """The acceptance run, shortened to the 3 s it judges plus one: ends by its
+    duration, at most 1 % missed deadlines, |theta| < 0.2 rad over the last 3 s."""
+    out = test_hil("--duration", "4", "--keep", str(tmp_path))
+    run = out["run"]
+    assert run["stop_reason"] == "duration", out
+    assert run["missed"] <= 0.01 * run["ticks"], out
+    assert out["flash_bytes"] <= 32 * 1024 and out["ram_bytes"] <= 1536
+    assert out["watchdog_ms"] == 50 and out["pwm_zero_after_stall_ms"] is None
+    log = read_log(run["log"])
+    t, theta = log["t"], log["theta_m"]
+    last = t > t[-1] - 3.0
+    assert np.nanmax(np.abs(theta[last])) < 0.2
+    assert np.isfinite(theta[last]).mean() > 0.9  # readings arrived
+    assert out["harness"]["resets"] == 0 and out["harness"]["released"]
+
+
+def test_a_stalled_controller_zeroes_the_motor_within_the_watchdog_time():
+    out = test_hil("--duration", "10", "--stall-at", "1")
+    assert out["harness"]["duty_at_mark"] != 0.0, out  # the motor ran when it stalled
+    assert out["pwm_zero_after_stall_ms"] is not None
+    assert out["pwm_zero_after_stall_ms"] <= out["watchdog_ms"] + 2 * PERIOD_MS, out
+    assert out["run"]["stop_reason"] in ("paused", "rig_fault"), out
+
+
+class Rig:
+    """firmware/hil/rig.py as a process, and a serial line to its pty."""
+
+    def __init__(self, *args: str, elf: str = "rig.elf"):
+        subprocess.run(["make", "-s", "-C", str(FIRMWARE), "hil"], check=True,
+                       capture_output=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, str(FIRMWARE / "hil" / "rig.py"),
+             "--lib", str(BUILD / "host" / "libhil.so"),
+             "--elf", str(BUILD / "atmega328p" / elf), *args],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, process_group=0)
+        line = self.proc.stdout.readline()
+        assert line.startswith("pty "), line
+        import serial
+
+        self.port = serial.Serial(line.split()[1], 1_000_000, timeout=0.2)
+        self.decoder = P.FrameDecoder()
+        self.seq = 0
+
+    def ask(self, frame: bytes, msg_type: int) -> P.Frame:
+        self.port.write(frame)
+        end = time.monotonic() + 10
+        while time.monotonic() < end:
+            for f in self.decoder.feed(self.port.read(64)):
+                assert isinstance(f, P.Frame), f
+                if f.type == msg_type:
+                    return f
+        raise AssertionError("no reply from the emulated rig")
+
+    def sample(self) -> P.SensorReading:
+        self.seq += 1
+        return P.parse_sensor(self.ask(P.sample_frame(self.seq), P.MSG_SENSOR))
+
+    def report(self) -> dict:
+        self.port.close()
+        self.proc.send_signal(signal.SIGTERM)
+        out, _ = self.proc.communicate(timeout=30)
+        return json.loads(out.strip().splitlines()[-1])
+
+    def kill(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def test_no_lost_counts_at_three_times_the_arms_top_speed():
+    """Both encoders turn at 100 rad/s (38 000 edges a second each; the arm's top
+    speed is about 30 rad/s, docs/build-a-rig.md) for 0.3 s; the readings after
+    it are the counts to the edge.  The hand also raised the pendulum at 50 000
+    edges a second before the session."""
+    speed, seconds, theta0 = 100.0, 0.3, 0.05
+    rig = Rig("--plant", "spin", "--spin-speed", str(speed), "--spin-time", str(seconds),
+              "--theta0", str(theta0))
+    try:
+        rig.ask(P.encode(P.MSG_HELLO, 0), P.MSG_HELLO_ACK)
+        start = rig.sample()
+        pend0 = round((theta0 - math.pi) * COUNTS / (2 * math.pi))
+        assert start.y == pytest.approx(2 * (pend0 % COUNTS) / COUNTS - 1, abs=1e-6)
+        rig.port.write(P.command_frame(rig.seq, 0.0))  # the hand lets go: the spin starts
+        moving = True
+        end = time.monotonic() + 60
+        while moving and time.monotonic() < end:  # until the velocity window reads rest
+            r = rig.sample()
+            moving = r.v != 0.0 or r.x == 0.0
+        turned = round(speed * seconds * COUNTS / (2 * math.pi))
+        pend = round((theta0 + speed * seconds - math.pi) * COUNTS / (2 * math.pi))
+        assert r.y == pytest.approx(2 * (pend % COUNTS) / COUNTS - 1, abs=1e-6)
+        assert r.x == pytest.approx(2 * ((turned + COUNTS // 2) % COUNTS) / COUNTS - 1,
+                                    abs=1e-6)
+        assert rig.report()["resets"] == 0
+    finally:
+        rig.kill()
+
+
+def test_the_hardware_watchdog_resets_a_hung_firmware_with_the_motor_off():
+    """The test build hangs its main loop 0.5 s after start (interrupts still
+    running, nothing kicks the watchdog): the AVR resets within WDTO_30MS (32 ms
+    at 128 kHz), the motor off, and reports WATCHDOG until a HELLO."""
+    rig = Rig("--plant", "spin", "--spin-time", "0", "--hang-at", "0.5", elf="rig-hang.elf")
+    try:
+        rig.ask(P.encode(P.MSG_HELLO, 0), P.MSG_HELLO_ACK)
+        # commands every few milliseconds keep the protocol's watchdog fed
+        end = time.monotonic() + 3
+        while time.monotonic() < end:
+            rig.seq += 1
+            rig.port.write(P.command_frame(rig.seq, 0.5))
+            time.sleep(0.004)
+        r = rig.sample()
+        assert r.status & P.STATUS_WATCHDOG and r.u_da == 0.0
+        ack = P.parse_hello_ack(rig.ask(P.encode(P.MSG_HELLO, 0), P.MSG_HELLO_ACK))
+        assert ack.status == 0
+        rep = rig.report()
+        assert rep["resets"] >= 1
+        assert rep["duty_at_hang"] == pytest.approx(0.5, abs=2e-3)
+        assert rep["pwm_nonzero_after_hang_ms"] <= 33.0
+    finally:
+        rig.kill()
