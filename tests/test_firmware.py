@@ -104,8 +104,9 @@ def test_sensor_answers_with_the_request_sequence_number_and_the_wrapped_channel
     for (seq, p, a, d), frame in zip(cases, replies, strict=True):
         assert frame.seq == seq
         r = P.parse_sensor(frame)
-        # y: -1 hanging at power-up, 0 half a turn away; x: 0 at power-up; both wrap
-        assert r.y == pytest.approx(2 * (p % PEND_COUNTS) / PEND_COUNTS - 1, abs=1e-6)
+        # y: 0.5 hanging at power-up, -0.5 half a turn away; x: 0 at power-up; both wrap
+        assert r.y == pytest.approx(2 * ((p + 3 * PEND_COUNTS // 4) % PEND_COUNTS) / PEND_COUNTS
+                                    - 1, abs=1e-6)
         assert r.x == pytest.approx(2 * ((a + ARM_COUNTS // 2) % ARM_COUNTS) / ARM_COUNTS - 1,
                                     abs=1e-6)
         v = d * 2 * math.pi / ARM_COUNTS / (VEL_WINDOW_MS * 1e-3) / VEL_FULL_SCALE

@@ -30,7 +30,7 @@ FIRMWARE = HERE.parent
 MCU = "atmega328p"
 #: The controller's calibration for the firmware's readings (docs/build-a-rig.md,
 #: "Scales for the controller"), with the thesis plant's u_scale.
-RIG_SETS = ("rig.theta_scale=3.141592653589793", "rig.theta_bias=0",
+RIG_SETS = ("rig.theta_scale=3.141592653589793", "rig.theta_bias=0.5",
             "rig.arm_scale=3.141592653589793", "rig.velocity_scale=40", "rig.velocity_bias=0")
 
 

@@ -82,7 +82,7 @@ static float wrap_counts(int32_t count, int32_t n, int32_t offset, float two_ove
 
 float rig_raw_pendulum(int32_t count)
 {
-    return wrap_counts(count, PEND_COUNTS, 0, (float)(2.0 / PEND_COUNTS));
+    return wrap_counts(count, PEND_COUNTS, 3 * PEND_COUNTS / 4, (float)(2.0 / PEND_COUNTS));
 }
 
 float rig_raw_arm(int32_t count)

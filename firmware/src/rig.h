@@ -64,7 +64,8 @@ float rig_duty(const rig_t *r);
 uint8_t rig_status(const rig_t *r);
 
 /* Raw readings of the protocol (App. B's channels, see docs/build-a-rig.md):
- * y = 2 (pend mod N_p) / N_p - 1 (hanging at power-up reads -1, upright 0),
+ * y = 2 ((pend + 3 N_p / 4) mod N_p) / N_p - 1 (hanging at power-up reads 0.5,
+ * upright -0.5: the wrap is a quarter turn from both),
  * x = 2 ((arm + N_a / 2) mod N_a) / N_a - 1 (0 at power-up), both wrapping,
  * v = arm_delta * 2 pi / (N_a * VEL_WINDOW_MS * 1e-3 * VEL_FULL_SCALE), clipped. */
 float rig_raw_pendulum(int32_t count);

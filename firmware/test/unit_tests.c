@@ -61,11 +61,12 @@ static int selftest(void)
     /* an interrupt without a change (a glitch shorter than the ISR) counts 0 */
     quad_update(&q, 3);
     CHECK(q.count == 0 && q.errors == 1);
-    /* raw channels: hanging at power-up reads -1, upright (half a turn) 0 */
-    CHECK(rig_raw_pendulum(0) == -1.0f);
-    CHECK(rig_raw_pendulum(PEND_COUNTS / 2) == 0.0f);
-    CHECK(rig_raw_pendulum(-PEND_COUNTS / 2) == 0.0f);
-    CHECK(rig_raw_pendulum(PEND_COUNTS) == -1.0f);
+    /* raw channels: hanging at power-up reads 0.5, upright (half a turn) -0.5 */
+    CHECK(rig_raw_pendulum(0) == 0.5f);
+    CHECK(rig_raw_pendulum(PEND_COUNTS / 2) == -0.5f);
+    CHECK(rig_raw_pendulum(-PEND_COUNTS / 2) == -0.5f);
+    CHECK(rig_raw_pendulum(PEND_COUNTS) == 0.5f);
+    CHECK(rig_raw_pendulum(PEND_COUNTS / 4) == -1.0f); /* the wrap: horizontal */
     CHECK(rig_raw_arm(0) == 0.0f);
     CHECK(rig_raw_arm(ARM_COUNTS / 2) == -1.0f);
     CHECK(rig_raw_arm(-1) < 0.0f && rig_raw_arm(-1) > -0.01f);
