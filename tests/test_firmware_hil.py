@@ -131,11 +131,13 @@ def test_no_lost_counts_at_three_times_the_arms_top_speed():
         pend0 = round((theta0 - math.pi) * COUNTS / (2 * math.pi))
         assert start.y == pytest.approx(raw_theta(pend0), abs=1e-6)
         rig.port.write(P.command_frame(rig.seq, 0.0))  # the hand lets go: the spin starts
-        moving = True
+        # until the shafts have turned and rest: the velocity window reads 0 and two
+        # readings agree (just after the start the window can read 0 too)
+        prev, r = None, rig.sample()
         end = time.monotonic() + 60
-        while moving and time.monotonic() < end:  # until the velocity window reads rest
-            r = rig.sample()
-            moving = r.v != 0.0 or r.x == 0.0
+        while (r.v != 0.0 or r.x == 0.0 or prev is None or (prev.x, prev.y) != (r.x, r.y)) \
+                and time.monotonic() < end:
+            prev, r = r, rig.sample()
         turned = round(speed * seconds * COUNTS / (2 * math.pi))
         pend = round((theta0 + speed * seconds - math.pi) * COUNTS / (2 * math.pi))
         assert r.y == pytest.approx(raw_theta(pend), abs=1e-6)
