@@ -82,6 +82,9 @@ class SpinPlant:
         self.t += DT
 
 
+#: The plants of ``--plant``.  The DC-motor plant of a home-built rig
+#: (``frictionlab.model.plants.furuta_dc``, preset HOMEBUILT, driven by the duty as a
+#: fraction of the supply voltage) is one more entry, a class like ThesisPlant.
 PLANTS = {"thesis": ThesisPlant, "spin": SpinPlant}
 
 
