@@ -24,8 +24,9 @@
  * - Time: emulated time runs at wall-clock speed (it sleeps when ahead, waking
  *   at once for bytes from the pty; it runs flat out when behind).
  * - hil_mark(): "the controller was stopped now"; the report says how long the
- *   duty stayed non-zero after it.  hang_at >= 0 (with the test build
- *   rig-hang.elf): hang_at seconds after the pty opened the firmware's main loop
+ *   duty stayed non-zero after it.  hang_at >= 0 or hil_hang() (with the test
+ *   build rig-hang.elf): hang_at seconds after the pty opened, or now, the
+ *   firmware's main loop
  *   hangs (a 2 ms pulse on its hang pin); the report says how long the duty stayed non-zero after it
  *   (the AVR's hardware watchdog resets it).
  */
@@ -503,6 +504,13 @@ void hil_last_io(double *rx, double *tx)
 {
     *rx = last_rx_ms;
     *tx = last_tx_ms;
+}
+
+/* The firmware's hang pin goes high now (rig-hang.elf: the main loop hangs). */
+void hil_hang(void)
+{
+    if (hang_ms < 0)
+        hang_at = emu_ms() / 1e3;
 }
 
 /* The controller was stopped now. */

@@ -6,7 +6,8 @@ in front of a simulated pendulum, both in this process.
 prints ``pty PATH`` when the rig is ready (``frictionlab run --backend
 serial://PATH``), runs until SIGTERM or SIGINT, then prints the harness's
 report (one JSON object).  SIGUSR1 marks "the controller was stopped now"
-(``test-hil --stall-at``).
+(``test-hil --stall-at``); SIGUSR2 makes the test build ``rig-hang.elf`` hang
+now (``--hang-at S``: S seconds after the pty opened).
 
 Every millisecond of emulated time the loop reads the PWM duty the firmware
 drives, steps the plant 1 ms with it (not while the operator's hand holds the
@@ -133,9 +134,12 @@ def main(argv=None) -> int:
     os.dup2(2, 1)
     lib = load(args.lib)
     stop = []
+    # end with the process that started this one (a killed test or test-hil)
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     signal.signal(signal.SIGUSR1, lambda *_: lib.hil_mark())
+    signal.signal(signal.SIGUSR2, lambda *_: lib.hil_hang())
     if not args.no_realtime:  # before the clock starts: the import takes a while
         # SCHED_FIFO like rig-sim, but on another CPU than the controller's loop (which
         # takes the last one), so that the loop's own work never holds the emulation
