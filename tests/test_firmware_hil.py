@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -50,22 +51,31 @@ def test_the_controller_balances_the_emulated_rig_and_a_stall_zeroes_the_motor(t
     the 3 s before the stall), then is stopped with SIGSTOP: the duty is zero
     within the advertised watchdog time plus 2 periods.  (A run that ends by its
     duration: firmware/test-hil --duration 10, docs/performance.md.)"""
-    out = test_hil("--duration", "10", "--stall-at", "5", "--keep", str(tmp_path))
+    for attempt in range(2):
+        out = test_hil("--duration", "10", "--stall-at", "5", "--keep",
+                       str(tmp_path / str(attempt)))
+        log = read_log(out["run"]["log"])
+        t, theta = log["t"], log["theta_m"]
+        # the ticks before the stall (its 1 s is the longest gap of the loop's time axis)
+        end = int(np.argmax(np.diff(t))) + 1
+        t, theta = t[:end], theta[:end]
+        missed = np.sum(np.round(np.diff(t) / (PERIOD_MS / 1e3)) - 1)
+        silent = out["run"]["stop_reason"] == "rig_silent"
+        if missed <= 0.01 * len(t) and not silent:
+            break
+        # a timing statistic, or the loop's stop for a stalled host: run once more
+        # (docs/development.md, "A busy machine")
+        warnings.warn(f"test-hil: {missed:.0f} deadlines missed before the stall in "
+                      f"{len(t)} ticks, stop {out['run']['stop_reason']}, on a busy host; "
+                      "running it again", stacklevel=1)
+    assert missed <= 0.01 * len(t), (missed, out)
     run = out["run"]
     assert out["flash_bytes"] <= 32 * 1024 and out["ram_bytes"] <= 1536
     assert out["watchdog_ms"] == 50
     assert out["harness"]["duty_at_mark"] != 0.0, out  # the motor ran when it stalled
     assert out["pwm_zero_after_stall_ms"] <= out["watchdog_ms"] + 2 * PERIOD_MS, out
     assert run["stop_reason"] in ("paused", "rig_fault"), out
-    log = read_log(run["log"])
-    t, theta = log["t"], log["theta_m"]
-    # the ticks before the stall: the loop's time axis runs on through the pause
-    before = np.flatnonzero(np.diff(t) > 0.1)
-    end = before[0] + 1 if before.size else len(t) - 1
-    t, theta = t[:end], theta[:end]
     assert t[-1] > 3.0
-    missed = np.sum(np.round(np.diff(t) / (PERIOD_MS / 1e3)) - 1)
-    assert missed <= 0.01 * len(t), missed  # deadlines missed before the stall
     last = t > t[-1] - 3.0
     assert np.nanmax(np.abs(theta[last])) < 0.2
     assert np.isfinite(theta[last]).mean() > 0.9  # readings arrived
