@@ -20,7 +20,8 @@ The encoders are those of docs/build-a-rig.md: ``COUNTS`` per turn, the
 pendulum counting from hanging down (its position at power-up), the arm from
 its position at power-up.  The plant law is frictionlab's own.  Plants
 (``--plant``): ``thesis`` (the thesis's rig,
-:class:`frictionlab.model.simulation.SimulatedPlant`: u = duty / rig.u_scale
+:class:`frictionlab.model.simulation.SimulatedPlant` of
+:func:`frictionlab.runs.simulated_plant`: u = duty / rig.u_scale
 in m/s^2) and ``spin`` (no dynamics: the hand turns the arm and the pendulum
 at ``--spin-speed`` rad/s for ``--spin-time`` s once released, then holds
 them; the lost-count test).  Another plant is one entry in :data:`PLANTS`.
@@ -51,13 +52,13 @@ class ThesisPlant:
 
     def __init__(self, args):
         from frictionlab.config import build_config
-        from frictionlab.model.simulation import SimulatedPlant
+        from frictionlab.runs import simulated_plant
 
         cfg = build_config(design=args.design, friction=args.friction,
                            sets=[("design.h", DT), ("sim.substeps", 2),
                                  ("sim.pendulum_steps", 1), *args.set])
         self.u_scale = cfg.rig.u_scale
-        self.plant = SimulatedPlant(cfg)
+        self.plant = simulated_plant(cfg)
         self.state = self.plant.init(args.theta0)
         self.plant.step(self.state, 0.0)  # compiled now, not in the real-time loop
 
