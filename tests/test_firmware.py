@@ -234,3 +234,18 @@ def test_float_encoding_matches_struct(unit_tests):
     u = struct.unpack("<f", struct.pack("<f", -0.123456789))[0]
     out = Rig(unit_tests).send(hello(), P.command_frame(0, u), P.sample_frame(1)).run()
     assert P.parse_sensor(out[1]).u_da == u
+
+
+@pytest.mark.parametrize("mcu, flash_kb", [("atmega328p", 32), ("atmega2560", 256)])
+def test_the_avr_build_fits(tmp_path, mcu, flash_kb):
+    """``make -C firmware`` (and ``MCU=atmega2560``) builds with -Werror; the
+    ATmega328P build within 32 KB of flash and 1.5 KB of static RAM."""
+    subprocess.run(["make", "-s", "-C", str(FIRMWARE), f"MCU={mcu}", f"BUILD={tmp_path}",
+                    f"{tmp_path}/rig.hex"], check=True, capture_output=True)
+    out = subprocess.run(["avr-size", "-A", str(tmp_path / "rig.elf")], capture_output=True,
+                         text=True, check=True).stdout
+    sec = {line.split()[0]: int(line.split()[1]) for line in out.splitlines()
+           if line.startswith(".")}
+    assert sec[".text"] + sec[".data"] <= min(flash_kb, 32) * 1024
+    assert sec[".data"] + sec[".bss"] <= 1536
+    assert (tmp_path / "rig.hex").read_text().startswith(":")

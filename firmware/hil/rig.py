@@ -4,8 +4,9 @@ in front of a simulated pendulum, both in this process.
     python firmware/hil/rig.py --lib build/host/libhil.so --elf build/atmega328p/rig.elf
 
 prints ``pty PATH`` when the rig is ready (``frictionlab run --backend
-serial://PATH``), runs until SIGTERM or SIGINT, then prints the harness's
-report (one JSON object).  SIGUSR1 marks "the controller was stopped now"
+serial://PATH``) and ``released`` when the controller's first COMMAND let the
+pendulum go, runs until SIGTERM or SIGINT, then prints the harness's report
+(one JSON object).  SIGUSR1 marks "the controller was stopped now"
 (``test-hil --stall-at``); SIGUSR2 makes the test build ``rig-hang.elf`` hang
 now (``--hang-at S``: S seconds after the pty opened).
 
@@ -160,9 +161,13 @@ def main(argv=None) -> int:
         return 1
     print("pty", lib.hil_pty().decode(), file=out, flush=True)
     duty, held, set_counts, run_ms = lib.hil_duty, lib.hil_held, lib.hil_set_counts, lib.hil_run_ms
+    was_held = True
     while not stop:
         d = duty()
         if not held():
+            if was_held:  # the controller's first COMMAND: its run's t = 0
+                print("released", file=out, flush=True)
+                was_held = False
             plant.step(d)
         set_counts(*counts(*plant.angles()))
         if run_ms():

@@ -5,7 +5,8 @@ rig (firmware/hil/rig.py) and ``frictionlab run --backend serial://PTY
     {"run": <the run's JSON>, "pwm_zero_after_stall_ms": MS | null,
      "watchdog_ms": MS, "flash_bytes": N, "ram_bytes": N, "harness": {...}}
 
-``--stall-at S``: S seconds into the run the controller is stopped with
+``--stall-at S``: S seconds into the run (after its first command) the
+controller is stopped with
 SIGSTOP (and continued 1 s later, when it stops itself as ``paused``);
 ``pwm_zero_after_stall_ms`` is how long the duty stayed non-zero after that,
 in emulated time.  ``harness`` is the harness's report (emulated time, lag
@@ -17,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import select
 import shutil
 import signal
 import subprocess
@@ -45,16 +47,6 @@ def sizes(elf: Path) -> tuple[int, int]:
 def watchdog_ms() -> int:
     text = (FIRMWARE / "src" / "config.h").read_text()
     return int(re.search(r"#define WATCHDOG_MS (\d+)", text).group(1))
-
-
-def wait_for(pred, timeout: float, what: str, proc=None) -> None:
-    end = time.monotonic() + timeout
-    while not pred():
-        if proc is not None and proc.poll() is not None:
-            raise RuntimeError(f"{what}: the process ended (status {proc.returncode})")
-        if time.monotonic() > end:
-            raise RuntimeError(f"timed out waiting for {what}")
-        time.sleep(0.02)
 
 
 def main(argv=None) -> int:
@@ -104,9 +96,15 @@ def main(argv=None) -> int:
         ctrl = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=open(tmp / "run.err", "w"),
                                 text=True, process_group=0)
         if args.stall_at is not None:
-            # the run has started when its log exists
-            wait_for(lambda: log_dir.is_dir() and any(log_dir.glob("*.csv")), 120,
-                     "the run's log", ctrl)
+            # the run's t = 0: its first COMMAND released the pendulum
+            end = time.monotonic() + 300
+            while True:
+                ready, _, _ = select.select([rig.stdout], [], [], 0.1)
+                if ready and rig.stdout.readline().strip() == "released":
+                    break
+                if ctrl.poll() is not None or time.monotonic() > end:
+                    raise RuntimeError("the run did not start: "
+                                       + (tmp / "run.err").read_text()[-2000:])
             time.sleep(args.stall_at)
             ctrl.send_signal(signal.SIGSTOP)
             rig.send_signal(signal.SIGUSR1)
