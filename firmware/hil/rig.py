@@ -145,7 +145,7 @@ def main(argv=None) -> int:
     if not args.no_realtime:  # before the clock starts: the import takes a while
         # SCHED_FIFO like rig-sim, but on another CPU than the controller's loop (which
         # takes the last one), so that the loop's own work never holds the emulation
-        # back; it needs about 6 % of that CPU (docs/performance.md)
+        # back; it needs about 5 % of that CPU (docs/performance.md)
         from frictionlab.realtime.osrt import default_cpu, try_realtime_priority
 
         last = default_cpu()
