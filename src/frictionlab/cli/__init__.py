@@ -30,8 +30,8 @@ from ..config import (
 )
 from . import compensate, identify, predict, reproduce, run, sweep
 from .common import (
+    Parser,
     UsageError,
-    _Parser,
     add_config_args,
     check_output_path,
     config_from_args,
@@ -176,7 +176,7 @@ def cmd_keys(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = Parser(
         prog="frictionlab",
         description="Rotary inverted pendulum with arm friction: design, simulate, sweep, "
                     "identify, compensate, and run the real-time controller.",

@@ -44,7 +44,7 @@ class _Formatter(argparse.HelpFormatter):
                                           longest + self._current_indent + 2)
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line on stderr (exit status 2)."""
 
     def __init__(self, *args, **kwargs):
