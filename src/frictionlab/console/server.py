@@ -30,7 +30,7 @@ import uvicorn
 import uvicorn.config
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from ..realtime.osrt import STOP_SIGNALS
+from ..realtime.osrt import STOP_SIGNALS, try_realtime_priority
 from .app import create_app
 from .security import MAX_BODY, check_bind, is_loopback, resolve_token
 
@@ -167,8 +167,6 @@ def _server_thread_priority() -> None:
     (SCHED_FIFO 50) still preempts it.  Where it is not permitted nothing
     changes (the loop has already said so).
     """
-    from ..realtime.osrt import try_realtime_priority
-
     try_realtime_priority(SERVER_PRIORITY)
 
 
