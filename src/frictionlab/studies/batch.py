@@ -38,15 +38,21 @@ from ..config import Config
 from ..model._jit import jit, jit_nogil
 from ..model.controller import NS, gains_record, state_vector, state_view
 from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
-from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
+from ..model.limit_cycles import (
+    FEATURES,
+    KERNEL_VALUES,
+    REL_PROMINENCE,
+    SETTLE_TOL,
+    SMOOTH,
+    STATUS_CODES,
+    _features_kernel,
+)
 from ..model.plant import plant_record
 from ..model.sensor import SensorParams, sensor_record
 from ..model.simulation import NC, _run, make_controller, make_sensor, run_ticks
 
 __all__ = ["Batch", "evaluate_rows", "prepare", "rows", "run"]
 
-#: Feature-extraction settings of :func:`frictionlab.model.limit_cycles.features`'s defaults.
-REL_PROMINENCE, SETTLE_TOL, SMOOTH = 0.02, 2e-3, 9
 #: Status code of a set whose window is not positive (an error row).
 _BAD_WINDOW = 3
 _FEATURE_INDEX = [KERNEL_VALUES.index(name) for name in FEATURES]

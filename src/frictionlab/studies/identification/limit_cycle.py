@@ -21,9 +21,11 @@ and the cost is :math:`C(p) = \sum r_{e,f}^2`.  A run that falls or does not
 settle into a limit cycle, or lacks a measured feature, gets the finite
 residual :data:`PENALTY` (times the weight) for each such feature, larger than
 any plausible relative error, so the global search is steered away from it.
-A half-cycle with a single maximum has no separate second peak or valley;
-its ``peak2`` and ``valley`` are then taken equal to ``peak1``, which is the
-continuous limit of a double peak whose valley has filled in.
+A simulated cycle with a shoulder (``peak2`` but no ``valley``,
+:mod:`frictionlab.model.limit_cycles`) has its ``valley`` taken equal to its
+``peak2``, and one with a single maximum and no shoulder its ``peak2`` and
+``valley`` equal to ``peak1``: each is the continuous limit of a double peak
+whose dip has just filled in.
 
 Search
 ------
@@ -708,6 +710,8 @@ def _sim_feature(row: Mapping[str, Any], name: str) -> float | None:
         return None if v is None or not math.isfinite(float(v)) else float(v)
 
     v = get(name)
+    if v is None and name == "valley":
+        v = get("peak2")  # a shoulder: the dip has just filled in
     if v is None and name in ("peak2", "valley"):
         v = get("peak1")
     return v
