@@ -239,7 +239,7 @@ def _reference_half_cycle(seg, rel, slope_noise=0.0, noise=0.0):
         return seg[p], None, None
     w = -np.abs(d)
     floor = max(rel * max(0.0, -d.min()), 3 * slope_noise, 1e-15)
-    cand, props = find_peaks(w, prominence=floor)
+    cand, _ = find_peaks(w, prominence=floor)
     best = None
     for c in cand:
         q, value = c + 1, seg[p + c] + seg[p + c + 1]

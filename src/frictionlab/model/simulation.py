@@ -72,6 +72,7 @@ from .controller import (
 )
 from .design import design as make_design
 from .friction import (
+    COULOMB,
     FRICTION_DTYPE,
     KINDS,
     LUGRE,
@@ -197,6 +198,12 @@ def plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
             elif fkind == NONE:
                 f = 0.0
             else:
+                if fkind == COULOMB and ad != 0.0:
+                    # a plant's relay follows the velocity's sign at once: kept
+                    # inside the hysteresis (the compensator's device, Sec. 6.1), the
+                    # old sign would push the arm along a reversed velocity
+                    # (docs/model.md, "Coulomb friction as a plant")
+                    mem = 1.0 if ad > 0.0 else -1.0
                 f, mem = friction_step(fkind, fp, mem, ad, fe, dt, 0.0)
             f_sum += f
             a = fe - f
