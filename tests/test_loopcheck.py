@@ -14,7 +14,7 @@ from frictionlab.model.controller import Controller
 from frictionlab.model.design import PRESETS, design
 from frictionlab.model.friction import FrictionParams
 from frictionlab.model.loopcheck import check_loop, loop_matrices
-from frictionlab.model.plant import PlantParams, zoh_closed_form
+from frictionlab.model.plants.thesis import PlantParams, zoh_closed_form
 from frictionlab.model.simulation import make_controller, simulate_config
 from frictionlab.realtime.params import ChangeError, ControlParams, UnsafeChange
 

@@ -19,7 +19,7 @@ from frictionlab.model.periodic import (
     orbit_trajectory,
     periodic_orbit,
 )
-from frictionlab.model.plant import linearized_model, zoh
+from frictionlab.model.plants.thesis import linearized_model, zoh
 from frictionlab.model.simulation import run_features, simulate_config
 from frictionlab.studies.predict import (
     StaticFrictionNonlinearity,

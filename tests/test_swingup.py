@@ -12,7 +12,7 @@ import pytest
 from frictionlab.cli import main
 from frictionlab.config import ConfigError, build_config
 from frictionlab.model.controller import state_vector
-from frictionlab.model.plant import accelerations
+from frictionlab.model.plants.thesis import accelerations
 from frictionlab.model.swingup import (
     BALANCING,
     SwingUp,

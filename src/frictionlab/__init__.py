@@ -49,7 +49,7 @@ from .model.design import Design, DesignSpec, design, preset
 from .model.friction import FrictionModel, FrictionParams, make_model
 from .model.limit_cycles import LimitCycleFeatures, features, trajectory_features
 from .model.observers import ArmObserver, PendulumObserver
-from .model.plant import PlantParams, rhs, zoh
+from .model.plants.thesis import PlantParams, rhs, zoh
 from .model.rig import RigScaling
 from .model.simulation import Trajectory, simulate_config
 

@@ -30,7 +30,7 @@ from .model.controller import check_compensator as _check_compensator
 from .model.design import DesignSpec, preset
 from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
-from .model.plant import PlantParams
+from .model.plants.thesis import PlantParams
 from .model.rig import RigScaling
 from .model.simulation import Trajectory, simulate_config
 from .model.swingup import SwingUpParams

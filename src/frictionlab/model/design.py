@@ -2,8 +2,8 @@ r"""Discrete pole-placement state feedback and observer gains (Sec. 2.2-2.4, App
 
 The controller is designed on the frictionless, undamped linearisation
 eq. (7) sampled with zero-order hold at ``h``: Sec. 2.2's closed form
-(:func:`frictionlab.model.plant.zoh_closed_form`, equal to the matrix exponential of
-:func:`frictionlab.model.plant.zoh` to rounding, tested; it needs no scipy, so a
+(:func:`frictionlab.model.plants.thesis.zoh_closed_form`, equal to the matrix exponential of
+:func:`frictionlab.model.plants.thesis.zoh` to rounding, tested; it needs no scipy, so a
 design loads in milliseconds).
 Continuous specifications :math:`(\omega_i, \zeta_i)` map to the discrete
 characteristic polynomial eq. (8)
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .params import Validated, param
-from .plant import PlantParams, zoh_closed_form
+from .plants.thesis import PlantParams, zoh_closed_form
 
 __all__ = [
     "PRESETS",

@@ -5,15 +5,15 @@ The closed loop of Sec. 5 advances, once per sampling period h, the state
 ====  ============  ====================================================
 idx   name          meaning
 ====  ============  ====================================================
-0-4   plant         ``[theta, theta_dot, arm, arm_dot, z]`` (:mod:`frictionlab.model.plant`)
+0-4   plant         ``[theta, theta_dot, arm, arm_dot, z]`` (:mod:`frictionlab.model.plants.thesis`)
 5-12  controller    the controller state (:mod:`frictionlab.model.controller`)
-13    memory        the friction model's memory (:func:`~frictionlab.model.simulation.plant_tick`)
+13    memory        the friction model's memory (:func:`~frictionlab.model.plants.plant_step`)
 ====  ============  ====================================================
 
 by one *tick*: measure, :func:`~frictionlab.model.controller.controller_step`,
-:func:`~frictionlab.model.simulation.plant_tick` -- the simulator's own compiled
-functions, called here through :func:`_plant_step` and :func:`loop_tick`
-(no dynamics are re-implemented).  Measurement noise is left out: the map is
+the plant's step -- the closed loop's own compiled tick
+(:func:`frictionlab.model.closedloop.step_loop`, called here through
+:func:`loop_tick`; no dynamics are re-implemented).  Measurement noise is left out: the map is
 the deterministic loop; quantisation (``sim.quantization``) is kept.
 
 Linearised loop
@@ -77,9 +77,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._jit import jit
+from .closedloop import NC, no_swing, run_loop, step_loop
 from .controller import (
     NS,
-    controller_step,
     state_index,
     state_record,
     state_vector,
@@ -87,16 +87,9 @@ from .controller import (
 )
 from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
 from .limit_cycles import LimitCycleFeatures, _crossings, features
-from .sensor import arm_zero, reading
-from .simulation import (
-    NC,
-    STATUS,
-    Trajectory,
-    _run,
-    make_controller,
-    make_sensor,
-    plant_tick,
-)
+from .plants import THESIS
+from .sensor import arm_zero
+from .simulation import STATUS, Trajectory, make_controller, make_sensor
 
 if TYPE_CHECKING:  # only annotations: the configuration layer builds what the model runs
     from ..config import Config
@@ -126,25 +119,16 @@ R_OK, R_FELL, R_NO_RETURN = 0, 1, 2
 
 
 @jit
-def _plant_step(x, u, mem, substeps, ratio, h, pp, fkind, fp):
-    """The simulator's plant step (the one call site of ``plant_tick`` here)."""
-    return plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
-
-
-@jit
 def loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp):
     """Advance the loop state ``X`` (:data:`NL`,) in place by one tick; return u.
 
-    Measure (the simulator's sensor ``sp`` without noise, the arm's zero
-    ``x0``), run the controller, then the plant over the sample, exactly as
+    The closed loop's own tick (:func:`frictionlab.model.closedloop.step_loop`:
+    measure with the simulator's sensor ``sp`` without noise and the arm's zero
+    ``x0``, run the controller, then the plant over the sample), exactly as
     :func:`frictionlab.model.simulation.simulate_config` does.
     """
-    x = X[:NX_PLANT]
-    s = state_view(X[I_S:I_MEM])
-    th_m, arm_m, armd_m, _ = reading(sp, x[0], x[2], x[3], False, x0)
-    u, _u_fb, _f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
-    _f, mem = _plant_step(x, u, X[I_MEM], substeps, ratio, h, pp, fkind, fp)
-    X[I_MEM] = mem
+    u, X[I_MEM] = step_loop(X[:NX_PLANT], state_view(X[I_S:I_MEM]), X[I_MEM], x0, THESIS.code,
+                            substeps, ratio, pp, fkind, fp, gp, cp, sp, 0.0)
     return u
 
 
@@ -332,17 +316,16 @@ def linear_loop(cfg: Config, eps: float = 1e-7) -> LinearLoop:
     loop = _Loop(cfg)
     ku = cfg.plant.input_gain
     gp = loop.gp.linear()  # no compensator in the linear loop
+    ideal = loop.sensor._replace(step=0.0)  # the true signals (no converter, no noise)
 
     def tick(Xl: np.ndarray, w: float) -> np.ndarray:
         X = np.zeros(NL)
         X[_LIN_IDX] = Xl
         # one tick with the input w added to the controller's u: run the
         # controller, then the plant with u + w / k_u, through the same kernels
-        x = X[:NX_PLANT]
-        s = state_record(X[I_S:I_MEM])
-        u, _, _ = controller_step(s, gp, loop.cp, x[0], x[2], x[3])
-        _plant_step(x, u + w / ku, 0.0, loop.substeps, loop.ratio, loop.h, loop.pp, NONE,
-                    loop.fp)
+        u, _ = step_loop(X[:NX_PLANT], state_record(X[I_S:I_MEM]), 0.0, 0.0, THESIS.code,
+                         loop.substeps, loop.ratio, loop.pp, NONE, loop.fp, gp, loop.cp, ideal,
+                         w / ku)
         return X[_LIN_IDX].copy(), u
 
     n = len(_LIN_IDX)
@@ -745,9 +728,10 @@ def _trajectory(loop: _Loop, state: np.ndarray, duration: float) -> Trajectory:
     x = np.array(state[:NX_PLANT], dtype=float)
     s = state_record(np.array(state[I_S:I_MEM], dtype=float))
     out = np.zeros((n, NC))
-    done, status, _, _ = _run(x, float(state[I_MEM]), n, loop.substeps, loop.ratio, loop.pp,
-                              loop.fkind, loop.fp, loop.gp, loop.cp, s, loop.sensor, 1,
-                              loop.x0, loop.fall_angle, out, True)
+    done, status, _, _ = run_loop(x, float(state[I_MEM]), n, THESIS.code, loop.substeps,
+                                  loop.ratio, loop.pp, loop.fkind, loop.fp, loop.gp, loop.cp, s,
+                                  loop.sensor, 1, loop.x0, loop.fall_angle, out, True, False,
+                                  *no_swing())
     return Trajectory(np.arange(done), loop.h, out[:done], STATUS[status], loop.cfg)
 
 
