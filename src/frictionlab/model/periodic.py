@@ -193,7 +193,7 @@ class _Loop:
         ctrl = make_controller(cfg)
         self.controller = ctrl
         self.gp, self.cp = ctrl.record()
-        self.pp = cfg.plant.record()
+        self.pp = cfg.plant_row()
         self.fkind = KINDS.index(cfg.friction_kind)
         # periodic orbits of the plant at its starting levels
         self.fp = without_drift(cfg.friction.record())

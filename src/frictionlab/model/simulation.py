@@ -181,7 +181,7 @@ class SimulatedPlant:
     def __init__(self, cfg: Config, duration: float | None = None):
         self.cfg = cfg
         self.h = cfg.design.h
-        self._pp = cfg.plant.record()  # the float row plant_tick_rows reads
+        self._pp = cfg.plant_row()  # the float row plant_tick_rows reads
         self._fkind = KINDS.index(cfg.friction_kind)
         # friction.drift: over friction.drift_time, else to the end of the run
         # (``duration``, default sim.duration)
@@ -292,7 +292,7 @@ def simulate_config(
     sp = make_sensor(cfg)
     fkind = KINDS.index(cfg.friction_kind)
     fp = resolve_drift(cfg.friction.record(), n * h)
-    pp = cfg.plant.record()
+    pp = cfg.plant_row()
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
     # the swing-up supervisor's arguments, unused here (run_loop's swing is off)
     sup_row, wx, phase = no_swing()

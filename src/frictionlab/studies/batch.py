@@ -207,7 +207,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
             shared = (np.array(g, dtype=float),  # gains_record reads it back
                       friction_row(c),  # friction_view reads it back
                       state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
-                      cfg.plant.record(),
+                      cfg.plant_row(),
                       np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
             last_key = key
         gp.append(shared[0])

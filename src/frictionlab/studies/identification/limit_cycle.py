@@ -183,9 +183,11 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
     "plant.omega0": (5.0, 9.0),
     "plant.input_gain": (0.5, 2.0),
     "plant.zeta": (0.0, 0.2),
+    "actuator.curvature": (0.0, 0.5),
+    "actuator.back_emf": (0.0, 20.0),
 }
 
-_FITTABLE_SECTIONS = ("plant", "design", "friction", "compensation")
+_FITTABLE_SECTIONS = ("plant", "design", "friction", "compensation", "actuator")
 
 
 # ---------------------------------------------------------------------------
