@@ -67,7 +67,7 @@ import numpy as np
 
 from ._jit import jit
 
-__all__ = ["FEATURES", "LimitCycleFeatures", "features", "trajectory_features"]
+__all__ = ["FEATURES", "LimitCycleFeatures", "comparable", "features", "trajectory_features"]
 
 #: Feature names of ``simulate --json`` (docs/cli.md), in Table 1's order plus peak_to_peak.
 FEATURES = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity", "peak_to_peak")
@@ -593,6 +593,24 @@ def trajectory_features(traj, window: float | None = None) -> LimitCycleFeatures
         traj.t, traj["theta_m"], traj["u"], traj["arm_dot_m"], window=window,
         fell=traj.status == "fell", noise=noise,
     )
+
+
+def comparable(values, name: str) -> float | None:
+    """Feature ``name`` of ``values`` (a mapping of feature names) as compared with
+    a measured one: a missing ``valley`` is the ``peak2`` (a shoulder), a missing
+    ``peak2`` or ``valley`` the ``peak1`` (a single maximum): each the limit of a
+    dip that has just filled in.  ``None`` where even that is missing."""
+
+    def get(n):
+        v = values.get(n)
+        return None if v is None or not math.isfinite(float(v)) else float(v)
+
+    v = get(name)
+    if v is None and name == "valley":
+        v = get("peak2")
+    if v is None and name in ("peak2", "valley"):
+        v = get("peak1")
+    return v
 
 
 def _isnan(x) -> bool:

@@ -127,7 +127,7 @@ from ...config import (
     valid_keys,
 )
 from ...io.notes import Note
-from ...model.limit_cycles import FEATURES
+from ...model.limit_cycles import FEATURES, comparable
 
 __all__ = [
     "DEFAULT_BOUNDS",
@@ -706,17 +706,7 @@ class LimitCycleProblem:
 def _sim_feature(row: Mapping[str, Any], name: str) -> float | None:
     if row.get("status") != "limit_cycle":
         return None
-
-    def get(n):
-        v = row.get(n)
-        return None if v is None or not math.isfinite(float(v)) else float(v)
-
-    v = get(name)
-    if v is None and name == "valley":
-        v = get("peak2")  # a shoulder: the dip has just filled in
-    if v is None and name in ("peak2", "valley"):
-        v = get("peak1")
-    return v
+    return comparable(row, name)
 
 
 # ---------------------------------------------------------------------------
