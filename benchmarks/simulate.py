@@ -66,7 +66,7 @@ from frictionlab.model.controller import controller_step
 from frictionlab.model.friction import classical_force, lugre_dz, lugre_force
 from frictionlab.model.limit_cycles import FEATURES, features, trajectory_features
 from frictionlab.model.plants.thesis import rhs
-from frictionlab.model.simulation import make_controller, simulate_config
+from frictionlab.runs import make_controller, simulate_config
 
 DURATION = 30.0
 #: Sec. 5.2: the band the thesis widened to 0.03 rad/s to see stiction.

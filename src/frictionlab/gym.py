@@ -108,7 +108,8 @@ from .model.friction import KINDS, NP, friction_row, friction_view
 from .model.plants import THESIS, plant_step
 from .model.plants.thesis import PlantRecord
 from .model.sensor import reading
-from .model.simulation import make_sensor, plant_tick_rows
+from .model.simulation import plant_tick_rows
+from .runs import make_sensor
 
 __all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "SWINGUP_ENV_ID", "TASKS",
            "FurutaEnv", "FurutaVectorEnv"]

@@ -73,6 +73,7 @@ plant: a motor plant (``--plant furuta-dc``) models its motor itself.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -83,6 +84,7 @@ __all__ = [
     "B4_BACK_EMF",
     "B4_CURVATURE",
     "B4_TABLE",
+    "ActuatedPlant",
     "ActuatorParams",
     "actuator_accel",
     "fit_input_nonlinearity",
@@ -144,3 +146,21 @@ def actuator_accel(curvature, back_emf, u, arm_dot, arm_length):
     if back_emf != 0.0:
         a = a - back_emf * arm_length * arm_dot
     return a
+
+
+@dataclass(frozen=True)
+class ActuatedPlant:
+    """The thesis plant's parameters with its actuator: what a closed loop's
+    ``plant_params`` is when ``actuator.*`` is on.  ``record()`` is the plant's
+    float row carrying the actuator's; every other attribute is the plant's."""
+
+    plant: Any
+    actuator: ActuatorParams
+
+    def record(self) -> np.ndarray:
+        return self.plant.record(self.actuator.record())
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name == "plant":  # copies and pickles: not delegated
+            raise AttributeError(name)
+        return getattr(self.plant, name)

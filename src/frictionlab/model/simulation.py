@@ -18,37 +18,35 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from ._jit import jit
 from .closedloop import COLUMNS, LOGGED, NC, no_swing, run_loop
-from .controller import DEFAULT_ERROR_SIGNAL, STATE_DTYPE, Controller
-from .design import design as make_design
+from .controller import STATE_DTYPE, Controller
 from .friction import (
     KINDS,
+    FrictionParams,
     drifted_rows,
     friction_row,
     friction_view,
     is_drifting,
     resolve_drift,
 )
-from .plants import THESIS
-from .plants.thesis import tick
-from .sensor import SensorParams, sensor_params
-
-if TYPE_CHECKING:  # only annotations: the configuration layer builds what the model runs
-    from ..config import Config
+from .plants import PlantKind, plant_step
+from .sensor import SensorParams
 
 __all__ = [
     "COLUMNS",
     "DAT_LINE",
     "LOGGED",
+    "LoopSpec",
+    "PlantState",
     "SimulatedPlant",
     "Trajectory",
-    "run_features",
-    "simulate_config",
+    "run_ticks",
+    "simulate",
 ]
 
 #: One tick of a ``.dat`` log: the :data:`LOGGED` signals, space separated (the
@@ -79,15 +77,24 @@ class Trajectory:
         averaged over the sample that follows.
     status : {"ok", "fell"}
         ``fell`` if the run stopped early because the pendulum fell.
-    config : Config
+    config : object or None
+        What the run was made from (the caller's; for a run of a
+        configuration, its ``frictionlab.config.Config``); the model does not
+        read it.
+    meta : dict
+        Extra results of the runner (e.g. a swing-up's phases).
+    noise : float
+        The measurement noise of the run's sensor (its standard deviation, SI):
+        the feature extraction's threshold for a peak that stands out.
     """
 
     k: np.ndarray
     h: float
     data: np.ndarray
     status: str
-    config: Config | None = None
+    config: Any = None
     meta: dict = field(default_factory=dict)
+    noise: float = 0.0
 
     @property
     def t(self) -> np.ndarray:
@@ -129,6 +136,57 @@ class Trajectory:
 
 
 @dataclass(frozen=True)
+class LoopSpec:
+    """One simulated closed loop: everything the compiled kernels run.
+
+    Built from a configuration by :func:`frictionlab.runs.loop_spec`; the
+    model never reads a configuration.
+
+    Attributes
+    ----------
+    plant : PlantKind
+        Which plant (:data:`frictionlab.model.plants.PLANTS`).
+    plant_params
+        The plant's parameters (its module's ``Params``; ``record()`` is the
+        float row its step reads).
+    friction_kind : str
+        The plant's friction model (:data:`frictionlab.model.friction.KINDS`).
+    friction : FrictionParams
+        The plant's friction parameters (units of u).
+    controller : Controller
+        The balancing controller (design, compensator, saturation).
+    sensor : SensorParams
+        The sensor model (App. B).
+    h : float
+        Sampling period (s).
+    substeps, ratio : int
+        The plant integrator's substeps per sample and substeps per pendulum step.
+    fall_angle : float
+        ``|theta|`` (rad) beyond which the pendulum has fallen.
+    initial_angle : float
+        The pendulum's angle at the start (rad; at rest).
+    duration : float
+        The run's default duration (s).
+    source : object, optional
+        What the loop was built from (carried to :attr:`Trajectory.config`).
+    """
+
+    plant: PlantKind
+    plant_params: Any
+    friction_kind: str
+    friction: FrictionParams
+    controller: Controller
+    sensor: SensorParams
+    h: float
+    substeps: int
+    ratio: int
+    fall_angle: float
+    initial_angle: float
+    duration: float
+    source: Any = None
+
+
+@dataclass(frozen=True)
 class PlantState:
     """Explicit state of :class:`SimulatedPlant`.
 
@@ -137,10 +195,10 @@ class PlantState:
     x : ndarray (5,)
         ``[theta, theta_dot, arm, arm_dot, z]`` (rad, rad/s, rad, rad/s, rad).
     memory : float
-        The friction model's memory (:func:`frictionlab.model.plants.plant_step`): the Coulomb relay
-        state, or the LuGre friction of the last substep.
+        The friction model's memory (:func:`frictionlab.model.plants.plant_step`):
+        the Coulomb relay state, or the LuGre friction of the last substep.
     friction : float
-        Mean friction over the last sample (m/s^2).
+        Mean friction over the last sample (units of u).
     tick : int
         Samples stepped since :meth:`SimulatedPlant.init` (the clock of
         ``friction.drift``).
@@ -157,46 +215,48 @@ class PlantState:
 
 
 @jit
-def plant_tick_rows(x, u, mem, substeps, ratio, h, pp, fkind, fp):
-    """The plant's step with the friction record stored as the float row ``fp``
+def plant_tick_rows(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp):
+    """The plant's step (:func:`frictionlab.model.plants.plant_step`) with the
+    friction record stored as the float row ``fp``
     (:func:`frictionlab.model.friction.friction_row`): the form for a caller in
     Python at every tick (the emulated rigs), since numba takes a float array
     from Python faster than it types a record argument."""
-    return tick(x, u, mem, substeps, ratio, h, pp, fkind, friction_view(fp))
+    return plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, friction_view(fp))
 
 
 class SimulatedPlant:
     """The plant with its friction, stepped one sample at a time.
 
-    The same compiled integrator as :func:`simulate_config`; used by the
-    emulated rig and the real-time loop's ``sim`` backend.
+    The same compiled integrator as :func:`simulate`; used by the emulated rig,
+    the real-time loop's ``sim`` backend and the simulated identification
+    experiments.
 
     Examples
     --------
-    >>> plant = SimulatedPlant(build_config())
+    >>> plant = SimulatedPlant(loop_spec(build_config()))
     >>> st = plant.init()
     >>> st = plant.step(st, u=0.0)
     """
 
-    def __init__(self, cfg: Config, duration: float | None = None):
-        self.cfg = cfg
-        self.h = cfg.design.h
-        self._pp = cfg.plant_row()  # the float row plant_tick_rows reads
-        self._fkind = KINDS.index(cfg.friction_kind)
+    def __init__(self, spec: LoopSpec, duration: float | None = None):
+        self.spec = spec
+        self.h = spec.h
+        self._pcode = spec.plant.code
+        self._pp = spec.plant_params.record()  # the float row plant_tick_rows reads
+        self._fkind = KINDS.index(spec.friction_kind)
         # friction.drift: over friction.drift_time, else to the end of the run
-        # (``duration``, default sim.duration)
+        # (``duration``, default the spec's)
         # float rows: plant_tick_rows and drifted_rows view them as the record
-        fp = resolve_drift(cfg.friction.record(),
-                           cfg.sim.duration if duration is None else duration)
+        fp = resolve_drift(spec.friction.record(), spec.duration if duration is None else duration)
         self._drifting = bool(is_drifting(fp))
         self._fp = friction_row(fp)
         self._fpt = self._fp.copy()
-        self._substeps = cfg.substeps
-        self._ratio = cfg.pendulum_ratio
+        self._substeps = spec.substeps
+        self._ratio = spec.ratio
 
     def init(self, theta0: float | None = None) -> PlantState:
         x = np.zeros(5)
-        x[0] = self.cfg.sim.initial_angle if theta0 is None else theta0
+        x[0] = self.spec.initial_angle if theta0 is None else theta0
         return PlantState(x)
 
     def step(self, state: PlantState, u: float) -> PlantState:
@@ -206,8 +266,8 @@ class SimulatedPlant:
         if self._drifting:
             drifted_rows(fp, state.tick * self.h, self._fpt)
             fp = self._fpt
-        f, memory = plant_tick_rows(x, float(u), state.memory, self._substeps, self._ratio,
-                                    self.h, self._pp, self._fkind, fp)
+        f, memory = plant_tick_rows(self._pcode, x, float(u), state.memory, self._substeps,
+                                    self._ratio, self.h, self._pp, self._fkind, fp)
         return PlantState(x, memory, f, state.tick + 1)
 
     def push(self, state: PlantState, theta_dot_kick: float) -> PlantState:
@@ -217,21 +277,8 @@ class SimulatedPlant:
         return PlantState(x, state.memory, state.friction, state.tick)
 
 
-def make_sensor(cfg: Config) -> SensorParams:
-    """The sensor a configuration describes (``rig.*``, ``sim.quantization``,
-    ``sim.noise``, ``sim.seed``; the arm's raw zero :data:`~frictionlab.model.sensor.ARM_START`)."""
-    return sensor_params(cfg.rig, cfg.sim.quantization, cfg.sim.noise, cfg.sim.seed)
-
-
-def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Controller:
-    """The controller a configuration describes."""
-    d = make_design(cfg.design, cfg.plant)
-    return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal,
-                      u_max=cfg.rig.u_max)
-
-
-def run_ticks(cfg: Config, duration: float | None = None, record: bool = True) -> int:
-    """Ticks of a run of ``duration`` s (default ``cfg.sim.duration``).
+def run_ticks(h: float, duration: float, record: bool = True) -> int:
+    """Ticks of a run of ``duration`` s at the sampling period ``h``.
 
     Raises
     ------
@@ -240,10 +287,9 @@ def run_ticks(cfg: Config, duration: float | None = None, record: bool = True) -
         period, or (``record``) is longer than a recorded run can hold
         (:data:`MAX_TICKS`).
     """
-    duration = cfg.sim.duration if duration is None else float(duration)
+    duration = float(duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"duration must be > 0 s, got {duration}")
-    h = cfg.design.h
     n = round(duration / h)
     if n < 1:
         raise ValueError(f"duration {duration:g} s is shorter than one sampling period "
@@ -256,44 +302,39 @@ def run_ticks(cfg: Config, duration: float | None = None, record: bool = True) -
     return n
 
 
-def simulate_config(
-    cfg: Config,
+def simulate(
+    spec: LoopSpec,
     duration: float | None = None,
     *,
     record: bool = True,
     progress: Callable[[float], None] | None = None,
-    controller: Controller | None = None,
 ) -> Trajectory:
-    """Run the closed loop described by ``cfg``.
+    """Run the closed loop ``spec`` (:func:`frictionlab.model.closedloop.run_loop`).
 
     Parameters
     ----------
-    cfg : Config
-        Plant, design, friction, compensation and simulation settings.
+    spec : LoopSpec
+        Plant, friction, controller, sensor and integration settings.
     duration : float, optional
-        Simulated time in s (default ``cfg.sim.duration``).
+        Simulated time in s (default ``spec.duration``).
     record : bool
         Keep every tick's signals (always true for the public API).
     progress : callable, optional
         Called with the fraction done (runs are chunked so long runs can
         report progress).
-    controller : Controller, optional
-        Use this controller instead of the one ``cfg`` describes.
     """
-    n = run_ticks(cfg, duration, record)
-    h = cfg.design.h
-    ctrl = controller or make_controller(cfg)
+    h = spec.h
+    n = run_ticks(h, spec.duration if duration is None else duration, record)
+    ctrl = spec.controller
     gp, cp = ctrl.record()
     x = np.zeros(5)
-    x[0] = cfg.sim.initial_angle
-    s = ctrl.init(cfg.sim.initial_angle)
+    x[0] = spec.initial_angle
+    s = ctrl.init(spec.initial_angle)
     assert s.dtype == STATE_DTYPE
     out = np.zeros((n, NC)) if record else np.zeros((1, NC))
-    sp = make_sensor(cfg)
-    fkind = KINDS.index(cfg.friction_kind)
-    fp = resolve_drift(cfg.friction.record(), n * h)
-    pp = cfg.plant_row()
-    substeps, ratio = cfg.substeps, cfg.pendulum_ratio
+    fkind = KINDS.index(spec.friction_kind)
+    fp = resolve_drift(spec.friction.record(), n * h)
+    pp = spec.plant_params.record()
     # the swing-up supervisor's arguments, unused here (run_loop's swing is off)
     sup_row, wx, phase = no_swing()
     # chunks of whole ticks when progress is reported; the noise of sample n is a
@@ -304,29 +345,12 @@ def simulate_config(
     while done < n and status == 0:
         m = min(chunk, n - done)
         view = out[done:done + m] if record else out
-        d, status, mem, x0 = run_loop(x, mem, m, THESIS.code, substeps, ratio, pp, fkind, fp,
-                                      gp, cp, s, sp, done, x0, cfg.sim.fall_angle, view, record,
-                                      False, sup_row, wx, phase)
+        d, status, mem, x0 = run_loop(x, mem, m, spec.plant.code, spec.substeps, spec.ratio, pp,
+                                      fkind, fp, gp, cp, s, spec.sensor, done, x0,
+                                      spec.fall_angle, view, record, False, sup_row, wx, phase)
         done += d
         if progress is not None:
             progress(done / n)
     data = out[:done] if record else out[:0]
-    return Trajectory(np.arange(len(data)), h, data, STATUS[status], cfg)
-
-
-def run_features(cfg: Config, duration: float | None = None, window: float | None = None):
-    """Simulate ``cfg`` and reduce the run to its limit-cycle features.
-
-    The unit of work of sweeps, identification and tuning.
-
-    Returns
-    -------
-    LimitCycleFeatures
-        ``status`` is ``"fell"`` if the pendulum fell, else the features'
-        status (``"limit_cycle"`` or ``"settled"``).
-    """
-    from .limit_cycles import trajectory_features
-
-    traj = simulate_config(cfg, duration)
-    return trajectory_features(traj, window)
-
+    return Trajectory(np.arange(len(data)), h, data, STATUS[status], spec.source,
+                      noise=float(spec.sensor.noise))

@@ -51,8 +51,8 @@ from ..model.limit_cycles import (
 )
 from ..model.plants import THESIS
 from ..model.sensor import SensorParams, sensor_record
-from ..model.simulation import make_controller, make_sensor, run_ticks
 from ..model.swingup import SWING_FIELDS, SwingUpRecord
+from ..runs import make_controller, make_sensor, run_ticks
 
 __all__ = ["Batch", "evaluate_rows", "prepare", "rows", "run"]
 

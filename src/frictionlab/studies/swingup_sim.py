@@ -25,7 +25,7 @@ from ..model.closedloop import FELL, NC, SWING_STOPPED, run_loop
 from ..model.controller import Controller
 from ..model.friction import KINDS, resolve_drift
 from ..model.plants import THESIS
-from ..model.simulation import Trajectory, make_controller, make_sensor
+from ..model.simulation import Trajectory
 from ..model.swingup import (
     BALANCING,
     PHASES,
@@ -35,6 +35,7 @@ from ..model.swingup import (
     swing_vector,
     swingup_row,
 )
+from ..runs import make_controller, make_sensor
 
 __all__ = ["SwingUpResult", "simulate_swingup", "swingup_outcome"]
 
@@ -115,6 +116,7 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     u = out[:done, 3]
     max_u = float(np.abs(u[swinging]).max()) if swinging.any() else 0.0
     traj = Trajectory(np.arange(done), h, out[:done], "fell" if status == FELL else "ok", cfg,
+                      noise=cfg.sim.noise,
                       meta={"phase": phase, "phases": PHASES, "ticks": int(ticks)})
     return SwingUpResult(traj, catch_time, balanced, stop, int(catches), max_u)
 
@@ -137,7 +139,7 @@ def swingup_outcome(res: SwingUpResult, window: float | None = None):
         return "fell", LimitCycleFeatures("fell", *([None] * 7))
     first = int(np.argmax(traj.meta["phase"] == BALANCING))
     part = Trajectory(traj.k[first:] - first, traj.h, traj.data[first:], traj.status,
-                      traj.config)
+                      traj.config, noise=traj.noise)
     if window is None:
         window = 0.5 * len(part) * traj.h
     feats = trajectory_features(part, window)
