@@ -27,7 +27,7 @@ import time
 
 def main() -> None:
     from frictionlab.model.limit_cycles import features
-    from frictionlab.model.simulation import simulate_config
+    from frictionlab.runs import simulate_config
     from frictionlab.studies import reproduce as rp
     from frictionlab.studies.reference import TABLE_COLUMNS
 

@@ -4,7 +4,7 @@
 import numpy as np
 
 from frictionlab.config import build_config
-from frictionlab.model.simulation import SimulatedPlant
+from frictionlab.runs import simulated_plant
 
 
 def _reverse(eps):
@@ -12,7 +12,7 @@ def _reverse(eps):
     friction of every sample and the velocity during it."""
     cfg = build_config("fast", "coulomb", sets=(f"friction.hysteresis={eps}",
                                                 "friction.coulomb=1.5"))
-    plant = SimulatedPlant(cfg)
+    plant = simulated_plant(cfg)
     st = plant.init(0.0)
     st.x[3] = 1.0
     st = plant.step(st, 0.0)  # the relay takes the motion's sign

@@ -31,7 +31,7 @@ def one(path: Path, title: str, sets) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from frictionlab.model.simulation import simulate_config
+    from frictionlab.runs import simulate_config
 
     traj = simulate_config(build_config("fast", "lugre", sets=sets), 40.0)
     t, y = traj.t, traj["theta_m"]
