@@ -705,7 +705,7 @@ def write_report(results: Results, out: str, seconds: float,
         plot_rig_rows({rig: row["trace"] for rig, row in t1_rows.items()},
                       {rig: row for rig, row in t1_rows.items()}, TABLE1, path,
                       f"Table 1 (the rig) against one set for both rows, RMS relative "
-                      f"error {100 * t1['rms']:.1f} %: "
+                      f"error {100 * t1['rms']:.1f} %\n"
                       + ", ".join(f"{k} {v:g}" for k, v in TABLE1_SET.items()))
         figures.append(path)
     with open(os.path.join(out, "report.md"), "w", encoding="utf-8") as fh:
