@@ -178,12 +178,12 @@ def test_rows_match_simulate(report):
 
 @pytest.mark.slow
 def test_every_run_goes_through_the_sweep_engine(monkeypatch):
-    from frictionlab.model import simulation
+    from frictionlab import runs
     from frictionlab.studies import batch, sweep
 
     points, sims = [], []
     evaluate, run_batch = sweep.evaluate, batch.run
-    simulate_config = simulation.simulate_config
+    simulate_config = runs.simulate_config
 
     def counting_evaluate(base, pts, **kw):
         points.extend(pts)
@@ -200,7 +200,7 @@ def test_every_run_goes_through_the_sweep_engine(monkeypatch):
 
     monkeypatch.setattr(sweep, "evaluate", counting_evaluate)
     monkeypatch.setattr(batch, "run", counting_run)
-    monkeypatch.setattr(simulation, "simulate_config", counting_simulate)
+    monkeypatch.setattr(runs, "simulate_config", counting_simulate)
     results = rp.run(workers=1)
     assert len(points) == len(sims) == rp.count_runs()
     # the tables share runs: Table 2's F_C = 1.5 is Table 3's F_S = 2.3
