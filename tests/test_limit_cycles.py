@@ -176,7 +176,7 @@ def _signal(shapes, n=2000):
 
 
 @pytest.mark.slow
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=20, deadline=None)
 @given(st.floats(0.0, 0.6), st.floats(0.1, 0.3))
 def test_dips_and_shoulders_of_known_waveforms(c, sep):
     """A lobe with a second bump: whatever the dip's depth (down to none), two
@@ -251,7 +251,7 @@ def _reference_half_cycle(seg, rel, slope_noise=0.0, noise=0.0):
 
 
 @pytest.mark.slow
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(st.lists(st.integers(0, 40), min_size=4, max_size=80), st.sampled_from([1e-6, 0.02, 0.2]))
 def test_compiled_half_cycle_matches_the_reference(values, rel):
     """The compiled half-cycle kernel and the plain-Python definition agree on
