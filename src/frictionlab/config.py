@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .model.actuator import ActuatorParams
 from .model.controller import COMPENSATOR_FIELDS, COMPENSATOR_KINDS
 from .model.controller import check_compensator as _check_compensator
 from .model.design import DesignSpec, preset
@@ -182,6 +183,7 @@ class Config:
     sim: SimParams = dataclasses.field(default_factory=SimParams)
     rig: RigScaling = dataclasses.field(default_factory=RigScaling)
     swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
+    actuator: ActuatorParams = dataclasses.field(default_factory=ActuatorParams)
 
     def __post_init__(self) -> None:
         for field, kind, kinds in (("friction", self.friction_kind, PLANT_FRICTION_KINDS),
@@ -193,6 +195,11 @@ class Config:
         if self.compensation_kind != "none":
             check_compensator(self.compensation_kind, self.compensation, h=self.design.h,
                               arm_length=self.plant.arm_length)
+
+    def plant_row(self) -> Any:
+        """The float row the compiled plant reads: ``plant.*`` with the actuator's
+        ``actuator.*`` (:mod:`frictionlab.model.actuator`)."""
+        return self.plant.record(self.actuator.record())
 
     @property
     def substeps(self) -> int:
@@ -228,10 +235,11 @@ class Config:
         return out
 
 
-_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig", "swingup")
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig", "swingup",
+             "actuator")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
             "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling,
-            "swingup": SwingUpParams}
+            "swingup": SwingUpParams, "actuator": ActuatorParams}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}

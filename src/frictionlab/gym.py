@@ -106,6 +106,7 @@ from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
 from .model.friction import KINDS, NP, friction_row, friction_view
 from .model.plants import THESIS, plant_step
+from .model.plants.thesis import PlantRecord
 from .model.sensor import reading, wrap_angle
 from .model.simulation import plant_tick_rows
 from .runs import make_sensor
@@ -174,7 +175,7 @@ class _Plants:
         self.us = np.zeros(n)
         self.substeps = np.zeros(n, dtype=np.int64)
         self.ratios = np.zeros(n, dtype=np.int64)
-        self.pps = np.zeros((n, 5))
+        self.pps = np.zeros((n, len(PlantRecord._fields)))
         self.fkinds = np.zeros(n, dtype=np.int64)
         self.fps = np.zeros((n, NP))  # friction records as float rows
         self.steps = np.zeros(n, dtype=np.int64)
@@ -187,7 +188,7 @@ class _Plants:
     def start(self, i: int, cfg: Config, theta0: float) -> None:
         """Plant i at rest at ``theta0`` with the parameters of ``cfg``."""
         self.configs[i] = cfg
-        self.pps[i] = cfg.plant.record()
+        self.pps[i] = cfg.plant_row()
         self.fps[i] = friction_row(cfg.friction.record())
         self.fkinds[i] = KINDS.index(cfg.friction_kind)
         self.substeps[i] = cfg.substeps

@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from .config import Config, build_config
+from .model.actuator import ActuatedPlant
 from .model.controller import DEFAULT_ERROR_SIGNAL, Controller
 from .model.design import design as make_design
 from .model.limit_cycles import LimitCycleFeatures, trajectory_features
@@ -52,7 +53,9 @@ def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Co
 
 def loop_spec(cfg: Config, controller: Controller | None = None) -> LoopSpec:
     """The closed loop a configuration describes (``controller`` in place of its own)."""
-    return LoopSpec(THESIS, cfg.plant, cfg.friction_kind, cfg.friction,
+    # the thesis plant with its actuator (App. B.4) when actuator.* is on
+    plant = ActuatedPlant(cfg.plant, cfg.actuator) if cfg.actuator.enabled else cfg.plant
+    return LoopSpec(THESIS, plant, cfg.friction_kind, cfg.friction,
                     controller or make_controller(cfg), make_sensor(cfg), cfg.design.h,
                     cfg.substeps, cfg.pendulum_ratio, cfg.sim.fall_angle, cfg.sim.initial_angle,
                     cfg.sim.duration, cfg)

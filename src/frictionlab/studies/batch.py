@@ -40,7 +40,15 @@ from ..model._jit import jit, jit_nogil
 from ..model.closedloop import NC, run_loop
 from ..model.controller import NS, gains_record, state_vector, state_view
 from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
-from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
+from ..model.limit_cycles import (
+    FEATURES,
+    KERNEL_VALUES,
+    REL_PROMINENCE,
+    SETTLE_TOL,
+    SMOOTH,
+    STATUS_CODES,
+    _features_kernel,
+)
 from ..model.plants import THESIS
 from ..model.sensor import SensorParams, sensor_record
 from ..model.swingup import SWING_FIELDS, SwingUpRecord
@@ -48,8 +56,6 @@ from ..runs import make_controller, make_sensor, run_ticks
 
 __all__ = ["Batch", "evaluate_rows", "prepare", "rows", "run"]
 
-#: Feature-extraction settings of :func:`frictionlab.model.limit_cycles.features`'s defaults.
-REL_PROMINENCE, SETTLE_TOL, SMOOTH = 0.02, 2e-3, 9
 #: Status code of a set whose window is not positive (an error row).
 _BAD_WINDOW = 3
 _FEATURE_INDEX = [KERNEL_VALUES.index(name) for name in FEATURES]
@@ -201,7 +207,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
             shared = (np.array(g, dtype=float),  # gains_record reads it back
                       friction_row(c),  # friction_view reads it back
                       state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
-                      cfg.plant.record(),
+                      cfg.plant_row(),
                       np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
             last_key = key
         gp.append(shared[0])
