@@ -481,7 +481,7 @@ def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Co
     """The controller a configuration describes."""
     d = make_design(cfg.design, cfg.plant)
     return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal,
-                      u_max=cfg.rig.u_max)
+                      u_max=cfg.u_limit)
 
 
 def run_ticks(cfg: Config, duration: float | None = None, record: bool = True) -> int:

@@ -167,7 +167,8 @@ STOP_CODES = ("", "not_caught", "arm_travel", "arm_speed")
 
 #: Fields of the swing-up state, in their storage order (module table).
 SWING_FIELDS = ("phase", "tick", "phase_ticks", "theta_hat", "theta_dot_hat", "arm_offset",
-                "energy", "stop", "catch_tick", "u", "catches")
+                "energy", "stop", "catch_tick", "u", "catches", "target", "side", "top",
+                "top_energy", "crossed")
 #: The swing-up state's record type: one float64 per field of :data:`SWING_FIELDS`.
 SWING_DTYPE = float_record_dtype(SWING_FIELDS)
 
@@ -248,6 +249,13 @@ class SwingUpRecord(NamedTuple):
     arm_limit: float
     arm_speed_limit: float
     decay: float
+    catch_fraction: float
+    friction_margin: float
+    arm_brake: float
+    adapt: float
+    apex_cos: float
+    blend: float
+    horizon_ticks: float
 
 
 @jit
@@ -255,7 +263,8 @@ def swingup_record(row):
     """The :class:`SwingUpRecord` stored as the float row :func:`swingup_row`."""
     return SwingUpRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7],
                          row[8], row[9], row[10], row[11], row[12], row[13], row[14], row[15],
-                         row[16])
+                         row[16], row[17], row[18], row[19], row[20], row[21],
+                         row[22], row[23])
 
 
 def swingup_row(rec: SwingUpRecord) -> np.ndarray:
@@ -273,7 +282,7 @@ class SwingUpParams(Validated):
                         "m/s^2", lo=0.0, hi=1e4, lo_open=True)
     max_acceleration: float = param(10.0, "|u| limit while swinging", "m/s^2", lo=0.0,
                                     hi=1e3, lo_open=True)
-    energy_target: float = param(0.5, "target normalised energy E0 (0 = upright at rest)",
+    energy_target: float = param(0.0, "target normalised energy E0 (0 = upright at rest)",
                                  "1", lo=-1.0, hi=2.0)
     catch_angle: float = param(0.3, "hand over to the balancing controller when |theta| is "
                                "below this", "rad", lo=0.0, hi=1.0, lo_open=True)
@@ -290,12 +299,32 @@ class SwingUpParams(Validated):
                                "m/s^2/(rad/s)", lo=0.0, hi=1e3)
     recentre_time: float = param(3.0, "time constant of the arm reference's return from the "
                                  "catch position to 0 (0 = at once)", "s", lo=0.0, hi=1e3)
-    observer_omega: float = param(40.0, "swing-up angle observer's error pole frequency",
+    observer_omega: float = param(80.0, "swing-up angle observer's error pole frequency",
                                   "rad/s", lo=0.0, hi=1e3, lo_open=True)
     arm_limit: float = param(6.0, "stop (arm_travel) when |Omega| exceeds this", "rad",
                              lo=0.0, hi=1e3, lo_open=True)
     arm_speed_limit: float = param(25.0, "stop (arm_speed) when |Omega'| exceeds this",
                                    "rad/s", lo=0.0, hi=1e3, lo_open=True)
+    catch_fraction: float = param(0.5, "hand over only when the balancing controller's "
+                                  "predicted command stays within this fraction of the |u| "
+                                  "limit (controller.u_max, or the DAC's range) for "
+                                  "catch_horizon", "1", lo=0.0, hi=1.0, lo_open=True)
+    catch_horizon: float = param(0.5, "how far ahead the hand-over test predicts the "
+                                 "balancing controller's command (linear, no friction)", "s",
+                                 lo=0.0, hi=5.0)
+    friction_margin: float = param(3.0, "arm friction level added to the energy law's "
+                                   "command in its direction (the compensator's Coulomb "
+                                   "level instead when compensation is on)", "units of u",
+                                   lo=0.0, hi=1e3)
+    arm_brake: float = param(8.0, "extra arm damping in the upper half, k_b cos(theta) on "
+                             "Omega', so that the arm is near rest when the pendulum arrives",
+                             "m/s^2/(rad/s)", lo=0.0, hi=1e3)
+    blend: float = param(1.0, "the energy law is weighted by (1 - max(cos theta, 0))^blend: "
+                         "full in the lower half, fading out towards upright (0 = no fade)",
+                         "1", lo=0.0, hi=10.0)
+    energy_adapt: float = param(0.5, "gain of the target's correction after each swing "
+                                "into the upper half that falls short of or passes over the "
+                                "catch region (0 = a fixed target)", "1", lo=0.0, hi=2.0)
 
     def record(self, omega0: float, g: float, h: float) -> SwingUpRecord:
         """The :class:`SwingUpRecord` for :func:`swingup_step` (design omega_0, g and h)."""
@@ -318,6 +347,13 @@ class SwingUpParams(Validated):
             arm_limit=float(self.arm_limit),
             arm_speed_limit=float(self.arm_speed_limit),
             decay=0.0 if self.recentre_time == 0 else math.exp(-h / self.recentre_time),
+            catch_fraction=float(self.catch_fraction),
+            friction_margin=float(self.friction_margin),
+            arm_brake=float(self.arm_brake),
+            adapt=float(self.energy_adapt),
+            apex_cos=math.cos(0.5 * self.catch_angle),
+            blend=float(self.blend),
+            horizon_ticks=float(max(1, round(self.catch_horizon / h))),
         )
 
 
@@ -340,6 +376,58 @@ def energy_law(theta, theta_dot, e, k, e0, umax):
     sg = 1.0 if theta_dot * math.cos(theta) >= 0.0 else -1.0
     u = k * (e - e0) * sg
     return min(max(u, -umax), umax)
+
+
+@jit
+def predicted_peak(gp, theta, theta_dot, arm_dot, n):
+    """Largest |u| of the balancing controller over the next ``n`` ticks, predicted
+    on the linearised plant (eq. 7 at upright, no friction) under its state
+    feedback from (theta, theta', arm 0, arm'): the hand-over test."""
+    w2 = gp.omega0 * gp.omega0
+    b = w2 / gp.g
+    il = 1.0 / gp.arm_length
+    hs = 0.5 * gp.h
+    x1, x2, x3, x4 = theta, theta_dot, 0.0, arm_dot
+    peak = 0.0
+    for _ in range(int(n)):
+        u = -(gp.l1 * x1 + gp.l2 * x2 + gp.l3 * x3 + gp.l4 * x4)
+        peak = max(peak, abs(u))
+        for _ in range(2):  # two semi-implicit Euler substeps per tick, u held
+            x2 += hs * (w2 * x1 - b * u)
+            x1 += hs * x2
+            x4 += hs * u * il
+            x3 += hs * x4
+    return peak
+
+
+@jit
+def target_correction(w, th, e, sp):
+    """Track a swing into the upper half (``cos theta > 0``) and, when it leaves
+    that half without a catch, correct the energy target ``w.target``: by the
+    shortfall ``cos(catch_angle/2) - max cos(theta)`` of a swing that turned back
+    (at the apex theta' = 0, so its height measures the energy whatever the
+    plant's omega_0), or by minus the energy over the top plus
+    ``1 - cos(catch_angle/2)`` of one that passed over; times ``sp.adapt``."""
+    c = math.cos(th)
+    if c > 0.0:
+        if w.side == 0.0:
+            w.side = 1.0 if th >= 0.0 else -1.0
+            w.top = c
+            w.top_energy = e
+            w.crossed = 0.0
+        else:
+            if th * w.side < 0.0:
+                w.crossed = 1.0
+            if c > w.top:
+                w.top = c
+                w.top_energy = e
+    elif w.side != 0.0:
+        if w.crossed != 0.0:
+            w.target -= sp.adapt * (max(w.top_energy, 0.0) + 1.0 - sp.apex_cos)
+        else:
+            w.target += sp.adapt * (sp.apex_cos - w.top)
+        w.target = min(max(w.target, sp.energy_target - 1.0), sp.energy_target + 1.0)
+        w.side = 0.0
 
 
 @jit
@@ -405,7 +493,8 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == CAUGHT and abs(th_m) > sp.release_angle:
         phase = SWINGING
         w.phase_ticks = 0.0
-    if phase == SWINGING and abs(th_m) < sp.catch_angle:
+    if phase == SWINGING and abs(th_m) < sp.catch_angle and predicted_peak(
+            gp, th_m, thd, arm_dot_m, sp.horizon_ticks) <= sp.catch_fraction * gp.u_max:
         phase = CAUGHT
         w.phase_ticks = 0.0
         w.catch_tick = w.tick - 1.0
@@ -415,18 +504,28 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
         s.x1 = th_m
         s.x2 = thd / gp.omega0
         s.arm_dot = arm_dot_m
+    if phase == SWINGING:
+        target_correction(w, th, e, sp)
+    else:
+        w.side = 0.0
     if phase == CAUGHT and w.phase_ticks >= sp.settle_ticks:
         phase = BALANCING
         w.phase_ticks = 0.0
     w.phase = phase
     if phase == SWINGING:
-        u = energy_law(th, thd, e, sp.gain, sp.energy_target, sp.max_acceleration)
-        u -= sp.arm_stiffness * arm_m + sp.arm_damping * arm_dot_m
+        up = max(math.cos(th), 0.0)  # 0 in the lower half, 1 upright
+        u = energy_law(th, thd, e, sp.gain, w.target, sp.max_acceleration)
+        if u != 0.0:
+            fm = sp.friction_margin if gp.compensator == 0 else max(sp.friction_margin, cp.fc)
+            u += fm if u > 0.0 else -fm
+        u = ((1.0 - up) ** sp.blend) * u - (sp.arm_stiffness * arm_m
+                                           + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
         umax = min(sp.max_acceleration, gp.u_max)  # and the DAC range
         u = min(max(u, -umax), umax)
         w.u = u
         return u, u, 0.0
-    w.arm_offset *= sp.decay
+    if phase == BALANCING:
+        w.arm_offset *= sp.decay
     u, u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m - w.arm_offset, arm_dot_m)
     w.u = u
     return u, u_fb, f_hat
@@ -467,7 +566,8 @@ class SwingUp:
     def init(self, theta0: float = math.pi) -> tuple[np.record, np.record]:
         """Initial ``(w, s)`` (:data:`SWING_DTYPE` and controller state records):
         swinging, the observer at the first measured angle, at rest."""
-        return (new_swing_state(theta_hat=wrap_angle(float(theta0)), catch_tick=-1.0),
+        return (new_swing_state(theta_hat=wrap_angle(float(theta0)), catch_tick=-1.0,
+                                target=float(self.params.energy_target)),
                 new_state())
 
     def step(self, state, theta_m: float, arm_m: float, arm_dot_m: float):

@@ -55,7 +55,7 @@ chunk), reads them back for ``--resume``, and at the end rewrites the file in
 sweep order (atomically).  Columns: the varied keys, the seven features of
 :data:`frictionlab.model.limit_cycles.FEATURES`, ``status``, ``error`` (a
 ``reduce``'s extra columns are not written, except the swing-up sweep's
-``caught`` and ``catch_time``).  A
+``caught`` and ``swing_up_time``).  A
 ``.parquet`` output is written at the end from all rows; while the sweep runs
 the rows go to the crash-safe CSV journal ``FILE.parquet.partial.csv``.
 A sidecar ``FILE.meta.json`` records the base configuration, duration and
@@ -99,7 +99,7 @@ MODES = ("grid", "oat")
 #: Row statuses: the three of ``frictionlab simulate`` plus ``error``.
 STATUSES = ("limit_cycle", "settled", "fell", "not_caught", "error")
 #: The extra columns of a swing-up sweep (:func:`reduce_swingup`).
-SWINGUP_COLUMNS = ("caught", "catch_time")
+SWINGUP_COLUMNS = ("caught", "swing_up_time")
 
 #: Largest number of points per task.
 MAX_CHUNK = 50
@@ -335,7 +335,7 @@ def reduce_swingup(cfg: Config, duration: float | None,
     Returns the features and status of
     :func:`frictionlab.studies.swingup_sim.swingup_outcome` (``not_caught`` when it
     never reached the balancing phase) and ``caught`` (1 when it did, else 0)
-    and ``catch_time`` (s, the catch that led to balancing; ``None`` if none).
+    and ``swing_up_time`` (s, the catch that led to balancing; ``None`` if none).
     """
     from .swingup_sim import simulate_swingup, swingup_outcome
 
@@ -344,7 +344,7 @@ def reduce_swingup(cfg: Config, duration: float | None,
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
     out["status"] = status
     out["caught"] = int(res.balanced)
-    out["catch_time"] = res.swing_up_time
+    out["swing_up_time"] = res.swing_up_time
     return out
 
 
