@@ -37,9 +37,23 @@ conventions (u positive accelerates the arm positively; theta positive
 clockwise as in eq. 6, where u enters with a minus sign).
 ``sign(0)`` is taken as +1, so a pendulum hanging exactly at rest is kicked.
 
-To that is added an arm-centring term :math:`-k_p\Omega - k_d\dot\Omega`
-(``swingup.arm_stiffness``, ``swingup.arm_damping``) that keeps the arm near
-its start; the sum is saturated at ``swingup.max_acceleration``.
+The command is
+
+.. math::
+
+    u = \mathrm{sat}_{u_s}\bigl((1 - c)^b\,(u_E + F_m\,\mathrm{sign}\,u_E)
+        - k_p\Omega - (k_d + k_b c)\dot\Omega\bigr), \qquad c = \max(\cos\theta, 0),
+
+with :math:`u_E` the energy law above (its target :math:`E_t`, see below),
+:math:`F_m` the friction margin (``swingup.friction_margin``, or the
+compensator's Coulomb level when larger: the arm slides when the law asks,
+instead of sticking below the stiction level near the target), the fade
+:math:`(1-c)^b` (``swingup.blend``: pumping in the lower half, where it acts),
+the arm-centring gains :math:`k_p, k_d` (``swingup.arm_stiffness``,
+``swingup.arm_damping``) and the brake :math:`k_b` (``swingup.arm_brake``)
+that stops the arm as the pendulum nears upright.  :math:`u_s` is the
+smallest of ``swingup.max_acceleration`` and the balancing controller's
+saturation (``controller.u_max`` within the DAC's range).
 
 The angular velocity comes from a nonlinear observer on the full model
 (:math:`\ddot\theta` of eq. 6 with the design's omega_0, the applied u and
@@ -48,33 +62,42 @@ at :math:`e^{-\omega_s h}` (``swingup.observer_omega``); the linear
 balancing observers are only valid near upright.  Angles are wrapped into
 [-pi, pi) (the rig's angle channel wraps, App. B.1).
 
+The energy target, swing by swing
+---------------------------------
+:math:`E_t` starts at ``swingup.energy_target`` and is corrected
+(:func:`target_correction`, gain ``swingup.energy_adapt``) whenever the
+pendulum leaves the upper half (:math:`\cos\theta > 0`) without a catch: up by
+:math:`\cos(\theta_c/2) - \cos\theta_{apex}` after a swing that turned back (at
+the apex :math:`\dot\theta = 0`, so its height measures the energy whatever
+the plant's omega_0, which the design only assumes), down by the energy over
+the top plus :math:`1 - \cos(\theta_c/2)` after one that passed over;
+:math:`\theta_c` is ``swingup.catch_angle``.
+
 Hand-over
 ---------
-When the measured angle enters the catch region (``|theta| <
-swingup.catch_angle``) the balancing controller takes over: its observers
-start from the current measurement (theta, the swing-up observer's
-theta_dot, the arm at its current position with the measured velocity).  The
-arm's reference is the position where it was caught (an offset
-subtracted from the arm angle) and returns to 0 exponentially with the time
-constant ``swingup.recentre_time``, so the balancing controller does not
-react to an arm error of several radians the moment it takes over.  A catch
-that fails (``|theta| > swingup.release_angle`` before ``swingup.settle_time``
-has passed) returns to swinging; one that holds for ``settle_time`` is
-*balancing*, after which the usual falls and angle limits apply.
+The balancing controller takes over when the measured angle is in the catch
+region (``|theta| < swingup.catch_angle``) and its command, predicted on the
+linearised plant (eq. 7, no friction) under its state feedback from the
+current state (:func:`predicted_peak`), stays within
+``swingup.catch_fraction`` of its saturation for ``swingup.catch_horizon``:
+a pendulum arriving fast, or with the arm moving, goes on swinging.  The
+balancing observers start from the current measurement (theta, the swing-up
+observer's theta_dot, the arm at its current position with the measured
+velocity).  The arm's reference is the position where it was caught (an
+offset subtracted from the arm angle); once balancing it returns to 0
+exponentially with the time constant ``swingup.recentre_time``.  A catch
+that fails (``|theta| > swingup.release_angle`` before
+``swingup.settle_time`` has passed) returns to swinging; one that holds for
+``settle_time`` is *balancing*, after which the usual falls and angle limits
+apply.
 
 Friction
 --------
 The arm bearing's friction (any plant model, present throughout) eats into
-the net acceleration :math:`a = u - F`: while the law is saturated at
-``max_acceleration`` (4-5 times the thesis's stiction level 2.3 m/s^2), the
-arm moves and friction only reduces the pumping rate by
-:math:`F_C/u_s`; near the target energy the command falls below the
-stiction level, the arm sticks (at the pendulum's turning points, where
-``sign`` flips and the arm reverses), and the pendulum swings freely with
-the energy it has - which is what the law wants there.  The catch happens
-at whatever energy is left; :math:`E_0` slightly above 0
-(``swingup.energy_target``) makes up for the damping and friction losses of
-the last swing.  docs/swingup.md maps the success rate over friction levels.
+the net acceleration :math:`a = u - F`; the margin :math:`F_m` puts a level
+back in the direction the law asks for, and the target correction makes up
+for what is left (and for the pendulum's damping).  docs/swingup.md maps the
+success rate over friction levels and plant mismatch on a 10 m/s^2 actuator.
 
 Safety (the same checks in the simulator and the loop)
 ------------------------------------------------------
@@ -106,6 +129,11 @@ pos   field              meaning
 8     ``catch_tick``     tick of the last catch (-1: none)
 9     ``u``              last applied u (m/s^2)
 10    ``catches``        number of catches so far
+11    ``target``         energy target E_t (:func:`target_correction`)
+12    ``side``           sign of theta when the swing entered the upper half (0: not there)
+13    ``top``            largest cos(theta) of that swing
+14    ``top_energy``     E where cos(theta) was largest
+15    ``crossed``        1 when that swing passed over the top
 ====  =================  =====================================================
 
 A caller in Python at every tick (the 200 Hz loop) keeps the state as a float
@@ -148,6 +176,7 @@ __all__ = [
     "copy_swing_state",
     "energy",
     "new_swing_state",
+    "predicted_peak",
     "swing_index",
     "swing_record",
     "swing_vector",
@@ -156,6 +185,7 @@ __all__ = [
     "swingup_row",
     "swingup_step",
     "swingup_step_rows",
+    "target_correction",
     "wrap_angle",
 ]
 
@@ -215,7 +245,7 @@ class SwingUpRecord(NamedTuple):
     Attributes
     ----------
     gain, max_acceleration, energy_target : float
-        Energy law k (m/s^2), its |u| limit (m/s^2) and E0.
+        Energy law k (m/s^2), its |u| limit (m/s^2) and the initial target E0.
     catch_angle, release_angle : float
         Hand-over and failed-catch angles (rad).
     settle_ticks, limit_ticks : float
@@ -230,6 +260,13 @@ class SwingUpRecord(NamedTuple):
         Safety limits on |Omega| (rad) and |Omega'| (rad/s).
     decay : float
         Per-tick factor of the arm reference's return to 0 (0: at once).
+    catch_fraction, horizon_ticks : float
+        Hand-over: the predicted balancing command within this fraction of its
+        saturation for this many ticks (:func:`predicted_peak`).
+    friction_margin, arm_brake, blend : float
+        :math:`F_m` (m/s^2), :math:`k_b` (m/s^2 per rad/s) and the fade exponent b.
+    adapt, apex_cos : float
+        Gain of the target's correction and cos(catch_angle / 2).
     """
 
     gain: float
