@@ -19,10 +19,11 @@ Inverted Pendulum" (Lund, 1996).  The public API:
   :class:`Trajectory`, :func:`features`, :func:`trajectory_features`
 * rig conversions: :class:`RigScaling`
 
-The package is layered (docs/architecture.md): :mod:`frictionlab.model`
-(numpy, scipy and numba only), :mod:`frictionlab.config`, :mod:`frictionlab.io`,
-:mod:`frictionlab.studies`, :mod:`frictionlab.realtime`,
-:mod:`frictionlab.console` and :mod:`frictionlab.cli`.
+The package is layered (docs/architecture.md), inner to outer:
+:mod:`frictionlab.model` (numpy, scipy and numba only), :mod:`frictionlab.io`,
+:mod:`frictionlab.config`, :mod:`frictionlab.runs`, :mod:`frictionlab.plotting`,
+:mod:`frictionlab.realtime`, :mod:`frictionlab.studies`, :mod:`frictionlab.console`
+and :mod:`frictionlab.cli`.
 
 The larger capabilities are subpackages with their own curated ``__all__``,
 imported on demand so that ``import frictionlab`` stays light:
@@ -81,7 +82,7 @@ __all__ = [
 #: and ``linearize``).
 _LAZY = {
     "Config": "config", "ConfigError": "config", "SimParams": "config",
-    "build_config": "config", "simulate": "config",
+    "build_config": "config", "simulate": "runs", "simulate_config": "runs",
     "Controller": "model.controller",
     "Design": "model.design", "DesignSpec": "model.design", "design": "model.design",
     "preset": "model.design",
@@ -90,9 +91,10 @@ _LAZY = {
     "LimitCycleFeatures": "model.limit_cycles", "features": "model.limit_cycles",
     "trajectory_features": "model.limit_cycles",
     "ArmObserver": "model.observers", "PendulumObserver": "model.observers",
-    "PlantParams": "model.plant", "rhs": "model.plant", "zoh": "model.plant",
+    "PlantParams": "model.plants.thesis", "rhs": "model.plants.thesis",
+    "zoh": "model.plants.thesis",
     "RigScaling": "model.rig",
-    "Trajectory": "model.simulation", "simulate_config": "model.simulation",
+    "Trajectory": "model.simulation",
     "to_control": "interop", "linearize": "interop",
 }
 
