@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from frictionlab.config import ConfigValueError, build_config
-from frictionlab.model.simulation import make_controller, simulate_config
 from frictionlab.model.swingup import CAUGHT, SWINGING, SwingUp, predicted_peak
+from frictionlab.runs import make_controller, simulate_config
 from frictionlab.studies.swingup_sim import simulate_swingup, swingup_outcome
 
 HANGING = ("sim.initial_angle", math.pi)

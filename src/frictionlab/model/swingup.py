@@ -164,6 +164,7 @@ from .controller import (
 from .friction import friction_view
 from .params import Validated, param
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
+from .sensor import wrap_angle
 
 __all__ = [
     "PHASES",
@@ -392,12 +393,6 @@ class SwingUpParams(Validated):
             blend=float(self.blend),
             horizon_ticks=float(max(1, round(self.catch_horizon / h))),
         )
-
-
-@jit
-def wrap_angle(a):
-    """``a`` wrapped into [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @jit
