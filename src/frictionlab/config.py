@@ -43,6 +43,7 @@ __all__ = [
     "Config",
     "ConfigError",
     "ConfigValueError",
+    "ControllerLimits",
     "SimParams",
     "UnknownKeyError",
     "build_config",
@@ -159,6 +160,18 @@ class SimParams(Validated):
     duration: float = param(40.0, "simulated time", "s", lo=0.0, hi=1e5, lo_open=True)
 
 
+@dataclass(frozen=True)
+class ControllerLimits(Validated):
+    """Limits on every controller command for the whole run (keys ``controller.*``)."""
+
+    _prefix = "controller."
+
+    u_max: float | None = param(None, "|u| limit of every controller command (swing-up, "
+                                "catch, balancing, compensation), in the simulator and the "
+                                "loop (None = only the DAC's range, 1/|rig.u_scale|)",
+                                "units of u", lo=0.0, lo_open=True, optional=True)
+
+
 #: Default arm/friction substeps per sampling period, by plant friction model
 #: (the cheapest counts that keep the limit-cycle features within 0.3 % of a
 #: run with 20 times as many, docs/model.md "Integration"): the static models
@@ -184,6 +197,7 @@ class Config:
     rig: RigScaling = dataclasses.field(default_factory=RigScaling)
     swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
     actuator: ActuatorParams = dataclasses.field(default_factory=ActuatorParams)
+    controller: ControllerLimits = dataclasses.field(default_factory=ControllerLimits)
 
     def __post_init__(self) -> None:
         for field, kind, kinds in (("friction", self.friction_kind, PLANT_FRICTION_KINDS),
@@ -200,6 +214,14 @@ class Config:
         """The float row the compiled plant reads: ``plant.*`` with the actuator's
         ``actuator.*`` (:mod:`frictionlab.model.actuator`)."""
         return self.plant.record(self.actuator.record())
+
+    @property
+    def u_limit(self) -> float:
+        """The bound on every controller command (units of u): ``controller.u_max``
+        within the DAC's range (``rig.u_max``, the harder bound the loop applies to
+        u_DA as well)."""
+        dac = self.rig.u_max
+        return dac if self.controller.u_max is None else min(self.controller.u_max, dac)
 
     @property
     def substeps(self) -> int:
@@ -236,10 +258,11 @@ class Config:
 
 
 _SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig", "swingup",
-             "actuator")
+             "actuator", "controller")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
             "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling,
-            "swingup": SwingUpParams, "actuator": ActuatorParams}
+            "swingup": SwingUpParams, "actuator": ActuatorParams,
+            "controller": ControllerLimits}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}

@@ -45,10 +45,10 @@ def make_sensor(cfg: Config) -> SensorParams:
 
 def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Controller:
     """The balancing controller a configuration describes (design, compensator, the
-    saturation of u at the DAC's range)."""
+    saturation of u at ``controller.u_max`` within the DAC's range, Config.u_limit)."""
     d = make_design(cfg.design, cfg.plant)
     return Controller(d, cfg.compensation_kind, cfg.compensation, error_signal=error_signal,
-                      u_max=cfg.rig.u_max)
+                      u_max=cfg.u_limit)
 
 
 def loop_spec(cfg: Config, controller: Controller | None = None) -> LoopSpec:

@@ -22,6 +22,7 @@ from .common import (
     check_engine_args,
     check_output_dir,
     check_output_path,
+    check_window,
     emit_json,
     error_message,
     feature_lines,
@@ -232,6 +233,7 @@ def cmd_limit_cycle(args) -> int:
     # validate the whole problem (settings, bounds, run length) before any
     # output or simulation: bad input exits 2 with a single stderr line
     constrained = not args.allow_stiction_below_coulomb
+    check_window(args.window, args.duration)
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
                       evaluate=_never, stiction_above_coulomb=constrained)
@@ -542,6 +544,8 @@ def cmd_features(args) -> int:
             raise UsageError(f"--set {key}: features takes only design.h (the period of a "
                              ".dat without its sidecar)")
     out = _log_experiment(args.log, h, args.window, args.design, what="features:")
+    if args.window is not None and out["window"] < args.window:  # the log is shorter
+        check_window(args.window, out["window"], f"the log {args.log} holds")
     if args.json:
         emit_json(out)
         return 0

@@ -20,6 +20,7 @@ import os
 import signal
 import sys
 
+from ..startsignals import Interrupted, interface_stats, not_started, take_over
 from .common import (
     UsageError,
     add_config_args,
@@ -166,6 +167,15 @@ def register_cli(sub) -> None:
 
 
 def cmd_run(args) -> int:
+    try:
+        return _cmd_run(args)
+    except Interrupted as exc:
+        # a stop signal before the run's own handlers took over (frictionlab.startsignals,
+        # installed by the executable first thing): nothing opened, nothing written
+        return _report(not_started(exc.name), args)
+
+
+def _cmd_run(args) -> int:
     from ..realtime import RealtimeController
     from ..realtime.clock import MonotonicClock
 
@@ -185,6 +195,8 @@ def cmd_run(args) -> int:
     check_output_dir(args.log_dir, "--log-dir")
     flush_notes(args)
     with _RunSignals() as signals:
+        if signals.received is not None:  # came during the start-up: nothing ran
+            return _report(not_started(signals.received), args)
         ctl = RealtimeController(cfg, args.backend, log_dir=args.log_dir,
                                  clock=MonotonicClock(), safety=safety,
                                  prewarm_us=args.prewarm_us, duration=args.duration,
@@ -194,7 +206,7 @@ def cmd_run(args) -> int:
                                  swing_up=args.swing_up)
         signals.ctl = ctl
         if signals.received is not None:  # before anything ran: no rig opened, no log
-            return _report(_not_started(signals.received), args)
+            return _report(not_started(signals.received), args)
         if not args.headless:
             # until the console serves (and takes these signals over) a signal ends
             # `run` at once; nothing runs yet
@@ -263,8 +275,11 @@ class _RunSignals:
     def __enter__(self):
         from ..realtime.osrt import STOP_SIGNALS
 
+        early = take_over()  # the executable's start-up handler raises no more
         for sig in STOP_SIGNALS:
             self._previous[sig] = signal.signal(sig, self._stop)
+        if self.received is None:
+            self.received = early
         if hasattr(signal, "SIGTSTP"):
             self._previous[signal.SIGTSTP] = signal.signal(signal.SIGTSTP, self._suspend)
         if hasattr(signal, "SIGXFSZ"):
@@ -294,14 +309,6 @@ class _RunSignals:
             os.kill(os.getpid(), signal.SIGTSTP)  # suspended here until SIGCONT (fg)
         finally:
             signal.signal(signal.SIGTSTP, self._suspend)
-
-
-def _not_started(reason_detail: str) -> dict:
-    """The statistics of a run that a signal ended before it started."""
-    none3 = {"p50": None, "p99": None, "max": None}
-    return {"ticks": 0, "missed": 0, "overruns": 0, "rig_timeouts": 0, "jitter_ms": none3,
-            "compute_us": dict(none3), "stop_reason": "signal",
-            "stop_detail": f"{reason_detail} before the run started", "log": None}
 
 
 def _run_headless(ctl, args) -> int:
@@ -344,17 +351,6 @@ def _report(st: dict, args) -> int:
     print(f"frictionlab run: stopped: {reason} ({what}): {st.get('stop_detail') or ''}",
           file=sys.stderr)
     return 1
-
-
-def interface_stats(st: dict) -> dict:
-    """The fields ``frictionlab run --headless --json`` prints (docs/cli.md), from the
-    run's full statistics (all of which are in the run's JSON sidecar)."""
-    j, c = st["jitter_ms"], st["compute_us"]
-    return {"ticks": st["ticks"], "missed": st["missed"], "overruns": st["overruns"],
-            "jitter_ms": {"p50": j["p50"], "p99": j["p99"], "max": j["max"]},
-            "compute_us": {"p50": c["p50"], "p99": c["p99"]},
-            "stop_reason": st["stop_reason"], "log": st["log"],
-            **({"swing_up": st["swing_up"]} if st.get("swing_up") is not None else {})}
 
 
 def cmd_rig_sim(args) -> int:

@@ -190,7 +190,7 @@ class ControlParams:
                                   compensation=params[kind])
         d = design(spec, cfg.plant)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
-                          error_signal=error_signal, u_max=cfg.rig.u_max)
+                          error_signal=error_signal, u_max=cfg.u_limit)
         gp, rec = ctrl.record()
         cp = friction_row(rec)
         cp.flags.writeable = False
