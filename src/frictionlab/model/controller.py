@@ -66,12 +66,16 @@ from .friction import (
     CLASSICAL,
     COULOMB,
     FRICTION_DTYPE,
+    FRICTION_FIELDS,
     LUGRE,
     STRIBECK,
     FrictionParams,
+    friction_record,
+    friction_row,
     friction_step,
     friction_view,
     levels,
+    steady_bristle,
     with_levels,
 )
 from .observers import arm_observer_step, pendulum_observer_step
@@ -92,6 +96,8 @@ __all__ = [
     "Controller",
     "ControllerOutput",
     "Gains",
+    "Transition",
+    "carry_compensator",
     "check_compensator",
     "compensator_levels",
     "compensator_params",
@@ -103,10 +109,12 @@ __all__ = [
     "gains_row",
     "new_state",
     "reset_compensator",
+    "start_compensator",
     "state_index",
     "state_record",
     "state_vector",
     "state_view",
+    "switch_controller",
     "zero_state",
 ]
 
@@ -135,6 +143,8 @@ STATE_DTYPE = float_record_dtype(STATE_FIELDS)
 NS = len(STATE_FIELDS)
 #: The compensator's fields (:func:`reset_compensator` zeroes them).
 _COMPENSATOR_STATE = ("relay", "z_hat", "v_hat", "v_prev", "fc_hat", "fs_hat", "adapt", "slide")
+#: Position of sigma_0 in a friction row.
+_SIGMA0 = FRICTION_FIELDS.index("sigma0")
 
 
 def new_state(**values: float) -> np.record:
@@ -228,6 +238,10 @@ class Gains(NamedTuple):
         Index in :data:`ERROR_SIGNALS` of the LuGre observer's error e.
     feed_net : float
         1.0: the observers receive :math:`u - \\hat F` (module docstring), 0.0: u.
+    comp_weight : float
+        The share of the compensator's estimate that is applied (and fed to the
+        observers): 1 but while a compensator is being ramped in after a switch
+        (:class:`Transition`).
     """
 
     l1: float
@@ -246,6 +260,7 @@ class Gains(NamedTuple):
     compensator: int
     error_signal: int
     feed_net: float
+    comp_weight: float = 1.0
 
     @property
     def feedback(self) -> np.ndarray:
@@ -267,7 +282,8 @@ class Gains(NamedTuple):
 def gains_record(row):
     """The :class:`Gains` stored as the float row ``np.array(gains, dtype=float)``."""
     return Gains(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8],
-                 row[9], row[10], row[11], row[12], int(row[13]), int(row[14]), row[15])
+                 row[9], row[10], row[11], row[12], int(row[13]), int(row[14]), row[15],
+                 row[16])
 
 
 #: Candidate error signals e for the LuGre compensator's observer, eq. (19):
@@ -397,6 +413,142 @@ def reset_compensator(s: np.record) -> None:
         setattr(s, name, 0.0)
 
 
+def start_compensator(s: np.record, kind: int, cp, v: float) -> None:
+    r"""Start compensator ``kind`` on a running controller state ``s`` as if it
+    had been running: its memory set to the steady value for the measured arm
+    velocity ``v`` (rad/s), so that its first estimate is the steady friction
+    :math:`F_{ss}(v)` of its model rather than a transient.
+
+    The LuGre observer (``lugre``, ``adaptive``): the bristle of steady
+    sliding, :math:`\dot z = 0` in eq. (18), :math:`\hat z = s(v)\,
+    \mathrm{sgn}(v)/\sigma_0` (:func:`~frictionlab.model.friction.steady_bristle`),
+    for which :math:`\hat F = \sigma_0\hat z + F_v v = s(v)\mathrm{sgn}(v) + F_v v`,
+    the Stribeck curve; 0 at v = 0 (at rest the bristle's value is not
+    known: 0 is no estimate).  The Coulomb relay: the direction of ``v``
+    outside its hysteresis, else 0.  The adaptive law restarts from the
+    compensator's levels.  The classical form has no memory.  See
+    docs/compensation.md, "Switching while running".
+
+    Parameters
+    ----------
+    s : record of :data:`STATE_DTYPE`
+        Updated in place (the compensator's fields only).
+    kind : int
+        The new compensator's code (:data:`COMPENSATOR_CODES`).
+    cp : record or float row of :data:`~frictionlab.model.friction.FRICTION_DTYPE`
+        The new compensator's friction parameters.
+    v : float
+        The last measured arm velocity (rad/s); NaN counts as 0.
+    """
+    reset_compensator(s)
+    p = cp if isinstance(cp, np.record) else friction_record(_friction_row(cp))
+    v = float(v) if math.isfinite(v) else 0.0
+    if kind == COULOMB and abs(v) > p.eps:
+        s.relay = math.copysign(1.0, v)
+    elif kind in (LUGRE, ADAPTIVE) and v != 0.0:
+        s.z_hat = float(steady_bristle(v, p))
+
+
+def _friction_row(cp) -> np.ndarray:
+    """A compensator's friction parameters as a float row (from a record or a row)."""
+    return friction_row(cp) if isinstance(cp, np.record) else np.asarray(cp, dtype=float)
+
+
+def carry_compensator(s: np.record, cp_old, cp_new) -> None:
+    r"""Keep the LuGre observer's spring force :math:`\sigma_0\hat z` continuous
+    across a change of its :math:`\sigma_0` (the bristle rescaled by
+    :math:`\sigma_0/\sigma_0'`); the bristle then relaxes to the new steady
+    value at the rate :math:`\sigma_0'|v|/s(v)` of eq. (18)."""
+    old, new = float(_friction_row(cp_old)[_SIGMA0]), float(_friction_row(cp_new)[_SIGMA0])
+    if old != new:
+        s.z_hat = s.z_hat * old / new
+
+
+class Transition:
+    """The gains of the ticks that follow a change of controller while it runs.
+
+    The state feedback L moves linearly from the gains in use to the new
+    ones over ``n_gain`` ticks (the loop's ``safety.gain_transition``), and a
+    compensator started afresh (:func:`start_compensator`) has its estimate
+    applied with a weight (:attr:`Gains.comp_weight`) rising linearly from
+    ``w_from`` to 1 over ``n_comp`` ticks, while the observers' bias from the
+    friction they did not model before decays.  :meth:`advance` gives the
+    gains of the next tick: the j-th tick after the change uses j/n of each
+    way.  Written once for every runner: the 200 Hz loop and the
+    simulator's :func:`frictionlab.model.simulation.simulate_config` with
+    ``switches``.
+    """
+
+    def __init__(self, target: Gains, l_from, n_gain: int, w_from: float, n_comp: int):
+        self.target = target
+        self.l_from = np.asarray(l_from, dtype=float)
+        self.l_step = target.feedback - self.l_from
+        self.n_gain = int(n_gain) if self.l_step.any() else 0
+        self.w_from = float(w_from)
+        self.n_comp = int(n_comp) if self.w_from < 1.0 else 0
+        self.n = max(self.n_gain, self.n_comp)
+        self.k = 0
+
+    @property
+    def done(self) -> bool:
+        """True once the target gains are reached."""
+        return self.k >= self.n
+
+    def current(self) -> Gains:
+        """The gains of the tick :meth:`advance` last gave (the start's before the first)."""
+        k = self.k
+        if k >= self.n:
+            return self.target
+        g = self.target
+        if k < self.n_gain:
+            g = g.with_feedback(self.l_from + (k / self.n_gain) * self.l_step)
+        if k < self.n_comp:
+            g = g._replace(comp_weight=self.w_from + (k / self.n_comp) * (1.0 - self.w_from))
+        return g
+
+    def advance(self) -> Gains:
+        """The gains of the next tick."""
+        self.k += 1
+        return self.current()
+
+
+def switch_controller(s: np.record | None, old: Gains, cp_old, new: Gains, cp_new, v: float,
+                      n_gain: int, n_comp: int) -> Transition:
+    """Make a change of controller while it runs bumpless; returns its :class:`Transition`.
+
+    ``old``/``cp_old`` are the gains and compensator parameters in use (in the
+    middle of an earlier transition too), ``new``/``cp_new`` the target, ``v``
+    the last measured arm velocity, ``s`` the controller state (None before
+    the first tick: nothing to carry).  A compensator of another kind is
+    started at its steady value (:func:`start_compensator`) and ramped in over
+    ``n_comp`` ticks; the LuGre observer kept (``lugre`` to or from
+    ``adaptive``, or new parameters) keeps its spring force
+    (:func:`carry_compensator`), the adaptive law restarting from its new
+    parameters when they changed; new gains L ramp over ``n_gain`` ticks.
+    Switching compensation off removes the estimate at once (its level, a step
+    the compensated cycle itself makes at every reversal).
+    """
+    kind, was = new.compensator, old.compensator
+    cp_old, cp_new = _friction_row(cp_old), _friction_row(cp_new)
+    w_from = 1.0
+    if s is not None and kind != 0:
+        lugre_kept = kind in (LUGRE, ADAPTIVE) and was in (LUGRE, ADAPTIVE)
+        if lugre_kept:
+            z = s.z_hat
+            if kind != was or (kind == ADAPTIVE and not (cp_old == cp_new).all()):
+                reset_compensator(s)  # the adaptive law restarts from the new levels
+                s.z_hat = z
+            carry_compensator(s, cp_old, cp_new)
+            w_from = old.comp_weight
+        elif kind != was:
+            start_compensator(s, kind, cp_new, v)
+            w_from = 0.0
+        else:
+            w_from = old.comp_weight
+    return Transition(new, old.feedback, n_gain if s is not None else 0, w_from,
+                      n_comp)
+
+
 @jit
 def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     """One controller tick; updates the state record ``s`` in place.
@@ -437,10 +589,14 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
             e = arm_dot_m
         elif err == E_ARM_ANGLE:
             e = arm_m
+        # ramped in after a switch (Transition): the observer's correction too
+        w = gp.comp_weight
+        e *= w * w * w
         if kind == ADAPTIVE:
             f_hat = adaptive_force(s, cp, arm_dot_m, e, h, gp.arm_length, gp.u_max)
         else:
             f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
+        f_hat *= gp.comp_weight
     u = u_fb + f_hat
     umax = gp.u_max
     if u > umax:

@@ -55,7 +55,7 @@ becomes non-finite stops at once with status ``"fell"``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -69,6 +69,7 @@ from .controller import (
     compensator_levels,
     controller_step,
     estimates,
+    switch_controller,
 )
 from .design import design as make_design
 from .friction import (
@@ -517,6 +518,8 @@ def simulate_config(
     record: bool = True,
     progress: Callable[[float], None] | None = None,
     controller: Controller | None = None,
+    switches: Sequence[tuple[float, Controller]] = (),
+    transition: tuple[float, float] = (2.0, 2.0),
 ) -> Trajectory:
     """Run the closed loop described by ``cfg``.
 
@@ -533,6 +536,16 @@ def simulate_config(
         report progress).
     controller : Controller, optional
         Use this controller instead of the one ``cfg`` describes.
+    switches : sequence of (t, Controller)
+        Changes of controller while the loop runs, as the operator makes them in
+        the 200 Hz loop: from the tick nearest ``t`` (s) on, that controller runs
+        on the plant, the sensor and the controller state as they are, made
+        bumpless as the loop makes it
+        (:func:`frictionlab.model.controller.switch_controller`: a new
+        compensator started at its steady value for the last measured arm
+        velocity and ramped in, new gains L ramped) over ``transition`` =
+        (gain, compensation) seconds (the loop's ``safety.gain_transition``
+        and ``safety.compensation_transition``).
     """
     n = run_ticks(cfg, duration, record)
     h = cfg.design.h
@@ -548,7 +561,12 @@ def simulate_config(
     fp = resolve_drift(cfg.friction.record(), n * h)
     pp = cfg.plant.record()
     substeps, ratio = cfg.substeps, cfg.pendulum_ratio
-    if progress is None:
+    if switches:
+        if not record:
+            raise ValueError("a run with switches is recorded (record=True)")
+        done, status = _run_switched(x, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                     cfg.sim.fall_angle, out, switches, transition, h)
+    elif progress is None:
         done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
                                   0, 0.0, cfg.sim.fall_angle, out, record)
     else:
@@ -566,6 +584,33 @@ def simulate_config(
             progress(done / n)
     data = out[:done] if record else out[:0]
     return Trajectory(np.arange(len(data)), h, data, STATUS[status], cfg)
+
+
+def _run_switched(x, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, fall_angle, out,
+                  switches, transition, h):
+    """:func:`_run` in chunks between the switches, and tick by tick through each
+    switch's transition (:class:`frictionlab.model.controller.Transition`); the
+    plant, its friction memory, the sensor's arm zero and the controller state
+    carry over, so that a run without switches is the unchunked one bit for bit."""
+    events = sorted((round(t / h), i, c) for i, (t, c) in enumerate(switches))
+    n_gain, n_comp = (round(t / h) for t in transition)
+    arm_dot_m = COLUMNS.index("arm_dot_m")
+    done, status, mem, x0 = 0, 0, 0.0, 0.0
+    trans = None
+    while done < n and status == 0:
+        while events and events[0][0] <= done:
+            new_gp, new_cp = events.pop(0)[2].record()
+            v = out[done - 1, arm_dot_m] if done else 0.0
+            trans = switch_controller(s, gp, cp, new_gp, new_cp, v, n_gain, n_comp)
+            gp, cp = trans.current(), new_cp
+        if trans is not None and not trans.done:
+            gp, m = trans.advance(), 1
+        else:
+            m = min(n, events[0][0] if events else n) - done
+        d, status, mem, x0 = _run(x, mem, m, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
+                                  done, x0, fall_angle, out[done:done + m], True)
+        done += d
+    return done, status
 
 
 def run_features(cfg: Config, duration: float | None = None, window: float | None = None):
