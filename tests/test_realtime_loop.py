@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from frictionlab.config import ConfigError, build_config
-from frictionlab.model.controller import controller_step
+from frictionlab.model.controller import controller_step, start_compensator
 from frictionlab.model.friction import friction_record
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime import loop as loop_mod
@@ -168,28 +168,31 @@ def test_realtime_refusal_is_reported_once(cfg, monkeypatch, capsys):
 
 
 def _replay_u(samples, params_at):
-    """Replay the controller on the logged measurements; params_at(k) -> ControlParams."""
+    """Replay the controller on the logged measurements; params_at(k) -> ControlParams.
+    A new compensator starts as the loop starts it: at its steady value for the arm
+    velocity measured in the tick before (here at once: no compensation transition)."""
     first = samples[0]
     p = params_at(first.k)
     s = p.controller.init(first.theta_m)
     out = []
+    v_prev = 0.0
     for smp in samples:
         q = params_at(smp.k)
-        if q.gp != p.gp and q.comp_kind != p.comp_kind:
-            s.relay = 0.0
-            s.z_hat = 0.0
+        if q.gp.compensator != p.gp.compensator and q.gp.compensator:
+            start_compensator(s, q.gp.compensator, q.cp, v_prev)
         p = q
         u, _, _ = controller_step(s, p.gp, friction_record(p.cp), smp.theta_m, smp.arm_m,
                                   smp.arm_dot_m)
         out.append(u)
+        v_prev = smp.arm_dot_m
     return np.array(out)
 
 
 def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
     clock = FakeClock()
     ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=clock, duration=1.0,
-                             safety=Safety(gain_transition=0.0), realtime=False,
-                             manage_gc=False)
+                             safety=Safety(gain_transition=0.0, compensation_transition=0.0),
+                             realtime=False, manage_gc=False)
     sub = ctl.subscribe(maxlen=1000)
     before = ControlParams.from_config(cfg)
     futures = []

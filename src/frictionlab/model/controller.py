@@ -143,8 +143,8 @@ STATE_DTYPE = float_record_dtype(STATE_FIELDS)
 NS = len(STATE_FIELDS)
 #: The compensator's fields (:func:`reset_compensator` zeroes them).
 _COMPENSATOR_STATE = ("relay", "z_hat", "v_hat", "v_prev", "fc_hat", "fs_hat", "adapt", "slide")
-#: Position of sigma_0 in a friction row.
-_SIGMA0 = FRICTION_FIELDS.index("sigma0")
+#: Positions of sigma_0 and of the observer gain k in a friction row.
+_SIGMA0, _K = FRICTION_FIELDS.index("sigma0"), FRICTION_FIELDS.index("k")
 
 
 def new_state(**values: float) -> np.record:
@@ -242,6 +242,9 @@ class Gains(NamedTuple):
         The share of the compensator's estimate that is applied (and fed to the
         observers): 1 but while a compensator is being ramped in after a switch
         (:class:`Transition`).
+    error_weight : float
+        The share of the error signal e that the LuGre observer receives: 1 but
+        while it is being ramped in after a switch (:class:`Transition`).
     """
 
     l1: float
@@ -261,6 +264,7 @@ class Gains(NamedTuple):
     error_signal: int
     feed_net: float
     comp_weight: float = 1.0
+    error_weight: float = 1.0
 
     @property
     def feedback(self) -> np.ndarray:
@@ -283,7 +287,7 @@ def gains_record(row):
     """The :class:`Gains` stored as the float row ``np.array(gains, dtype=float)``."""
     return Gains(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8],
                  row[9], row[10], row[11], row[12], int(row[13]), int(row[14]), row[15],
-                 row[16])
+                 row[16], row[17])
 
 
 #: Candidate error signals e for the LuGre compensator's observer, eq. (19):
@@ -467,25 +471,29 @@ def carry_compensator(s: np.record, cp_old, cp_new) -> None:
 class Transition:
     """The gains of the ticks that follow a change of controller while it runs.
 
-    The state feedback L moves linearly from the gains in use to the new
-    ones over ``n_gain`` ticks (the loop's ``safety.gain_transition``), and a
-    compensator started afresh (:func:`start_compensator`) has its estimate
-    applied with a weight (:attr:`Gains.comp_weight`) rising linearly from
-    ``w_from`` to 1 over ``n_comp`` ticks, while the observers' bias from the
-    friction they did not model before decays.  :meth:`advance` gives the
-    gains of the next tick: the j-th tick after the change uses j/n of each
-    way.  Written once for every runner: the 200 Hz loop and the
-    simulator's :func:`frictionlab.model.simulation.simulate_config` with
-    ``switches``.
+    Over ``n_gain`` ticks (the loop's ``safety.gain_transition``) the state
+    feedback L moves linearly from ``l_from``, the gains in use, to the
+    target's.  Over ``n_comp`` ticks (``safety.compensation_transition``) the
+    weight of the compensator's estimate (:attr:`Gains.comp_weight`) rises
+    linearly from ``comp_from`` to 1, and that of the LuGre observer's error
+    signal (:attr:`Gains.error_weight`) from ``error_from`` with the cube of
+    the ramp's progress, :math:`r^3`: it reaches a tenth at :math:`r = 0.46`,
+    once the observers' bias from the friction they did not model before the
+    switch has decayed (docs/compensation.md, "Switching while running").
+    :meth:`advance` gives the gains of the next tick: the j-th tick after the
+    change is at r = j/n.  Written once for every runner: the 200 Hz loop and
+    :func:`frictionlab.model.simulation.simulate_config` with ``switches``.
     """
 
-    def __init__(self, target: Gains, l_from, n_gain: int, w_from: float, n_comp: int):
+    def __init__(self, target: Gains, l_from, n_gain: int, n_comp: int,
+                 comp_from: float = 1.0, error_from: float = 1.0):
         self.target = target
         self.l_from = np.asarray(l_from, dtype=float)
         self.l_step = target.feedback - self.l_from
         self.n_gain = int(n_gain) if self.l_step.any() else 0
-        self.w_from = float(w_from)
-        self.n_comp = int(n_comp) if self.w_from < 1.0 else 0
+        self.comp_from = float(comp_from)
+        self.error_from = float(error_from)
+        self.n_comp = int(n_comp) if min(self.comp_from, self.error_from) < 1.0 else 0
         self.n = max(self.n_gain, self.n_comp)
         self.k = 0
 
@@ -503,7 +511,9 @@ class Transition:
         if k < self.n_gain:
             g = g.with_feedback(self.l_from + (k / self.n_gain) * self.l_step)
         if k < self.n_comp:
-            g = g._replace(comp_weight=self.w_from + (k / self.n_comp) * (1.0 - self.w_from))
+            r = k / self.n_comp
+            g = g._replace(comp_weight=self.comp_from + r * (1.0 - self.comp_from),
+                           error_weight=self.error_from + r * r * r * (1.0 - self.error_from))
         return g
 
     def advance(self) -> Gains:
@@ -519,34 +529,36 @@ def switch_controller(s: np.record | None, old: Gains, cp_old, new: Gains, cp_ne
     ``old``/``cp_old`` are the gains and compensator parameters in use (in the
     middle of an earlier transition too), ``new``/``cp_new`` the target, ``v``
     the last measured arm velocity, ``s`` the controller state (None before
-    the first tick: nothing to carry).  A compensator of another kind is
-    started at its steady value (:func:`start_compensator`) and ramped in over
-    ``n_comp`` ticks; the LuGre observer kept (``lugre`` to or from
-    ``adaptive``, or new parameters) keeps its spring force
-    (:func:`carry_compensator`), the adaptive law restarting from its new
-    parameters when they changed; new gains L ramp over ``n_gain`` ticks.
-    Switching compensation off removes the estimate at once (its level, a step
-    the compensated cycle itself makes at every reversal).
+    the first tick: nothing to carry, the change is made at once).
+
+    * A compensator of another kind is started at its steady value
+      (:func:`start_compensator`) and ramped in over ``n_comp`` ticks, its
+      estimate and its error signal (:class:`Transition`).
+    * The LuGre observer kept (``lugre`` to or from ``adaptive``, or new
+      parameters) keeps its spring force (:func:`carry_compensator`); the
+      adaptive law restarts from its new parameters when they changed; a new
+      observer gain k or error signal is ramped in.
+    * Switching compensation off removes the estimate at once: a step of its
+      level at most, which the compensated cycle itself makes at every reversal.
+    * New gains L ramp over ``n_gain`` ticks.
     """
     kind, was = new.compensator, old.compensator
     cp_old, cp_new = _friction_row(cp_old), _friction_row(cp_new)
-    w_from = 1.0
-    if s is not None and kind != 0:
-        lugre_kept = kind in (LUGRE, ADAPTIVE) and was in (LUGRE, ADAPTIVE)
-        if lugre_kept:
-            z = s.z_hat
-            if kind != was or (kind == ADAPTIVE and not (cp_old == cp_new).all()):
-                reset_compensator(s)  # the adaptive law restarts from the new levels
-                s.z_hat = z
-            carry_compensator(s, cp_old, cp_new)
-            w_from = old.comp_weight
-        elif kind != was:
-            start_compensator(s, kind, cp_new, v)
-            w_from = 0.0
-        else:
-            w_from = old.comp_weight
-    return Transition(new, old.feedback, n_gain if s is not None else 0, w_from,
-                      n_comp)
+    comp_from, error_from = old.comp_weight, old.error_weight
+    if s is None:
+        return Transition(new, new.feedback, 0, 0)
+    if kind != 0 and kind in (LUGRE, ADAPTIVE) and was in (LUGRE, ADAPTIVE):
+        z = s.z_hat
+        if kind != was or (kind == ADAPTIVE and not (cp_old == cp_new).all()):
+            reset_compensator(s)  # the adaptive law restarts from the new levels
+            s.z_hat = z
+        carry_compensator(s, cp_old, cp_new)
+        if cp_old[_K] != cp_new[_K] or old.error_signal != new.error_signal:
+            error_from = 0.0
+    elif kind != 0 and kind != was:
+        start_compensator(s, kind, cp_new, v)
+        comp_from = error_from = 0.0
+    return Transition(new, old.feedback, n_gain, n_comp, comp_from, error_from)
 
 
 @jit
@@ -589,9 +601,7 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
             e = arm_dot_m
         elif err == E_ARM_ANGLE:
             e = arm_m
-        # ramped in after a switch (Transition): the observer's correction too
-        w = gp.comp_weight
-        e *= w * w * w
+        e *= gp.error_weight  # ramped in after a switch (Transition)
         if kind == ADAPTIVE:
             f_hat = adaptive_force(s, cp, arm_dot_m, e, h, gp.arm_length, gp.u_max)
         else:
