@@ -271,6 +271,16 @@ class Gains(NamedTuple):
         """The state feedback L = (l1, l2, l3, l4)."""
         return np.array(self[:4])
 
+    @property
+    def gains8(self) -> np.ndarray:
+        """The state feedback and the observer gains (l1, l2, l3, l4, k1, k2, k3, k4)."""
+        return np.array(self[:8])
+
+    def with_gains8(self, g) -> Gains:
+        """These gains with L and K replaced by ``g`` (as :attr:`gains8`)."""
+        return self._replace(l1=float(g[0]), l2=float(g[1]), l3=float(g[2]), l4=float(g[3]),
+                             k1=float(g[4]), k2=float(g[5]), k3=float(g[6]), k4=float(g[7]))
+
     def with_feedback(self, L) -> Gains:
         """These gains with the state feedback L replaced."""
         return self._replace(l1=float(L[0]), l2=float(L[1]), l3=float(L[2]), l4=float(L[3]))
@@ -472,8 +482,12 @@ class Transition:
     """The gains of the ticks that follow a change of controller while it runs.
 
     Over ``n_gain`` ticks (the loop's ``safety.gain_transition``) the state
-    feedback L moves linearly from ``l_from``, the gains in use, to the
-    target's.  Over ``n_comp`` ticks (``safety.compensation_transition``) the
+    feedback L and the observer gains K move from ``l_from``, the gains in use
+    (L and K, 8 numbers), to the target's: linearly, or piecewise linearly
+    along ``l_path`` (rows of L and K from the old design to the new one,
+    :func:`frictionlab.model.design.gain_path`; its first row is replaced by
+    ``l_from``, its last by the target's).
+    Over ``n_comp`` ticks (``safety.compensation_transition``) the
     weight of the compensator's estimate (:attr:`Gains.comp_weight`) rises
     linearly from ``comp_from`` to 1, and that of the LuGre observer's error
     signal (:attr:`Gains.error_weight`) from ``error_from`` with the cube of
@@ -486,11 +500,12 @@ class Transition:
     """
 
     def __init__(self, target: Gains, l_from, n_gain: int, n_comp: int,
-                 comp_from: float = 1.0, error_from: float = 1.0):
+                 comp_from: float = 1.0, error_from: float = 1.0, l_path=None):
         self.target = target
-        self.l_from = np.asarray(l_from, dtype=float)
-        self.l_step = target.feedback - self.l_from
-        self.n_gain = int(n_gain) if self.l_step.any() else 0
+        path = np.array([l_from, target.gains8] if l_path is None else l_path, dtype=float)
+        path[0], path[-1] = l_from, target.gains8
+        self.l_path = path
+        self.n_gain = int(n_gain) if (path[0] != path[-1]).any() else 0
         self.comp_from = float(comp_from)
         self.error_from = float(error_from)
         self.n_comp = int(n_comp) if min(self.comp_from, self.error_from) < 1.0 else 0
@@ -509,7 +524,10 @@ class Transition:
             return self.target
         g = self.target
         if k < self.n_gain:
-            g = g.with_feedback(self.l_from + (k / self.n_gain) * self.l_step)
+            pos = k / self.n_gain * (len(self.l_path) - 1)
+            i = int(pos)
+            a, b = self.l_path[i], self.l_path[i + 1]
+            g = g.with_gains8(a + (pos - i) * (b - a))
         if k < self.n_comp:
             r = k / self.n_comp
             g = g._replace(comp_weight=self.comp_from + r * (1.0 - self.comp_from),
@@ -523,7 +541,7 @@ class Transition:
 
 
 def switch_controller(s: np.record | None, old: Gains, cp_old, new: Gains, cp_new, v: float,
-                      n_gain: int, n_comp: int) -> Transition:
+                      n_gain: int, n_comp: int, l_path=None) -> Transition:
     """Make a change of controller while it runs bumpless; returns its :class:`Transition`.
 
     ``old``/``cp_old`` are the gains and compensator parameters in use (in the
@@ -540,13 +558,18 @@ def switch_controller(s: np.record | None, old: Gains, cp_old, new: Gains, cp_ne
       observer gain k or error signal is ramped in.
     * Switching compensation off removes the estimate at once: a step of its
       level at most, which the compensated cycle itself makes at every reversal.
-    * New gains L ramp over ``n_gain`` ticks.
+    * New gains L ramp over ``n_gain`` ticks (along ``l_path`` when given:
+      :func:`frictionlab.model.design.gain_path`); a new omega_0 keeps the
+      pendulum observer's estimate of theta' (its state is theta'/omega_0).
     """
     kind, was = new.compensator, old.compensator
     cp_old, cp_new = _friction_row(cp_old), _friction_row(cp_new)
     comp_from, error_from = old.comp_weight, old.error_weight
     if s is None:
         return Transition(new, new.feedback, 0, 0)
+    if old.omega0 != new.omega0:
+        # the pendulum observer's state is theta'/omega_0: keep theta'-hat, not x2
+        s.x2 = s.x2 * old.omega0 / new.omega0
     if kind != 0 and kind in (LUGRE, ADAPTIVE) and was in (LUGRE, ADAPTIVE):
         z = s.z_hat
         if kind != was or (kind == ADAPTIVE and not (cp_old == cp_new).all()):
@@ -558,7 +581,7 @@ def switch_controller(s: np.record | None, old: Gains, cp_old, new: Gains, cp_ne
     elif kind != 0 and kind != was:
         start_compensator(s, kind, cp_new, v)
         comp_from = error_from = 0.0
-    return Transition(new, old.feedback, n_gain, n_comp, comp_from, error_from)
+    return Transition(new, old.gains8, n_gain, n_comp, comp_from, error_from, l_path)
 
 
 @jit

@@ -72,6 +72,7 @@ from .controller import (
     switch_controller,
 )
 from .design import design as make_design
+from .design import gain_path
 from .friction import (
     FRICTION_DTYPE,
     KINDS,
@@ -564,8 +565,9 @@ def simulate_config(
     if switches:
         if not record:
             raise ValueError("a run with switches is recorded (record=True)")
-        done, status = _run_switched(x, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
-                                     cfg.sim.fall_angle, out, switches, transition, h)
+        done, status = _run_switched(x, n, substeps, ratio, pp, fkind, fp, ctrl, s, sp,
+                                     cfg.sim.fall_angle, out, switches, transition, h,
+                                     cfg.plant)
     elif progress is None:
         done, status, _, _ = _run(x, 0.0, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp,
                                   0, 0.0, cfg.sim.fall_angle, out, record)
@@ -586,12 +588,14 @@ def simulate_config(
     return Trajectory(np.arange(len(data)), h, data, STATUS[status], cfg)
 
 
-def _run_switched(x, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, fall_angle, out,
-                  switches, transition, h):
+def _run_switched(x, n, substeps, ratio, pp, fkind, fp, ctrl, s, sp, fall_angle, out,
+                  switches, transition, h, plant):
     """:func:`_run` in chunks between the switches, and tick by tick through each
     switch's transition (:class:`frictionlab.model.controller.Transition`); the
     plant, its friction memory, the sensor's arm zero and the controller state
     carry over, so that a run without switches is the unchunked one bit for bit."""
+    gp, cp = ctrl.record()
+    spec = ctrl.design.spec
     events = sorted((round(t / h), i, c) for i, (t, c) in enumerate(switches))
     n_gain, n_comp = (round(t / h) for t in transition)
     arm_dot_m = COLUMNS.index("arm_dot_m")
@@ -599,9 +603,13 @@ def _run_switched(x, n, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, fall_angl
     trans = None
     while done < n and status == 0:
         while events and events[0][0] <= done:
-            new_gp, new_cp = events.pop(0)[2].record()
+            new = events.pop(0)[2]
+            new_gp, new_cp = new.record()
             v = out[done - 1, arm_dot_m] if done else 0.0
-            trans = switch_controller(s, gp, cp, new_gp, new_cp, v, n_gain, n_comp)
+            path = (gain_path(spec, new.design.spec, plant) if new.design.spec != spec
+                    else None)
+            spec = new.design.spec
+            trans = switch_controller(s, gp, cp, new_gp, new_cp, v, n_gain, n_comp, path)
             gp, cp = trans.current(), new_cp
         if trans is not None and not trans.done:
             gp, m = trans.advance(), 1

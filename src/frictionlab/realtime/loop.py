@@ -698,7 +698,7 @@ class Loop:
                 # bumpless: from the gains in use (mid-transition too), a new compensator
                 # started at its steady value for the arm's velocity and ramped in
                 trans = switch_controller(s, gp, cp, params.gp, params.cp, arm_dot, ramp_n,
-                                          comp_n)
+                                          comp_n, params.l_path)
                 gp, cp = trans.current(), params.cp
                 if trans.done:
                     trans = None
