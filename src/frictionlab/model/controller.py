@@ -508,7 +508,7 @@ class Transition:
         self.n_gain = int(n_gain) if (path[0] != path[-1]).any() else 0
         self.comp_from = float(comp_from)
         self.error_from = float(error_from)
-        self.n_comp = int(n_comp) if min(self.comp_from, self.error_from) < 1.0 else 0
+        self.n_comp = int(n_comp) if (self.comp_from, self.error_from) != (1.0, 1.0) else 0
         self.n = max(self.n_gain, self.n_comp)
         self.k = 0
 
@@ -555,7 +555,8 @@ def switch_controller(s: np.record | None, old: Gains, cp_old, new: Gains, cp_ne
     * The LuGre observer kept (``lugre`` to or from ``adaptive``, or new
       parameters) keeps its spring force (:func:`carry_compensator`); the
       adaptive law restarts from its new parameters when they changed; a new
-      observer gain k or error signal is ramped in.
+      observer gain k moves from the old one to the new one, a new error signal
+      is ramped in from 0.
     * Switching compensation off removes the estimate at once: a step of its
       level at most, which the compensated cycle itself makes at every reversal.
     * New gains L ramp over ``n_gain`` ticks (along ``l_path`` when given:
@@ -576,8 +577,12 @@ def switch_controller(s: np.record | None, old: Gains, cp_old, new: Gains, cp_ne
             reset_compensator(s)  # the adaptive law restarts from the new levels
             s.z_hat = z
         carry_compensator(s, cp_old, cp_new)
-        if cp_old[_K] != cp_new[_K] or old.error_signal != new.error_signal:
+        k_old, k_new = cp_old[_K], cp_new[_K]
+        if old.error_signal != new.error_signal:
             error_from = 0.0
+        elif k_old != k_new and k_new > 0.0:
+            # from the gain in use (k_old e) to the new one (k_new e)
+            error_from = old.error_weight * k_old / k_new
     elif kind != 0 and kind != was:
         start_compensator(s, kind, cp_new, v)
         comp_from = error_from = 0.0

@@ -25,21 +25,22 @@ nanoseconds on the monotonic clock, so there is no drift):
    (log writer, console subscriptions) without blocking;
 7. between ticks, after every tick (one without a reading too): apply
    pending parameter changes atomically (the mailbox; in effect from the
-   next tick; a change of compensator, or of the adaptive compensator's
-   parameters, restarts the compensator's state), and the scheduled
+   next tick, made bumpless: see below), and the scheduled
    housekeeping (garbage collection once a second, the host's steal time
    every 100 ms).
 
-Gain transitions: a change of the state-feedback gains L while the loop runs
-(a new design) moves L linearly from the gains in use to the new ones over
-:attr:`Safety.gain_transition` seconds (2 s), one step per tick; everything
-else of the change (observer gains, compensation) takes effect at once.
-Switched at once in the middle of the slow design's limit cycle, the fast
-design's gains meet an arm swinging at up to 5 rad/s about 1.4 rad from its
-reference and throw the pendulum to 0.41-0.44 rad, past the 0.35 rad angle
-limit, two times in three (simulated over a whole cycle of switch times);
-over 2 s the swing stays below 0.31 rad.  ``gain_transition = 0`` switches at
-once.
+Switching while running (bumpless; docs/realtime.md and docs/compensation.md,
+"Switching while running"): a change is made by
+:func:`frictionlab.model.controller.switch_controller`, as the simulator makes
+it.  New gains (a design change) move from the gains in use to the new ones
+over :attr:`Safety.gain_transition` seconds (2 s), along the gains of the
+designs in between (:func:`frictionlab.model.design.gain_path`, computed
+outside the loop), one step per tick: switched at once in the middle of the
+slow design's limit cycle, the fast design's gains throw the pendulum past the
+0.35 rad angle limit two times in three.  A compensator switched on (or to
+another kind) starts at its steady estimate for the last measured arm velocity
+and is ramped in over :attr:`Safety.compensation_transition` seconds (2 s).
+``0`` switches at once.
 
 Pre-warming (``prewarm_us`` > 0): on a virtual machine whose CPU sits idle
 between ticks, the first microseconds after a wake-up run from cold caches
