@@ -13,11 +13,20 @@ runners make the switch with the same code
 (:func:`~frictionlab.model.controller.switch_controller`).
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from frictionlab.config import build_config
-from frictionlab.model.controller import LUGRE, new_state, start_compensator
+from frictionlab.model.controller import (
+    LUGRE,
+    Transition,
+    new_state,
+    start_compensator,
+    switch_controller,
+)
+from frictionlab.model.design import PRESETS, design, gain_path
 from frictionlab.model.friction import FrictionParams, lugre_dz, steady_state
 from frictionlab.model.simulation import simulate_config
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
@@ -116,3 +125,50 @@ def test_a_lugre_compensator_starts_at_its_steady_friction(v):
     assert lugre_dz(v, s.z_hat, 0.0, p) == pytest.approx(0.0, abs=1e-12)
     start_compensator(s, LUGRE, p, 0.0)
     assert s.z_hat == 0.0  # at rest the bristle is not known: no estimate
+
+
+def test_the_gain_path_passes_through_the_designs_in_between():
+    """Each row of gain_path is the pole placement of a specification on the straight
+    line between the two designs; a transition moves the gains piecewise linearly
+    through them, j/n of the way at the j-th tick."""
+    fast, slow = PRESETS["fast"], PRESETS["slow"]
+    path = gain_path(fast, slow, steps=10)
+    assert path.shape == (11, 8)
+    mid = dataclasses.replace(fast, **{f: (getattr(fast, f) + getattr(slow, f)) / 2 for f in (
+        "omega0", "omega1", "zeta1", "omega2", "zeta2", "observer_omega1", "observer_zeta1",
+        "observer_omega2", "observer_zeta2")})
+    for row, spec in ((0, fast), (5, mid), (10, slow)):
+        d = design(spec)
+        np.testing.assert_allclose(path[row], np.concatenate([d.L, d.K]), rtol=1e-12)
+    # ... and not the straight line between the ends
+    assert np.max(np.abs(path[5] - (path[0] + path[10]) / 2)) > 0.1
+    target = ControlParams.from_config(build_config("slow")).gp
+    tr = Transition(target, path[0], 100, 0, l_path=path)
+    gains = [tr.advance() for _ in range(100)]
+    assert tr.done and gains[-1] == target
+    np.testing.assert_allclose(gains[49].gains8, path[5], rtol=1e-12)  # tick 50: r = 0.5
+    np.testing.assert_allclose(gains[54].gains8, (path[5] + path[6]) / 2, rtol=1e-12)
+    assert all(g.comp_weight == 1.0 and g.error_weight == 1.0 for g in gains)
+
+
+def test_a_started_compensator_is_ramped_in_estimate_and_error():
+    old = ControlParams.from_config(build_config("fast"))
+    new = old.apply({"compensation": "lugre"})
+    s = new_state(arm_dot=1.0)
+    tr = switch_controller(s, old.gp, old.cp, new.gp, new.cp, 1.5, 400, 400)
+    assert s.z_hat > 0.0  # started sliding forward
+    w = np.array([(g.comp_weight, g.error_weight) for g in (tr.advance() for _ in range(400))])
+    r = np.arange(1, 401) / 400
+    np.testing.assert_allclose(w[:-1, 0], r[:-1], rtol=1e-12)
+    np.testing.assert_allclose(w[:-1, 1], r[:-1] ** 3, rtol=1e-12)
+    assert tuple(w[-1]) == (1.0, 1.0) and tr.done
+    # a running compensator switched off, or given new levels, is not ramped
+    for change in ({"compensation_enabled": False}, {"compensation_params": {"coulomb": 1.2}}):
+        other = new.apply(change)
+        assert switch_controller(s, new.gp, new.cp, other.gp, other.cp, 1.5, 400, 400).done
+
+
+def test_the_transition_times_are_options_of_run(cli):
+    res = cli("run", "--headless", "--duration", "1", "--compensation-transition", "-1")
+    assert res.returncode == 2
+    assert "--compensation-transition = -1 is out of range" in res.stderr
