@@ -56,7 +56,7 @@ SWITCHES = {
 
 
 def measure(name: str, times, transition: float) -> dict:
-    from frictionlab.model.simulation import simulate_config
+    from frictionlab.runs import simulate_config
 
     design, comp, sets, change = SWITCHES[name]
     cfg = build_config(design, "classical", comp, sets=sets)

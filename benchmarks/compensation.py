@@ -54,7 +54,7 @@ import numpy as np
 
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import trajectory_features
-from frictionlab.model.simulation import simulate_config
+from frictionlab.runs import simulate_config
 from frictionlab.studies.compensation import make_compensator, tune
 
 NOISE = 0.002

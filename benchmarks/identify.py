@@ -58,7 +58,7 @@ from pathlib import Path
 from _measure import cpu_seconds, load_average
 
 from frictionlab.config import build_config
-from frictionlab.model.simulation import run_features
+from frictionlab.runs import run_features
 from frictionlab.studies.identification.limit_cycle import fit_limit_cycle, parse_experiments
 
 TRUTH = {"friction.coulomb": 1.35, "friction.stiction": 2.1, "plant.omega0": 7.1,

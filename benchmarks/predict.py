@@ -44,7 +44,7 @@ import time
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import FEATURES
 from frictionlab.model.periodic import periodic_orbit
-from frictionlab.model.simulation import run_features
+from frictionlab.runs import loop_spec, run_features
 from frictionlab.studies.predict import describing_function
 
 DURATIONS = (5.0, 10.0, 20.0, 40.0)
@@ -94,7 +94,7 @@ def main() -> None:
     print(head)
     for design, label, cfg in configs():
         ref = run_features(cfg, 300.0, 200.0)
-        t_orbit, orbit = best_ms(lambda cfg=cfg: periodic_orbit(cfg), args.repeats)
+        t_orbit, orbit = best_ms(lambda cfg=cfg: periodic_orbit(loop_spec(cfg)), args.repeats)
         e_orbit = max_error(orbit.features, ref) if orbit.found else float("inf")
         sims = []
         for d in DURATIONS:

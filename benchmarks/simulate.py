@@ -13,7 +13,7 @@ Measures, single-threaded and side by side in one process:
   (eq. 19, e = -theta), and ``lugre_k1_cost`` = ``lugre_k1_ms / lugre_ms``;
 * ``scipy_ms`` - the classical case with :func:`scipy_closed_loop` below: the
   same controller (:func:`frictionlab.model.controller.controller_step`, the code
-  :meth:`Controller.step` runs), the same plant (:func:`frictionlab.model.plant.rhs`
+  :meth:`Controller.step` runs), the same plant (:func:`frictionlab.model.plants.thesis.rhs`
   with the friction of :mod:`frictionlab.model.friction` evaluated inside the
   right-hand side), u held over each sample, ``solve_ivp`` (RK45, rtol 1e-6,
   scipy's default atol 1e-6) restarted every sample, timed over the full 30 s
@@ -65,8 +65,8 @@ from frictionlab.config import Config, build_config
 from frictionlab.model.controller import controller_step
 from frictionlab.model.friction import classical_force, lugre_dz, lugre_force
 from frictionlab.model.limit_cycles import FEATURES, features, trajectory_features
-from frictionlab.model.plant import rhs
-from frictionlab.model.simulation import make_controller, simulate_config
+from frictionlab.model.plants.thesis import rhs
+from frictionlab.runs import make_controller, simulate_config
 
 DURATION = 30.0
 #: Sec. 5.2: the band the thesis widened to 0.03 rad/s to see stiction.

@@ -80,7 +80,7 @@ import time
 from _measure import cpu_seconds, load_average
 
 from frictionlab.config import Config, build_config
-from frictionlab.model.simulation import simulate_config
+from frictionlab.runs import simulate_config
 from frictionlab.studies.sweep import evaluate, make_points, parse_vary, reduce_features, shutdown
 
 DURATION = 30.0

@@ -35,7 +35,7 @@ from frictionlab.model.friction import (
     drifted_params,
     resolve_drift,
 )
-from frictionlab.model.simulation import SimulatedPlant, make_controller, simulate_config
+from frictionlab.runs import make_controller, simulate_config, simulated_plant
 
 H = 0.005
 L1 = 0.21
@@ -81,7 +81,7 @@ def test_the_simulated_plant_friction_follows_a_step_drift():
     assert np.max(f[t < 4.0 - 1e-9]) == pytest.approx(1.5)
     assert np.max(f[t >= 4.0 - 1e-9]) == pytest.approx(0.75)
     # the same plant stepped one sample at a time (the loop's sim backend)
-    plant = SimulatedPlant(cfg, duration=8.0)
+    plant = simulated_plant(cfg, duration=8.0)
     st = plant.init()
     levels = set()
     for _ in range(round(6.0 / H)):

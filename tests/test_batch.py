@@ -7,7 +7,7 @@ import pytest
 
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import FEATURES, _pairwise_sum
-from frictionlab.model.simulation import run_features
+from frictionlab.runs import run_features
 from frictionlab.studies import batch
 
 # (design, plant friction, compensation, sets): every plant friction model, both

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
-from frictionlab.model.simulation import simulate_config
+from frictionlab.runs import simulate_config
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "simulate.py"
 

@@ -18,7 +18,7 @@ from frictionlab.model.controller import DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Co
 from frictionlab.model.design import design as make_design
 from frictionlab.model.friction import FrictionParams, stribeck_curve, stribeck_level
 from frictionlab.model.limit_cycles import FEATURES
-from frictionlab.model.simulation import simulate_config
+from frictionlab.runs import simulate_config
 from frictionlab.studies import compensation as comp
 from frictionlab.studies.compensation import (
     ClassicalCompensator,

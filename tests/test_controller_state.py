@@ -16,7 +16,7 @@ from frictionlab.model.controller import (
     state_record,
     state_vector,
 )
-from frictionlab.model.simulation import make_controller
+from frictionlab.runs import make_controller
 
 
 def test_layout_is_one_float_per_field_in_order():

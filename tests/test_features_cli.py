@@ -9,9 +9,9 @@ from frictionlab.cli import main
 from frictionlab.cli.identify import load_measured
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import FEATURES, trajectory_features
-from frictionlab.model.simulation import simulate_config
 from frictionlab.realtime import FakeClock, RealtimeController
 from frictionlab.realtime.rigs import SimRig
+from frictionlab.runs import simulate_config
 
 DURATION = 20.0
 

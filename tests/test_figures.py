@@ -18,8 +18,8 @@ from matplotlib.colors import to_rgba
 from frictionlab.cli import main
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import FEATURES
-from frictionlab.model.simulation import run_features
 from frictionlab.plotting import config_title, feature_label, key_label, series_style
+from frictionlab.runs import run_features
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 UNIT = re.compile(r"\[[^\]]+\]")
@@ -228,8 +228,8 @@ def test_features_the_plot_shows_are_the_ones_simulate_reports():
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["angle_velocity", "control_friction"])
 def test_reproduce_cycle_figures(figures, capsys, tmp_path, kind):
-    from frictionlab.model.simulation import simulate_config
     from frictionlab.plotting import plot_cycle_figure
+    from frictionlab.runs import simulate_config
 
     traj = simulate_config(build_config("fast", "classical"), 4.0)
     trace = {k: traj[k] for k in ("t", "theta_m", "arm_dot_m", "u", "friction")}

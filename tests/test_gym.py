@@ -12,7 +12,7 @@ import frictionlab.gym as fgym
 from frictionlab.config import build_config
 from frictionlab.gym import DEFAULT_RANDOMIZATION, ENV_ID, FurutaEnv, FurutaVectorEnv
 from frictionlab.model.rig import RigScaling
-from frictionlab.model.simulation import make_controller, simulate_config
+from frictionlab.runs import make_controller, simulate_config
 
 NORMALISE_HINT = "symmetric and normalized space"
 

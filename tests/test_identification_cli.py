@@ -9,7 +9,7 @@ import pytest
 
 from frictionlab.cli import main
 from frictionlab.config import build_config
-from frictionlab.model.simulation import run_features
+from frictionlab.runs import run_features
 
 DURATION, WINDOW = 16.0, 10.0
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from frictionlab.config import ConfigError, build_config
-from frictionlab.model.simulation import run_features
+from frictionlab.runs import run_features
 from frictionlab.studies import sweep
 from frictionlab.studies.identification.limit_cycle import (
     DEFAULT_BOUNDS,

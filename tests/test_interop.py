@@ -14,8 +14,8 @@ from scipy.integrate import solve_ivp
 import frictionlab as fl
 from frictionlab.config import build_config
 from frictionlab.model.friction import make_model
-from frictionlab.model.plant import linearized_model, zoh
-from frictionlab.model.simulation import simulate_config
+from frictionlab.model.plants.thesis import linearized_model, zoh
+from frictionlab.runs import simulate_config
 
 CLI = [sys.executable, "-m", "frictionlab"]
 

@@ -14,9 +14,9 @@ from frictionlab.model.controller import Controller
 from frictionlab.model.design import PRESETS, design
 from frictionlab.model.friction import FrictionParams
 from frictionlab.model.loopcheck import check_loop, loop_matrices
-from frictionlab.model.plant import PlantParams, zoh_closed_form
-from frictionlab.model.simulation import make_controller, simulate_config
+from frictionlab.model.plants.thesis import PlantParams, zoh_closed_form
 from frictionlab.realtime.params import ChangeError, ControlParams, UnsafeChange
+from frictionlab.runs import make_controller, simulate_config
 
 FAST, SLOW = PRESETS["fast"], PRESETS["slow"]
 U_MAX = 1.0 / 0.022

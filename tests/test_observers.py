@@ -10,7 +10,7 @@ from frictionlab.model.observers import (
     arm_observer_step,
     pendulum_observer_step,
 )
-from frictionlab.model.plant import PlantParams, rhs
+from frictionlab.model.plants.thesis import PlantParams, rhs
 
 
 def test_pendulum_observer_model_matches_plant_rhs():

@@ -20,7 +20,7 @@ from frictionlab.config import (
 from frictionlab.model.design import DesignSpec
 from frictionlab.model.friction import FrictionParams
 from frictionlab.model.params import ParamError, check_range
-from frictionlab.model.plant import PlantParams
+from frictionlab.model.plants.thesis import PlantParams
 
 
 @pytest.mark.parametrize(

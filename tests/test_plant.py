@@ -4,7 +4,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from frictionlab.model.plant import (
+from frictionlab.model.plants.thesis import (
     PlantParams,
     linearize,
     linearized_model,

@@ -19,8 +19,8 @@ from frictionlab.model.periodic import (
     orbit_trajectory,
     periodic_orbit,
 )
-from frictionlab.model.plant import linearized_model, zoh
-from frictionlab.model.simulation import run_features, simulate_config
+from frictionlab.model.plants.thesis import linearized_model, zoh
+from frictionlab.runs import loop_spec, run_features, simulate_config
 from frictionlab.studies.predict import (
     StaticFrictionNonlinearity,
     describing_function,
@@ -171,7 +171,7 @@ def test_linear_loop_equals_the_loop_built_by_hand(name):
     M[6] += h * h / (2 * l) * urow
     M[7, [2, 6, 7]] += [k4, -k4, 1.0]
     M[7] += h / l * urow
-    L = linear_loop(cfg)
+    L = linear_loop(loop_spec(cfg))
     assert np.abs(L.Phi - M).max() < 2e-4
     assert np.abs(L.Gamma[:, 0] - np.concatenate([Gam[:, 0], np.zeros(4)])).max() < 1e-6
     assert np.allclose(L.C[2], urow, atol=1e-9)
@@ -186,7 +186,7 @@ def test_describing_function_of_coulomb_friction_scales_with_the_level():
     for fc in (1.1, 1.5, 1.9):
         cfg = build_config("fast", "classical", sets=[BAND, f"friction.coulomb={fc}"])
         df = describing_function(cfg)
-        H = linear_loop(cfg).frequency_response([2 * math.pi / df.period])[0]
+        H = linear_loop(loop_spec(cfg)).frequency_response([2 * math.pi / df.period])[0]
         assert abs(H.imag) < 1e-9 * abs(H) and H.real < 0
         assert df.amplitude == pytest.approx(4 * fc * abs(H) / math.pi, rel=1e-9)
         out.append((df.period, df.amplitude / fc))
@@ -239,7 +239,7 @@ def assert_features_close(orbit_features, ref, rel=0.01):
 @pytest.mark.parametrize("design,row", TABLE_ROWS)
 def test_orbit_features_match_long_runs_on_the_table_grids(design, row):
     cfg = build_config(design, "classical", sets=[TABLE_BAND[design], row])
-    orbit = periodic_orbit(cfg)
+    orbit = periodic_orbit(loop_spec(cfg))
     assert orbit.found and orbit.stable
     assert orbit.half_period
     assert_features_close(orbit.features, run_features(cfg, 300, 200))
@@ -248,7 +248,7 @@ def test_orbit_features_match_long_runs_on_the_table_grids(design, row):
 @pytest.mark.parametrize("design,kind,sets", RANDOM_SETS)
 def test_orbit_features_match_long_runs_on_random_sets(design, kind, sets):
     cfg = build_config(design, kind, sets=sets)
-    orbit = periodic_orbit(cfg)
+    orbit = periodic_orbit(loop_spec(cfg))
     assert orbit.found and orbit.stable
     assert_features_close(orbit.features, run_features(cfg, 300, 200))
 
@@ -256,7 +256,7 @@ def test_orbit_features_match_long_runs_on_random_sets(design, kind, sets):
 def test_orbit_of_the_lugre_plant_with_the_k_term():
     """Sec. 5.3's LuGre plant with eq. (19)'s k = 1 acting (App. F's setting)."""
     cfg = build_config("fast", "lugre", sets=["friction.observer_gain=1"])
-    orbit = periodic_orbit(cfg)
+    orbit = periodic_orbit(loop_spec(cfg))
     assert orbit.found and orbit.stable and orbit.half_period
     assert_features_close(orbit.features, run_features(cfg, 300, 200))
 
@@ -266,7 +266,7 @@ def test_fixed_point_is_the_state_a_long_run_crosses_the_section_with():
     states, interpolated like the section) is the orbit's, to the sampling
     phase (a run's crossings fall anywhere between ticks)."""
     cfg = build_config("fast", "classical", sets=[BAND])
-    orbit = periodic_orbit(cfg)
+    orbit = periodic_orbit(loop_spec(cfg))
     traj = simulate_config(cfg, 60)
     w0 = cfg.design.omega0
     X = np.column_stack([traj["theta"], traj["theta_dot"], traj["arm"], traj["arm_dot"],
@@ -283,7 +283,7 @@ def test_fixed_point_is_the_state_a_long_run_crosses_the_section_with():
 
 def test_half_and_full_period_maps_find_the_same_orbit():
     cfg = build_config("fast", "lugre")
-    half, full = periodic_orbit(cfg), periodic_orbit(cfg, symmetric=False)
+    half, full = periodic_orbit(loop_spec(cfg)), periodic_orbit(loop_spec(cfg), symmetric=False)
     assert half.half_period and not full.half_period
     assert half.period == pytest.approx(full.period, rel=1e-4)
     assert_features_close(half.features, full.features, rel=1e-3)
@@ -300,7 +300,7 @@ def test_a_perturbation_dies_out_as_the_multipliers_say(kind, sets):
     tell: the Jacobian is far from normal, a perturbation can first shrink by
     only half.)"""
     cfg = build_config("fast", kind, sets=sets)
-    orbit = periodic_orbit(cfg)
+    orbit = periodic_orbit(loop_spec(cfg))
     assert orbit.stable and abs(orbit.floquet_multipliers[0]) < 0.5
     w0 = cfg.design.omega0
     cols = ["theta_dot", "arm", "arm_dot", "theta_hat", "theta_dot_hat", "arm_hat",
@@ -317,12 +317,12 @@ def test_a_perturbation_dies_out_as_the_multipliers_say(kind, sets):
             out.append(y)
         return out
 
-    ref = orbit_trajectory(cfg, orbit.state, 2.2 * orbit.period)
+    ref = orbit_trajectory(loop_spec(cfg), orbit.state, 2.2 * orbit.period)
     scale = np.abs(np.column_stack([ref[c] for c in cols])).max(axis=0)
     scale[4] /= w0
     X = orbit.state.copy()
     X[idx] += 0.02 * scale
-    states = section_states(orbit_trajectory(cfg, X, 4.2 * orbit.period))
+    states = section_states(orbit_trajectory(loop_spec(cfg), X, 4.2 * orbit.period))
     assert len(states) == 4
     dist = [np.abs((y - orbit.state[idx]) / scale).max() for y in states]
     assert dist[-1] < 0.003
@@ -330,15 +330,16 @@ def test_a_perturbation_dies_out_as_the_multipliers_say(kind, sets):
 
 def test_asymmetric_friction_uses_the_full_period_map():
     cfg = build_config("fast", "classical", sets=[BAND, "friction.coulomb_negative=1.2"])
-    orbit = periodic_orbit(cfg)
+    orbit = periodic_orbit(loop_spec(cfg))
     assert orbit.found and not orbit.half_period
     assert_features_close(orbit.features, run_features(cfg, 300, 200))
 
 
 def test_no_orbit_without_switching_friction_or_when_the_pendulum_falls():
-    none = periodic_orbit(build_config("fast", "none"))
+    none = periodic_orbit(loop_spec(build_config("fast", "none")))
     assert not none.found and none.stable is None and "no switching" in none.message
-    fell = periodic_orbit(build_config("fast", "classical", sets=[BAND, "design.omega2=1"]))
+    fell = periodic_orbit(loop_spec(build_config("fast", "classical",
+                                                 sets=[BAND, "design.omega2=1"])))
     assert run_features(build_config("fast", "classical", sets=[BAND, "design.omega2=1"]),
                         60).status == "fell"
     assert not fell.found and "fell" in fell.message

@@ -28,11 +28,11 @@ from frictionlab.model.controller import (
 )
 from frictionlab.model.design import PRESETS, design, gain_path
 from frictionlab.model.friction import FrictionParams, lugre_dz, steady_state
-from frictionlab.model.simulation import simulate_config
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime.params import ControlParams
 from frictionlab.realtime.rigs import SimRig
 from frictionlab.realtime.samples import STOP
+from frictionlab.runs import simulate_config
 
 H = 0.005
 BOUND = 1.1

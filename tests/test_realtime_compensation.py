@@ -16,10 +16,10 @@ import pytest
 
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import features
-from frictionlab.model.simulation import simulate_config
 from frictionlab.realtime import FakeClock, RealtimeController
 from frictionlab.realtime.datalog import read_csv_log
 from frictionlab.realtime.samples import CHANGED, STOP
+from frictionlab.runs import simulate_config
 from frictionlab.studies.compensation import COMPENSATORS
 
 NOISE = 0.002

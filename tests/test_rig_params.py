@@ -11,12 +11,12 @@ import pytest
 
 from frictionlab.config import ConfigError, build_config, valid_keys
 from frictionlab.model.rig import RigScaling
-from frictionlab.model.simulation import make_controller
 from frictionlab.realtime import FakeClock
 from frictionlab.realtime.loop import Loop
 from frictionlab.realtime.params import ControlParams
 from frictionlab.realtime.rigs import FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
+from frictionlab.runs import make_controller
 
 RIG_KEYS = ["rig.theta_scale", "rig.theta_bias", "rig.arm_scale", "rig.velocity_scale",
             "rig.velocity_bias", "rig.u_scale"]

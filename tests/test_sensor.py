@@ -10,12 +10,12 @@ from hypothesis import strategies as st
 from frictionlab.config import build_config
 from frictionlab.model import sensor as S
 from frictionlab.model.rig import RigScaling
-from frictionlab.model.simulation import make_sensor, simulate_config
 from frictionlab.realtime import FakeClock, Safety
 from frictionlab.realtime.loop import Loop
 from frictionlab.realtime.params import ControlParams
 from frictionlab.realtime.rigs import AdcModel, FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
+from frictionlab.runs import make_sensor, simulate_config
 
 NOISY = ["sim.quantization=1", "sim.noise=0.002", "sim.seed=11", "sim.initial_angle=0.05"]
 

@@ -13,13 +13,8 @@ from hypothesis import strategies as st
 from frictionlab.cli import main
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import FEATURES
-from frictionlab.model.simulation import (
-    COLUMNS,
-    PlantState,
-    SimulatedPlant,
-    run_features,
-    simulate_config,
-)
+from frictionlab.model.simulation import COLUMNS, PlantState
+from frictionlab.runs import run_features, simulate_config, simulated_plant
 from frictionlab.studies.reference import TABLE1, TABLE2, TABLE3, TABLE_COLUMNS
 
 TABLE_COLS = TABLE_COLUMNS
@@ -107,8 +102,8 @@ def test_pendulum_steps_cost_no_accuracy():
         # pendulum driven by the arm's exact means hardly does either (the rig's
         # angle quantum is 1.5e-3 rad)
         x = np.array([0.1, -0.4, 0.2, 1.5, 0.0])
-        a = SimulatedPlant(base).step(PlantState(x), 6.0)
-        b = SimulatedPlant(fine).step(PlantState(x), 6.0)
+        a = simulated_plant(base).step(PlantState(x), 6.0)
+        b = simulated_plant(fine).step(PlantState(x), 6.0)
         assert np.array_equal(a.x[2:], b.x[2:]) and a.friction == b.friction
         assert abs(a.x[0] - b.x[0]) < 1e-5 and abs(a.x[1] - b.x[1]) < 1e-3
         # closed loop: the same limit cycle to 0.2 % (measured: 0.14 % for the
@@ -275,7 +270,7 @@ def test_simulate_cli_bad_input_exit_2(capsys):
 
 def test_simulated_plant_steps_like_the_simulator():
     cfg = build_config("fast", "lugre")
-    plant = SimulatedPlant(cfg)
+    plant = simulated_plant(cfg)
     st0 = plant.init()
     st1 = plant.step(st0, 3.0)
     assert st0.x[3] == 0.0 and st1.x[3] != 0.0  # the state is explicit, not mutated
@@ -295,7 +290,7 @@ def test_plant_observer_gain_zero_is_plain_eq18(theta, theta_dot, arm_dot, z, u)
     """k = 0: the arm and its LuGre friction do not see the pendulum at all (eq. 18,
     bit for bit); k > 0: they do (eq. 19 with e = -theta)."""
     for k, independent in ((0.0, True), (1.0, False)):
-        plant = SimulatedPlant(build_config("fast", "lugre",
+        plant = simulated_plant(build_config("fast", "lugre",
                                             sets=[f"friction.observer_gain={k}"]))
         a = plant.step(PlantState(np.array([theta, theta_dot, 0.3, arm_dot, z])), u)
         b = plant.step(PlantState(np.array([theta + 0.2, -theta_dot, 0.3, arm_dot, z])), u)
@@ -311,7 +306,7 @@ def test_plant_observer_term_sign_and_size(theta):
     relaxation term."""
     h = 0.005
     for k in (0.0, 1.0, 2.0):
-        plant = SimulatedPlant(_eq21(f"friction.observer_gain={k}"))
+        plant = simulated_plant(_eq21(f"friction.observer_gain={k}"))
         st1 = plant.step(PlantState(np.array([theta, 0.0, 0.0, 0.0, 0.0])), 0.0)
         integral = st1.x[4] - st1.x[2]
         if k == 0.0:
@@ -375,10 +370,11 @@ def test_inert_key_note_on_stderr(capsys):
 
 
 def test_the_loop_inlines_the_same_step_laws():
-    # _run calls inlined kernels of the very functions plant_tick and controller_step
-    # (one law each, not copies)
-    from frictionlab.model import controller, sensor, simulation
+    # run_loop calls inlined kernels of the very functions the plant's tick,
+    # controller_step and measure (one law each, not copies)
+    from frictionlab.model import closedloop, controller, plants, sensor
+    from frictionlab.model.plants import thesis
 
-    assert simulation._plant_tick_inline.py_func is simulation.plant_tick.py_func
-    assert simulation._controller_step_inline.py_func is controller.controller_step.py_func
-    assert simulation._measure_inline.py_func is sensor.measure.py_func
+    assert plants._thesis_tick.py_func is thesis.tick.py_func
+    assert closedloop._controller_step_inline.py_func is controller.controller_step.py_func
+    assert closedloop._measure_inline.py_func is sensor.measure.py_func

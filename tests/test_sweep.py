@@ -25,7 +25,7 @@ from frictionlab.cli import main
 from frictionlab.cli.sweep import UNDEFINED_MARKERS, markdown_table, plot_sweep
 from frictionlab.config import ConfigError, build_config
 from frictionlab.model.limit_cycles import FEATURES, trajectory_features
-from frictionlab.model.simulation import run_features, simulate_config
+from frictionlab.runs import run_features, simulate_config
 from frictionlab.studies import sweep as sweep_module
 from frictionlab.studies.reference import TABLE2
 from frictionlab.studies.sweep import (

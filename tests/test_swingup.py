@@ -12,7 +12,7 @@ import pytest
 from frictionlab.cli import main
 from frictionlab.config import ConfigError, build_config
 from frictionlab.model.controller import state_vector
-from frictionlab.model.plant import accelerations
+from frictionlab.model.plants.thesis import accelerations
 from frictionlab.model.swingup import (
     BALANCING,
     SwingUp,
@@ -129,7 +129,7 @@ def test_arm_speed_limit_stops():
 
 def test_handover_initialises_the_observers_from_the_measurement():
     cfg = build_config("fast", "classical")
-    from frictionlab.model.simulation import make_controller
+    from frictionlab.runs import make_controller
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
     w, s = sw.init(0.5)
@@ -149,7 +149,7 @@ def test_handover_initialises_the_observers_from_the_measurement():
 def test_swingup_step_compiled_equals_the_step_method():
     cfg = build_config("fast", "classical", sets=[HANGING])
     res = simulate_swingup(cfg, 3.0)
-    from frictionlab.model.simulation import make_controller
+    from frictionlab.runs import make_controller
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
     state = sw.init(math.pi)
@@ -209,7 +209,7 @@ def test_swingup_step_rows_equals_the_step_on_records_field_for_field():
     cfg = build_config("fast", "classical", sets=[HANGING])
     res = simulate_swingup(cfg, 2.0)
     tr = res.trajectory
-    from frictionlab.model.simulation import make_controller
+    from frictionlab.runs import make_controller
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
     gp, cp, sp = sw.record()

@@ -26,7 +26,7 @@ from frictionlab.model.friction import (
     lugre_step_exact,
     stribeck_curve,
 )
-from frictionlab.model.simulation import simulate_config
+from frictionlab.runs import simulate_config
 from frictionlab.studies.compensation import COMPENSATORS, compare, tune
 
 FIG = Path(__file__).resolve().parent.parent / "figures"

@@ -15,7 +15,7 @@ import dataclasses
 
 from frictionlab.config import Config, build_config
 from frictionlab.model.friction import FrictionParams
-from frictionlab.model.simulation import run_features
+from frictionlab.runs import run_features
 
 DURATION = 40.0
 SIGMA0 = (50.0, 100.0, 200.0)

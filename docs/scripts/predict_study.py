@@ -28,7 +28,7 @@ import numpy as np
 from frictionlab.config import build_config
 from frictionlab.model.limit_cycles import FEATURES, features
 from frictionlab.model.periodic import orbit_trajectory, periodic_orbit
-from frictionlab.model.simulation import run_features, simulate_config
+from frictionlab.runs import loop_spec, run_features, simulate_config
 from frictionlab.studies.predict import describing_function, plot_prediction, predict
 
 FIG = Path(__file__).resolve().parent.parent / "figures"
@@ -118,14 +118,14 @@ def evaluate(case):
     cfg = build_config(design, kind, sets=sets)
     ref, spread = reference(cfg)
     t0 = time.perf_counter()
-    po = periodic_orbit(cfg)
+    po = periodic_orbit(loop_spec(cfg))
     t_orbit = time.perf_counter() - t0
     df = describing_function(cfg)
     row = {"label": label, "design": design, "kind": kind, "sets": sets, "ref": ref,
            "spread": spread, "po": po, "df": df, "t_orbit": t_orbit}
     if po.found:
         row["err"] = {k: rel(getattr(po.features, k), getattr(ref, k)) for k in FEATURES}
-        traj = orbit_trajectory(cfg, po.state, po.period + cfg.design.h)
+        traj = orbit_trajectory(loop_spec(cfg), po.state, po.period + cfg.design.h)
         row["v1"] = fundamental(traj, "arm_dot", po.period)
         row["th1"] = fundamental(traj, "theta", po.period)
         v = np.abs(traj["arm_dot"][traj.t < po.period])

@@ -19,10 +19,11 @@ Inverted Pendulum" (Lund, 1996).  The public API:
   :class:`Trajectory`, :func:`features`, :func:`trajectory_features`
 * rig conversions: :class:`RigScaling`
 
-The package is layered (docs/architecture.md): :mod:`frictionlab.model`
-(numpy, scipy and numba only), :mod:`frictionlab.config`, :mod:`frictionlab.io`,
-:mod:`frictionlab.studies`, :mod:`frictionlab.realtime`,
-:mod:`frictionlab.console` and :mod:`frictionlab.cli`.
+The package is layered (docs/architecture.md), inner to outer:
+:mod:`frictionlab.model` (numpy, scipy and numba only), :mod:`frictionlab.io`,
+:mod:`frictionlab.config`, :mod:`frictionlab.runs`, :mod:`frictionlab.plotting`,
+:mod:`frictionlab.realtime`, :mod:`frictionlab.studies`, :mod:`frictionlab.console`
+and :mod:`frictionlab.cli`.
 
 The larger capabilities are subpackages with their own curated ``__all__``,
 imported on demand so that ``import frictionlab`` stays light:
@@ -43,15 +44,16 @@ imported on demand so that ``import frictionlab`` stays light:
   (registered on import; needs the ``gym`` extra)
 """
 
-from .config import Config, ConfigError, SimParams, build_config, simulate
+from .config import Config, ConfigError, SimParams, build_config
 from .model.controller import Controller
 from .model.design import Design, DesignSpec, design, preset
 from .model.friction import FrictionModel, FrictionParams, make_model
 from .model.limit_cycles import LimitCycleFeatures, features, trajectory_features
 from .model.observers import ArmObserver, PendulumObserver
-from .model.plant import PlantParams, rhs, zoh
+from .model.plants.thesis import PlantParams, rhs, zoh
 from .model.rig import RigScaling
-from .model.simulation import Trajectory, simulate_config
+from .model.simulation import Trajectory
+from .runs import simulate, simulate_config
 
 __version__ = "0.1.0"
 

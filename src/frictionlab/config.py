@@ -30,9 +30,8 @@ from .model.controller import check_compensator as _check_compensator
 from .model.design import DesignSpec, preset
 from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
-from .model.plant import PlantParams
+from .model.plants.thesis import PlantParams
 from .model.rig import RigScaling
-from .model.simulation import Trajectory, simulate_config
 from .model.swingup import SwingUpParams
 
 __all__ = [
@@ -49,7 +48,6 @@ __all__ = [
     "check_compensator",
     "inert_keys",
     "parse_assignment",
-    "simulate",
     "valid_keys",
 ]
 
@@ -527,19 +525,3 @@ def build_config(
         _split(key)
     return _apply(cfg, items) if items else cfg
 
-
-def simulate(
-    design: str = "fast",
-    friction: str = "classical",
-    compensation: str = "none",
-    duration: float | None = None,
-    **values,
-) -> Trajectory:
-    """Build a configuration and simulate it: ``simulate("fast", "classical",
-    friction__coulomb=1.3)`` (:func:`~frictionlab.model.simulation.simulate_config`).
-
-    Keyword names are keys with ``.`` written as ``__``.
-    """
-    sets = [(k.replace("__", "."), v) for k, v in values.items()]
-    cfg = build_config(design, friction, compensation, sets=sets)
-    return simulate_config(cfg, duration)

@@ -5,7 +5,7 @@ r"""Gymnasium environment ``frictionlab/Furuta-v0``: the sampled loop at h = 5 m
 An outer layer: this module imports gymnasium, the model does not.
 
 One step is one sampling period ``design.h`` (5 ms) of the simulator's own
-plant (:func:`frictionlab.model.simulation.plant_tick`, the compiled integrator of
+plant (:func:`frictionlab.model.plants.plant_step`, the compiled integrator of
 ``frictionlab simulate`` and of :class:`~frictionlab.model.simulation.SimulatedPlant`,
 with the configured arm friction, any model), with the action held
 (zero-order hold), exactly as the simulator's controller tick drives it.
@@ -105,9 +105,10 @@ from gymnasium.vector.utils import batch_space
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
 from .model.friction import KINDS, NP, friction_row, friction_view
-from .model.plant import plant_record
+from .model.plants import THESIS, plant_step
 from .model.sensor import reading
-from .model.simulation import make_sensor, plant_tick, plant_tick_rows
+from .model.simulation import plant_tick_rows
+from .runs import make_sensor
 
 __all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "SWINGUP_ENV_ID", "TASKS",
            "FurutaEnv", "FurutaVectorEnv"]
@@ -138,11 +139,11 @@ _INFO = ("theta", "theta_dot", "arm", "arm_dot", "z")
 @jit
 def _step_plants(mask, xs, us, mems, friction, substeps, ratios, h, pps, fkinds, fps):
     """Advance plant i (row i of ``xs``) over one sample with ``us[i]`` held,
-    for every i with ``mask[i]``: the simulator's :func:`plant_tick`."""
+    for every i with ``mask[i]``: the simulator's plant step."""
     for i in range(xs.shape[0]):
         if mask[i]:
-            friction[i], mems[i] = plant_tick(xs[i], us[i], mems[i], substeps[i], ratios[i], h,
-                                              plant_record(pps[i]), fkinds[i],
+            friction[i], mems[i] = plant_step(THESIS.code, xs[i], us[i], mems[i], substeps[i],
+                                              ratios[i], h, pps[i], fkinds[i],
                                               friction_view(fps[i]))
 
 

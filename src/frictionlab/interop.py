@@ -25,7 +25,7 @@ output     ``arm_dot``    measured arm velocity                           rad/s
 
 The outputs are the three signals the rig measures (the C of eq. 7), without
 the sensor's noise and quantisation.  The state derivative is
-:func:`frictionlab.model.plant.rhs` (eq. 6, with ``plant.input_gain``) driven by the
+:func:`frictionlab.model.plants.thesis.rhs` (eq. 6, with ``plant.input_gain``) driven by the
 friction law of :mod:`frictionlab.model.friction` that the simulator uses, evaluated
 at the current state: viscous, the ideal Coulomb relay, stiction + Coulomb
 with the zero-velocity band (the applied force is ``input_gain * u``), its
@@ -62,7 +62,7 @@ import numpy as np
 
 from .config import Config, build_config
 from .model.friction import COULOMB, KINDS, LUGRE, NONE, friction_step, lugre_dz, lugre_force
-from .model.plant import ARM, ARM_DOT, THETA, Z, rhs
+from .model.plants.thesis import ARM, ARM_DOT, THETA, Z, rhs
 
 __all__ = ["INPUTS", "OUTPUTS", "STATES", "linearize", "to_control"]
 

@@ -115,7 +115,7 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
     """
     from .config import COMPENSATOR_FIELDS, PLANT_FIELDS
     from .model.design import PRESETS
-    from .model.plant import PlantParams
+    from .model.plants.thesis import PlantParams
 
     exclude = set(exclude)
     parts = []

@@ -74,7 +74,7 @@ def cmd_design(args) -> int:
 def simulate_result(cfg: Config, duration: float | None, window: float | None,
                     progress: Callable[[float], None] | None = None):
     from ..model.limit_cycles import trajectory_features
-    from ..model.simulation import simulate_config
+    from ..runs import simulate_config
 
     traj = simulate_config(cfg, duration, progress=progress)
     feats = trajectory_features(traj, window)

@@ -265,7 +265,7 @@ def cmd_limit_cycle(args) -> int:
     print(f"done in {result.seconds:.1f} s: {result.evaluations} parameter sets, "
           f"{result.generations} generations, cost {result.cost:.4g}", file=err)
     if args.plot:
-        from ..model.simulation import simulate_config
+        from ..runs import simulate_config
         from ..studies.identification.limit_cycle import experiment_config
         from ..studies.identification.plots import plot_limit_cycle_fit
 

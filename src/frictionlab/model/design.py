@@ -2,8 +2,8 @@ r"""Discrete pole-placement state feedback and observer gains (Sec. 2.2-2.4, App
 
 The controller is designed on the frictionless, undamped linearisation
 eq. (7) sampled with zero-order hold at ``h``: Sec. 2.2's closed form
-(:func:`frictionlab.model.plant.zoh_closed_form`, equal to the matrix exponential of
-:func:`frictionlab.model.plant.zoh` to rounding, tested; it needs no scipy, so a
+(:func:`frictionlab.model.plants.thesis.zoh_closed_form`, equal to the matrix exponential of
+:func:`frictionlab.model.plants.thesis.zoh` to rounding, tested; it needs no scipy, so a
 design loads in milliseconds).
 Continuous specifications :math:`(\omega_i, \zeta_i)` map to the discrete
 characteristic polynomial eq. (8)
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .params import Validated, param
-from .plant import PlantParams, zoh_closed_form
+from .plants.thesis import PlantParams, zoh_closed_form
 
 __all__ = [
     "PRESETS",
@@ -46,7 +46,9 @@ __all__ = [
     "feedback_closed_form",
     "feedback_numeric",
     "gain_path",
+    "match_poles",
     "observer_gains",
+    "place",
     "preset",
 ]
 
@@ -159,13 +161,19 @@ def _design_matrices(spec: DesignSpec, g: float, arm_length: float):
 def feedback_numeric(spec: DesignSpec, g: float, arm_length: float) -> np.ndarray:
     """State-feedback gains ``L`` by numerical pole placement on (Phi, Gamma)."""
     Phi, Gamma = _design_matrices(spec, g, arm_length)
-    poles = requested_poles(spec)
+    return place(Phi, Gamma, requested_poles(spec))
+
+
+def place(Phi: np.ndarray, Gamma: np.ndarray, poles) -> np.ndarray:
+    """The gain row ``L`` giving ``Phi - Gamma L`` the eigenvalues ``poles`` (one
+    input): :func:`scipy.signal.place_poles`, or Ackermann's formula when a pole
+    repeats (a damping of exactly 1)."""
+    poles = np.asarray(poles)
     if len(np.unique(np.round(poles, 12))) == len(poles):
         from scipy.signal import place_poles  # heavy import, only when used
 
         res = place_poles(Phi, Gamma, poles)
         return np.asarray(res.gain_matrix, dtype=float).ravel()
-    # repeated poles (a damping of exactly 1): Ackermann's formula, single input
     n = Phi.shape[0]
     coeffs = np.real(np.poly(poles))
     phi = sum(c * np.linalg.matrix_power(Phi, n - i) for i, c in enumerate(coeffs))
@@ -193,7 +201,7 @@ def observer_gains(spec: DesignSpec) -> np.ndarray:
     return np.array([k1, k2, k3, k4])
 
 
-def _match(achieved: np.ndarray, requested: np.ndarray) -> np.ndarray:
+def match_poles(achieved: np.ndarray, requested: np.ndarray) -> np.ndarray:
     """Order ``achieved`` to pair with ``requested`` (greedy nearest)."""
     left = list(achieved)
     out = []
@@ -379,7 +387,7 @@ def _design(spec: DesignSpec, g: float, arm_length: float, method: str) -> Desig
         L = (feedback_closed_form(spec, g, L1) if method == "closed_form"
              else feedback_numeric(spec, g, L1))
         req = requested_poles(spec)
-    ach = _match(np.linalg.eigvals(Phi - Gamma @ L.reshape(1, 4)), req)
+    ach = match_poles(np.linalg.eigvals(Phi - Gamma @ L.reshape(1, 4)), req)
     fb = FeedbackDesign(L, req, ach, Phi, Gamma, method)
 
     K = observer_gains(spec)
@@ -388,14 +396,14 @@ def _design(spec: DesignSpec, g: float, arm_length: float, method: str) -> Desig
     AK = A1 - np.array([[K[0]], [K[1]]]) @ np.array([[1.0, 0.0]])
     s_req = np.sort_complex(np.roots([1.0, 2 * spec.observer_zeta1 * spec.observer_omega1,
                                       spec.observer_omega1**2]).astype(complex))
-    s_ach = _match(np.linalg.eigvals(AK), s_req)
+    s_ach = match_poles(np.linalg.eigvals(AK), s_req)
     Phi2 = np.array([[1.0, h], [0.0, 1.0]])
     AK2 = Phi2 - np.array([[K[2]], [K[3]]]) @ np.array([[1.0, 0.0]])
     z_req = np.concatenate([1.0 + h * s_req,
                             discrete_pair(spec.observer_omega2, spec.observer_zeta2, h)])
     z_ach = np.concatenate([
-        _match(np.linalg.eigvals(np.eye(2) + h * AK), z_req[:2]),
-        _match(np.linalg.eigvals(AK2), z_req[2:]),
+        match_poles(np.linalg.eigvals(np.eye(2) + h * AK), z_req[:2]),
+        match_poles(np.linalg.eigvals(AK2), z_req[2:]),
     ])
     obs = ObserverDesign(K, s_req, s_ach, z_req, z_ach)
     for arr in (L, req, ach, Phi, Gamma, K, s_req, s_ach, z_req, z_ach):

@@ -70,7 +70,7 @@ f_ext, dt, e) -> (F, state)`` over a friction record ``p`` (a numpy
 structured record of :data:`FRICTION_DTYPE`, made once by
 :meth:`FrictionParams.record` and passed by reference; the laws read its
 fields by name, ``p.fc``); it is the only place each law is evaluated:
-the simulator's plant (:func:`frictionlab.model.simulation.plant_tick`), the
+the simulator's plant (:func:`frictionlab.model.plants.plant_step`), the
 compensators (:func:`frictionlab.model.controller.compensator_force`, with the
 compensator's own parameters) and the model objects all call it.  The
 Stribeck level :math:`F_C + (F_S - F_C)e^{-(v/v_S)^2}` is written once, in

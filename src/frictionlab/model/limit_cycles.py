@@ -464,11 +464,10 @@ def features(
 
 def trajectory_features(traj, window: float | None = None) -> LimitCycleFeatures:
     """:func:`features` of a :class:`frictionlab.model.simulation.Trajectory`."""
-    cfg = traj.config
-    noise = cfg.sim.noise if cfg is not None else 0.0
+    noise = traj.noise
     if len(traj) < 3:
         return LimitCycleFeatures("fell" if traj.status == "fell" else "settled", *([None] * 7))
-    if window is not None and cfg is not None and traj.status != "fell":
+    if window is not None and traj.config is not None and traj.status != "fell":
         window = min(window, traj.t[-1])
     return features(
         traj.t, traj["theta_m"], traj["u"], traj["arm_dot_m"], window=window,

@@ -2,7 +2,7 @@ r"""Will the sampled loop hold?  Controller settings checked against the model b
 
 :func:`check_loop` takes a :class:`~frictionlab.model.controller.Controller` (gains
 of Sec. 2.2-2.3, compensator of Sec. 6) and the plant it will drive
-(:class:`~frictionlab.model.plant.PlantParams`) and answers, from linear models of
+(:class:`~frictionlab.model.plants.thesis.PlantParams`) and answers, from linear models of
 the sampled loop, whether applying it would hurt the motor.  The answer is a
 frozen :class:`LoopCheck` with its diagnostics, in the spirit of
 :func:`scipy.signal.place_poles`'s result object.
@@ -10,7 +10,7 @@ frozen :class:`LoopCheck` with its diagnostics, in the spirit of
 What is checked
 ---------------
 1. **The sampled closed loop at rest** (plant, observers, state feedback).
-   The plant of eq. (6) linearised upright (:func:`frictionlab.model.plant.linearize`,
+   The plant of eq. (6) linearised upright (:func:`frictionlab.model.plants.thesis.linearize`,
    with the plant's own :math:`\omega_0`, damping and input gain, which may
    differ from the design's) and sampled with zero-order hold at h; the
    controller is the compiled :func:`~frictionlab.model.controller.controller_step`
@@ -79,7 +79,7 @@ from .controller import (
     state_vector,
 )
 from .friction import steady_bristle, stribeck_curve
-from .plant import PlantParams, linearize, rhs, zoh
+from .plants.thesis import PlantParams, linearize, rhs, zoh
 
 __all__ = [
     "DEFAULT_DISTURBANCE",

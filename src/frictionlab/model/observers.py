@@ -24,7 +24,7 @@ Both are inconsistent with eq. (3); this module follows the derivation:
     \dot{\hat x}_2 &= \ddot\theta_{\rm model}(\hat x_1, \omega_0\hat x_2,
         \hat{\dot\Omega}, u)/\omega_0 + k_2(\theta_m - \hat x_1)
 
-where :math:`\ddot\theta_{\rm model}` is :func:`frictionlab.model.plant.accelerations`
+where :math:`\ddot\theta_{\rm model}` is :func:`frictionlab.model.plants.thesis.accelerations`
 (the plant's own equation, with :math:`\zeta = 0` and no friction, as the
 thesis's design model), :math:`\hat{\dot\Omega}` is the arm observer's
 velocity estimate, and :math:`\omega_0` is the *design* value.  The gains
@@ -50,7 +50,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ._jit import jit
-from .plant import accelerations
+from .plants.thesis import accelerations
 
 __all__ = [
     "ArmObserver",

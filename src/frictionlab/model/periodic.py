@@ -5,15 +5,15 @@ The closed loop of Sec. 5 advances, once per sampling period h, the state
 ====  ============  ====================================================
 idx   name          meaning
 ====  ============  ====================================================
-0-4   plant         ``[theta, theta_dot, arm, arm_dot, z]`` (:mod:`frictionlab.model.plant`)
+0-4   plant         ``[theta, theta_dot, arm, arm_dot, z]`` (:mod:`frictionlab.model.plants.thesis`)
 5-12  controller    the controller state (:mod:`frictionlab.model.controller`)
-13    memory        the friction model's memory (:func:`~frictionlab.model.simulation.plant_tick`)
+13    memory        the friction model's memory (:func:`~frictionlab.model.plants.plant_step`)
 ====  ============  ====================================================
 
 by one *tick*: measure, :func:`~frictionlab.model.controller.controller_step`,
-:func:`~frictionlab.model.simulation.plant_tick` -- the simulator's own compiled
-functions, called here through :func:`_plant_step` and :func:`loop_tick`
-(no dynamics are re-implemented).  Measurement noise is left out: the map is
+the plant's step -- the closed loop's own compiled tick
+(:func:`frictionlab.model.closedloop.step_loop`, called here through
+:func:`loop_tick`; no dynamics are re-implemented).  Measurement noise is left out: the map is
 the deterministic loop; quantisation (``sim.quantization``) is kept.
 
 Linearised loop
@@ -72,14 +72,13 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ._jit import jit
+from .closedloop import NC, no_swing, run_loop, step_loop
 from .controller import (
     NS,
-    controller_step,
     state_index,
     state_record,
     state_vector,
@@ -87,19 +86,8 @@ from .controller import (
 )
 from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
 from .limit_cycles import LimitCycleFeatures, _crossings, features
-from .sensor import arm_zero, reading
-from .simulation import (
-    NC,
-    STATUS,
-    Trajectory,
-    _run,
-    make_controller,
-    make_sensor,
-    plant_tick,
-)
-
-if TYPE_CHECKING:  # only annotations: the configuration layer builds what the model runs
-    from ..config import Config
+from .sensor import arm_zero
+from .simulation import STATUS, LoopSpec, Trajectory
 
 __all__ = [
     "LinearLoop",
@@ -126,30 +114,22 @@ R_OK, R_FELL, R_NO_RETURN = 0, 1, 2
 
 
 @jit
-def _plant_step(x, u, mem, substeps, ratio, h, pp, fkind, fp):
-    """The simulator's plant step (the one call site of ``plant_tick`` here)."""
-    return plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
-
-
-@jit
-def loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp):
+def loop_tick(X, pcode, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp):
     """Advance the loop state ``X`` (:data:`NL`,) in place by one tick; return u.
 
-    Measure (the simulator's sensor ``sp`` without noise, the arm's zero
-    ``x0``), run the controller, then the plant over the sample, exactly as
-    :func:`frictionlab.model.simulation.simulate_config` does.
+    The closed loop's own tick (:func:`frictionlab.model.closedloop.step_loop`:
+    measure with the simulator's sensor ``sp`` without noise and the arm's zero
+    ``x0``, run the controller, then the plant over the sample), exactly as
+    :func:`frictionlab.model.simulation.simulate` does.
     """
-    x = X[:NX_PLANT]
-    s = state_view(X[I_S:I_MEM])
-    th_m, arm_m, armd_m, _ = reading(sp, x[0], x[2], x[3], False, x0)
-    u, _u_fb, _f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
-    _f, mem = _plant_step(x, u, X[I_MEM], substeps, ratio, h, pp, fkind, fp)
-    X[I_MEM] = mem
+    u, X[I_MEM] = step_loop(X[:NX_PLANT], state_view(X[I_S:I_MEM]), X[I_MEM], x0, pcode,
+                            substeps, ratio, pp, fkind, fp, gp, cp, sp, 0.0)
     return u
 
 
 @jit
-def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, gp, cp, sp, x0, substeps,
+def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, pcode, gp, cp, sp, x0,
+                     substeps,
                      ratio, h, pp, fkind, fp):
     """Run each row of ``X0s`` to its next ``direction`` crossing of theta = 0.
 
@@ -171,7 +151,7 @@ def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, gp, cp, sp,
         armed = False
         for k in range(1, n_max + 1):
             prev[:] = X
-            loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp)
+            loop_tick(X, pcode, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp)
             th = direction * X[0]
             if not (abs(X[0]) <= fall_angle) or not np.isfinite(X[1] + X[3] + X[4]):
                 codes[r] = R_FELL
@@ -188,12 +168,12 @@ def _section_returns(X0s, direction, hyst, n_min, n_max, fall_angle, gp, cp, sp,
 
 
 @jit
-def _record(X, n, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp, fall_angle):
+def _record(X, n, pcode, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp, fall_angle):
     """Loop states at ticks 0..n (rows), stopping early if the pendulum falls."""
     out = np.empty((n + 1, X.shape[0]))
     out[0] = X
     for k in range(1, n + 1):
-        loop_tick(X, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp)
+        loop_tick(X, pcode, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp)
         out[k] = X
         if not (abs(X[0]) <= fall_angle) or not np.isfinite(X[1] + X[3] + X[4]):
             return out[:k + 1]
@@ -201,32 +181,33 @@ def _record(X, n, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp, fall_angle)
 
 
 class _Loop:
-    """A configuration's packed loop: one-tick map and section returns."""
+    """A loop's packed form: one-tick map and section returns."""
 
-    def __init__(self, cfg: Config):
-        self.cfg = cfg
-        self.h = cfg.design.h
-        ctrl = make_controller(cfg)
+    def __init__(self, spec: LoopSpec):
+        self.spec = spec
+        self.h = spec.h
+        ctrl = spec.controller
         self.controller = ctrl
         self.gp, self.cp = ctrl.record()
-        self.pp = cfg.plant.record()
-        self.fkind = KINDS.index(cfg.friction_kind)
+        self.pcode = spec.plant.code
+        self.pp = spec.plant_params.record()
+        self.fkind = KINDS.index(spec.friction_kind)
         # periodic orbits of the plant at its starting levels
-        self.fp = without_drift(cfg.friction.record())
-        self.sensor = make_sensor(cfg)._replace(noise=0.0)
+        self.fp = without_drift(spec.friction.record())
+        self.sensor = spec.sensor._replace(noise=0.0)
         self.x0 = arm_zero(self.sensor)
-        self.substeps, self.ratio = cfg.substeps, cfg.pendulum_ratio
-        self.fall_angle = cfg.sim.fall_angle
+        self.substeps, self.ratio = spec.substeps, spec.ratio
+        self.fall_angle = spec.fall_angle
 
     def _args(self):
-        return (self.gp, self.cp, self.sensor, self.x0, self.substeps, self.ratio, self.h, self.pp,
-                self.fkind, self.fp)
+        return (self.pcode, self.gp, self.cp, self.sensor, self.x0, self.substeps, self.ratio,
+                self.h, self.pp, self.fkind, self.fp)
 
     def initial_state(self) -> np.ndarray:
         """The simulator's initial loop state (``sim.initial_angle``, at rest)."""
         X = np.zeros(NL)
-        X[0] = self.cfg.sim.initial_angle
-        X[I_S:I_MEM] = state_vector(self.controller.init(self.cfg.sim.initial_angle))
+        X[0] = self.spec.initial_angle
+        X[I_S:I_MEM] = state_vector(self.controller.init(self.spec.initial_angle))
         return X
 
     def record(self, X: np.ndarray, n: int) -> np.ndarray:
@@ -235,7 +216,7 @@ class _Loop:
     def returns(self, X0s: np.ndarray, direction: int, hyst: float, n_min: int, n_max: int):
         X0s = np.ascontiguousarray(np.atleast_2d(X0s), dtype=float)
         return _section_returns(X0s, int(direction), float(hyst), int(n_min), int(n_max),
-                                self.fall_angle,
+                                self.fall_angle, self.pcode,
                                 self.gp, self.cp, self.sensor, self.x0, self.substeps, self.ratio,
                                 self.h, self.pp, self.fkind, self.fp)
 
@@ -257,8 +238,9 @@ class _Loop:
         def sym(p):
             return all(getattr(p, n) is None for n in
                        ("stiction_negative", "coulomb_negative", "viscous_negative"))
-        return (sym(self.cfg.friction)
-                and (self.controller.compensation == "none" or sym(self.cfg.compensation)))
+        return (sym(self.spec.friction)
+                and (self.controller.compensation == "none"
+                     or sym(self.controller.compensation_params)))
 
 
 # --------------------------------------------------------------------------
@@ -314,8 +296,8 @@ class LinearLoop:
 _LIN_IDX = np.array([0, 1, 2, 3, *_entries("x1", "x2", "arm", "arm_dot")])
 
 
-def linear_loop(cfg: Config, eps: float = 1e-7) -> LinearLoop:
-    """The loop of ``cfg`` without friction, linearised at the upright equilibrium.
+def linear_loop(spec: LoopSpec, eps: float = 1e-7) -> LinearLoop:
+    """The loop ``spec`` without friction, linearised at the upright equilibrium.
 
     Central differences of one compiled tick (:func:`loop_tick` with the
     friction switched off and no quantisation); the extra acceleration input
@@ -325,24 +307,23 @@ def linear_loop(cfg: Config, eps: float = 1e-7) -> LinearLoop:
 
     Parameters
     ----------
-    cfg : Config
+    spec : LoopSpec
     eps : float
         Difference step (rad, rad/s, m/s^2).
     """
-    loop = _Loop(cfg)
-    ku = cfg.plant.input_gain
+    loop = _Loop(spec)
+    ku = spec.plant_params.input_gain
     gp = loop.gp.linear()  # no compensator in the linear loop
+    ideal = loop.sensor._replace(step=0.0)  # the true signals (no converter, no noise)
 
     def tick(Xl: np.ndarray, w: float) -> np.ndarray:
         X = np.zeros(NL)
         X[_LIN_IDX] = Xl
         # one tick with the input w added to the controller's u: run the
         # controller, then the plant with u + w / k_u, through the same kernels
-        x = X[:NX_PLANT]
-        s = state_record(X[I_S:I_MEM])
-        u, _, _ = controller_step(s, gp, loop.cp, x[0], x[2], x[3])
-        _plant_step(x, u + w / ku, 0.0, loop.substeps, loop.ratio, loop.h, loop.pp, NONE,
-                    loop.fp)
+        u, _ = step_loop(X[:NX_PLANT], state_record(X[I_S:I_MEM]), 0.0, 0.0, loop.pcode,
+                         loop.substeps, loop.ratio, loop.pp, NONE, loop.fp, gp, loop.cp, ideal,
+                         w / ku)
         return X[_LIN_IDX].copy(), u
 
     n = len(_LIN_IDX)
@@ -503,7 +484,7 @@ def _seed(loop: _Loop, periods: int, max_time: float, settle_tol: float = 2e-3):
 
 
 def periodic_orbit(
-    cfg: Config,
+    spec: LoopSpec,
     *,
     symmetric: bool | None = None,
     seed_periods: int = 3,
@@ -516,8 +497,8 @@ def periodic_orbit(
 
     Parameters
     ----------
-    cfg : Config
-        The loop; ``sim.noise`` is ignored (the map is the noise-free loop).
+    spec : LoopSpec
+        The loop; the sensor's noise is ignored (the map is the noise-free loop).
     symmetric : bool, optional
         Use the half-period map (True) or the full one (False).  Default:
         the half-period map when the loop is symmetric, and the full map if
@@ -539,10 +520,10 @@ def periodic_orbit(
     -------
     PeriodicOrbit
     """
-    loop = _Loop(cfg)
+    loop = _Loop(spec)
     half = loop.symmetric() if symmetric is None else bool(symmetric)
     if loop.fkind in (NONE, VISCOUS):
-        return _not_found(f"no friction limit cycle: the {cfg.friction_kind!r} plant friction "
+        return _not_found(f"no friction limit cycle: the {spec.friction_kind!r} plant friction "
                           "has no switching", 0, half)
     seed = _seed(loop, seed_periods, seed_time)
     if not isinstance(seed, _Seed):
@@ -729,15 +710,15 @@ def _perturbed_runs(loop: _Loop, X: np.ndarray, free: np.ndarray, scale: np.ndar
     return None
 
 
-def orbit_trajectory(cfg: Config, state: np.ndarray, duration: float) -> Trajectory:
+def orbit_trajectory(spec: LoopSpec, state: np.ndarray, duration: float) -> Trajectory:
     """The simulator's run from the loop state ``state`` over ``duration`` seconds.
 
-    The same compiled loop as :func:`frictionlab.model.simulation.simulate_config`
+    The same compiled loop as :func:`frictionlab.model.simulation.simulate`
     (without noise), started from a loop state in this module's layout
     instead of the initial angle: run it from :attr:`PeriodicOrbit.state`
     to see the cycle.
     """
-    return _trajectory(_Loop(cfg), state, duration)
+    return _trajectory(_Loop(spec), state, duration)
 
 
 def _trajectory(loop: _Loop, state: np.ndarray, duration: float) -> Trajectory:
@@ -745,10 +726,12 @@ def _trajectory(loop: _Loop, state: np.ndarray, duration: float) -> Trajectory:
     x = np.array(state[:NX_PLANT], dtype=float)
     s = state_record(np.array(state[I_S:I_MEM], dtype=float))
     out = np.zeros((n, NC))
-    done, status, _, _ = _run(x, float(state[I_MEM]), n, loop.substeps, loop.ratio, loop.pp,
-                              loop.fkind, loop.fp, loop.gp, loop.cp, s, loop.sensor, 1,
-                              loop.x0, loop.fall_angle, out, True)
-    return Trajectory(np.arange(done), loop.h, out[:done], STATUS[status], loop.cfg)
+    done, status, _, _ = run_loop(x, float(state[I_MEM]), n, loop.pcode, loop.substeps,
+                                  loop.ratio, loop.pp, loop.fkind, loop.fp, loop.gp, loop.cp, s,
+                                  loop.sensor, 1, loop.x0, loop.fall_angle, out, True, False,
+                                  *no_swing())
+    return Trajectory(np.arange(done), loop.h, out[:done], STATUS[status], loop.spec.source,
+                      noise=float(loop.spec.sensor.noise))
 
 
 def _orbit_features(loop: _Loop, X: np.ndarray, period: float):

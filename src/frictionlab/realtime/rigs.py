@@ -59,7 +59,7 @@ from ..config import Config
 from ..model.params import ParamError
 from ..model.rig import RigScaling
 from ..model.sensor import ARM_START, adc, sensor_params
-from ..model.simulation import SimulatedPlant
+from ..runs import simulated_plant
 from . import protocol as P
 from .protocol import Frame, FrameError, SensorReading
 
@@ -226,7 +226,7 @@ class SimRig(Rig):
         self.lockstep = lockstep
         self.realtime_plant = not lockstep  # in lockstep the plant waits for the loop
         self.scaling = scaling or cfg.rig
-        self.plant = SimulatedPlant(cfg, duration)
+        self.plant = simulated_plant(cfg, duration)
         self.plant_friction = cfg.friction_kind
         self._arm_offset = arm_offset
         self._kicks: deque[float] = deque()

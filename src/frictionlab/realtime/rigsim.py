@@ -65,6 +65,7 @@ from collections import deque
 from ..config import Config
 from ..model.rig import ADC_BITS, RigScaling
 from ..model.simulation import SimulatedPlant
+from ..runs import simulated_plant
 from . import protocol as P
 from .osrt import try_realtime_priority
 from .protocol import Frame, FrameError
@@ -183,7 +184,7 @@ class RigEmulator:
         if p is None:
             cfg = self.cfg.with_values({"design.h": n * self.dt_ns / 1e9, "sim.substeps": n,
                                         "sim.pendulum_steps": -(-n // self._ratio)})
-            p = self._plants[n] = SimulatedPlant(cfg)
+            p = self._plants[n] = simulated_plant(cfg)
         return p
 
     def _advance(self, t: int) -> None:

@@ -7,7 +7,8 @@ from Python, each costs the compiled simulation plus the Python around it
 whole batch of parameter sets - a sweep's chunk, one generation of the
 identification's global search - is packed into arrays once and handed to one
 compiled driver, which for every set runs the same compiled closed loop as
-:func:`frictionlab.model.simulation.simulate_config` (:func:`~frictionlab.model.simulation._run`:
+:func:`frictionlab.model.simulation.simulate_config`
+(:func:`~frictionlab.model.closedloop.run_loop`:
 sensor model, controller step, plant tick) and the same compiled feature
 extraction as :func:`frictionlab.model.limit_cycles.features`
 (:func:`~frictionlab.model.limit_cycles._features_kernel`), with no Python per run.
@@ -36,12 +37,14 @@ import numpy as np
 
 from ..config import Config
 from ..model._jit import jit, jit_nogil
+from ..model.closedloop import NC, run_loop
 from ..model.controller import NS, gains_record, state_vector, state_view
 from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
 from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
-from ..model.plant import plant_record
+from ..model.plants import THESIS
 from ..model.sensor import SensorParams, sensor_record
-from ..model.simulation import NC, _run, make_controller, make_sensor, run_ticks
+from ..model.swingup import SWING_FIELDS, SwingUpRecord
+from ..runs import make_controller, make_sensor, run_ticks
 
 __all__ = ["Batch", "evaluate_rows", "prepare", "rows", "run"]
 
@@ -56,10 +59,13 @@ _FEATURE_INDEX = [KERNEL_VALUES.index(name) for name in FEATURES]
 #: core's cache (a whole run's 18 columns, 0.9 MB for 30 s, did not), and only
 #: the three columns the features read are kept.
 CHUNK_TICKS = 256
+#: Lengths of the swing-up supervisor's rows (run_loop's unused swing-up arguments).
+_SUP_N = len(SwingUpRecord._fields)
+_SWING_N = len(SWING_FIELDS)
 
 
 @jit
-def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
+def _one(i, x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
          buf, sig, codes, vals, cycles):
     """Run set ``i`` and store its status code, feature values and cycle count.
 
@@ -81,16 +87,20 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     plant_friction = friction_view(fp[i])
     comp = friction_view(cp[i])
     sp = sensor_record(sens[i])
-    plant = plant_record(pp[i])
     gains = gains_record(gp[i])
     n = nt[i]
     chunk = buf.shape[0]
+    # run_loop's swing-up arguments, unused (no swing-up in a batch)
+    sup_row = np.zeros(_SUP_N)
+    wx = np.zeros(_SWING_N)
+    phase = np.zeros(0)
     done, fell_code, mem, zero = 0, 0, 0.0, 0.0
     while done < n and fell_code == 0:
         m = min(chunk, n - done)
-        d, fell_code, mem, zero = _run(x, mem, m, sub[i], rat[i], plant, fk[i], plant_friction,
-                                       gains, comp, state_view(s_row), sp, done, zero, fall[i],
-                                       buf, True)
+        d, fell_code, mem, zero = run_loop(x, mem, m, pc[i], sub[i], rat[i], pp[i], fk[i],
+                                           plant_friction, gains, comp, state_view(s_row), sp,
+                                           done, zero, fall[i], buf, True, False, sup_row, wx,
+                                           phase)
         for k in range(d):
             sig[0, done + k] = buf[k, 0]
             sig[1, done + k] = buf[k, 3]
@@ -131,7 +141,7 @@ def _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
 
 
 @jit_nogil
-def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
+def _batch_serial(x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
                   codes, vals, cycles):
     """Every set of the batch in turn (in the calling thread, the GIL released)."""
     n = len(nt)
@@ -141,7 +151,7 @@ def _batch_serial(x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     buf = np.empty((min(longest, CHUNK_TICKS), NC))
     sig = np.empty((3, longest))
     for i in range(n):
-        _one(i, x0, nt, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
+        _one(i, x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
              buf, sig, codes, vals, cycles)
 
 
@@ -170,6 +180,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
     n = len(cfgs)
     x0 = np.empty(n)
     nt = np.empty(n, dtype=np.int64)
+    pc = np.empty(n, dtype=np.int64)
     sub = np.empty(n, dtype=np.int64)
     rat = np.empty(n, dtype=np.int64)
     h = np.empty(n)
@@ -201,6 +212,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
         fp.append(friction_row(resolve_drift(cfg.friction.record(), ticks * cfg.design.h)))
         x0[k] = cfg.sim.initial_angle
         nt[k] = ticks
+        pc[k] = THESIS.code
         sub[k] = cfg.substeps
         rat[k] = cfg.pendulum_ratio
         h[k] = cfg.design.h
@@ -210,7 +222,10 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
     def stack(rows, width):
         return np.ascontiguousarray(np.array(rows, dtype=float).reshape(n, width))
 
-    return (x0, nt, sub, rat, h, stack(pp, 5), fk, stack(fp, len(fp[0]) if n else 0),
+    # plant rows of every width (a batch may mix plants), padded to the widest
+    wide = max((len(r) for r in pp), default=0)
+    pp = [np.pad(r, (0, wide - len(r))) for r in pp]
+    return (x0, nt, pc, sub, rat, h, stack(pp, wide), fk, stack(fp, len(fp[0]) if n else 0),
             stack(gp, len(gp[0]) if n else 0), stack(cp, len(cp[0]) if n else 0),
             stack(s0, NS), stack(sens, len(SensorParams._fields)), fall, win)
 

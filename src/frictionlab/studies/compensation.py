@@ -445,7 +445,7 @@ class Comparison:
 
 def _run(cfg: Config, duration: float | None, window: float | None, controller=None):
     from ..model.limit_cycles import trajectory_features
-    from ..model.simulation import simulate_config
+    from ..runs import simulate_config
 
     traj = simulate_config(cfg, duration, controller=controller)
     feats = trajectory_features(traj, window)
@@ -721,7 +721,7 @@ def tune(
         failed=len(rows) - len(cands))
     if not return_trajectories:
         return res
-    from ..model.simulation import simulate_config
+    from ..runs import simulate_config
 
     return (res, simulate_config(cfg.with_values(res.best), duration),
             simulate_config(base_cfg, duration))

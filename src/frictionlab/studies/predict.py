@@ -66,6 +66,7 @@ import scipy.optimize
 from ..config import Config
 from ..model.friction import stribeck_classical_force, stribeck_curve
 from ..model.periodic import LinearLoop, PeriodicOrbit, linear_loop, periodic_orbit
+from ..runs import loop_spec
 
 __all__ = [
     "DescribingFunctionPrediction",
@@ -305,7 +306,7 @@ def describing_function(cfg: Config, *, amplitudes=None, omega=None,
         return DescribingFunctionPrediction(
             None, None, None, None, (), name,
             "the describing function covers the uncompensated loop only")
-    loop = loop or linear_loop(cfg)
+    loop = loop or linear_loop(loop_spec(cfg))
     w_nyq = math.pi / loop.h
     if omega is None:
         omega = np.logspace(math.log10(0.05), math.log10(0.999 * w_nyq), 800)
@@ -372,7 +373,8 @@ def predict(cfg: Config, **orbit_options) -> Prediction:
     notes = []
     if cfg.sim.noise > 0:
         notes.append("sim.noise is ignored: both predictions are of the noise-free loop")
-    return Prediction(periodic_orbit(cfg, **orbit_options), describing_function(cfg), notes)
+    return Prediction(periodic_orbit(loop_spec(cfg), **orbit_options), describing_function(cfg),
+                      notes)
 
 
 def plot_prediction(cfg: Config, result: Prediction, path: str) -> str:
@@ -388,7 +390,7 @@ def plot_prediction(cfg: Config, result: Prediction, path: str) -> str:
     from ..model.periodic import orbit_trajectory
     from ..plotting import TRACES, axis_label, config_title, plt, save_figure
 
-    loop = linear_loop(cfg)
+    loop = linear_loop(loop_spec(cfg))
     nl, _ = friction_nonlinearity(cfg)
     df, po = result.describing_function, result.periodic_orbit
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 5.0))
@@ -420,7 +422,7 @@ def plot_prediction(cfg: Config, result: Prediction, path: str) -> str:
     ax.legend(fontsize=8, loc="best")
     ax.grid(alpha=0.3)
     if po.found:
-        traj = orbit_trajectory(cfg, po.state, po.period + loop.h)
+        traj = orbit_trajectory(loop_spec(cfg), po.state, po.period + loop.h)
         bx.plot(traj.t, traj["theta_m"], label=f"periodic orbit, measured (T = {po.period:.3g} s)",
                 **TRACES["measured"])
     if df.pendulum_amplitude is not None:

@@ -208,7 +208,7 @@ def reduce_with_trace(cfg: Config, duration: float | None,
     :data:`TRACE` over the last six periods (at least 5 s).
     """
     from ..model.limit_cycles import trajectory_features
-    from ..model.simulation import simulate_config
+    from ..runs import simulate_config
 
     traj = simulate_config(cfg, duration)
     feats = trajectory_features(traj, window)

@@ -320,7 +320,7 @@ def reduce_features(cfg: Config, duration: float | None,
         (``None`` where undefined) and ``status`` (``limit_cycle``,
         ``settled`` or ``fell``).
     """
-    from ..model.simulation import run_features
+    from ..runs import run_features
 
     feats = run_features(cfg, duration, window)
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
@@ -410,7 +410,7 @@ def _check_reduce(reduce: Any) -> None:
 def _warm_up() -> None:
     """Load the compiled simulator and batch evaluator once (from numba's on-disk cache)."""
     from ..config import build_config
-    from ..model.simulation import run_features
+    from ..runs import run_features
     from .batch import evaluate_rows
 
     run_features(build_config(), 2.0)

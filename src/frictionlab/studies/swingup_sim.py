@@ -1,9 +1,9 @@
 r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.model.swingup`).
 
-The runner of :func:`frictionlab.model.swingup.swingup_step` on the simulator's
-plant (:func:`frictionlab.model.simulation.plant_tick`, the same compiled
-integrator, sensor (:func:`frictionlab.model.sensor.measure`) and friction drift as
-:func:`frictionlab.model.simulation.simulate_config`).  The pendulum's angle is
+The closed loop of :func:`frictionlab.model.closedloop.run_loop` with its
+swing-up supervisor (:func:`frictionlab.model.swingup.swingup_step`) on: the
+same compiled tick, plant, sensor and friction drift as
+:func:`frictionlab.model.simulation.simulate_config`.  The pendulum's angle is
 unbounded in the plant (it may go over the top); the recorded ``theta`` and
 ``theta_m`` columns are wrapped into [-pi, pi).
 
@@ -21,87 +21,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config
-from ..model._jit import jit, keep_alive
-from ..model.controller import Controller, compensator_levels, estimates
-from ..model.friction import (
-    FRICTION_DTYPE,
-    KINDS,
-    copy_friction_into,
-    drifted_params,
-    is_drifting,
-    resolve_drift,
-)
-from ..model.sensor import measure
-from ..model.simulation import NC, Trajectory, make_controller, make_sensor, plant_tick, record_tick
+from ..model.closedloop import FELL, NC, SWING_STOPPED, run_loop
+from ..model.controller import Controller
+from ..model.friction import KINDS, resolve_drift
+from ..model.plants import THESIS
+from ..model.simulation import Trajectory
 from ..model.swingup import (
     BALANCING,
-    CAUGHT,
     PHASES,
     STOP_CODES,
-    STOPPED,
     SwingUp,
     swing_record,
     swing_vector,
-    swing_view,
-    swingup_record,
     swingup_row,
-    swingup_step,
-    wrap_angle,
 )
+from ..runs import make_controller, make_sensor
 
 __all__ = ["SwingUpResult", "simulate_swingup", "swingup_outcome"]
-
-#: Run status codes of :func:`_run_swingup`.
-_OK, _FELL, _STOPPED = 0, 1, 2
-
-
-@jit
-def _run_swingup(x, n_ticks, substeps, ratio, pp, fkind, fp, gp, cp, sp_row, s, wx, sens,
-                 fall_angle, out, phase_out):
-    """The swing-up loop for ``n_ticks`` ticks; returns (ticks done, status code).
-
-    The swing-up's settings and state come as their float rows (numba types a
-    row from Python in about 1 us, a record or NamedTuple in about 5) and are
-    viewed as the records here, once."""
-    sp = swingup_record(sp_row)
-    w = swing_view(wx)
-    h = gp.h
-    drifting = is_drifting(fp)
-    # the plant's levels at the tick, in a scratch friction record (kept alive
-    # to the end: a record does not hold its array)
-    buf = np.empty(1, FRICTION_DTYPE)
-    fpt = buf[0]
-    copy_friction_into(fp, fpt)
-    mem = 0.0
-    x0 = 0.0
-    for k in range(n_ticks):
-        th_m, arm_m, armd_m, x0 = measure(sens, x[0], x[2], x[3], k, x0)
-        th_m = wrap_angle(th_m)
-        est = estimates(s, gp)
-        u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sp, th_m, arm_m, armd_m)
-        balancing = CAUGHT <= w.phase <= BALANCING
-        fc_used, fs_used = compensator_levels(s, gp, cp)
-        record_tick(out, k, th_m, est[0] if balancing else w.theta_hat,
-                    est[1] if balancing else w.theta_dot_hat,
-                    u, arm_m, armd_m, est[2], est[3], f_hat, est[4], wrap_angle(x[0]), x,
-                    fc_used, fs_used)
-        phase_out[k] = w.phase
-        if drifting:
-            drifted_params(fp, k * h, fpt)
-        f_mean, mem = plant_tick(x, u, mem, substeps, ratio, h, pp, fkind, fpt)
-        out[k, 15] = f_mean
-        if w.phase == STOPPED:
-            keep_alive(buf)
-            return k + 1, _STOPPED
-        if not np.isfinite(x[0] + x[1] + x[3] + x[4]):
-            keep_alive(buf)
-            return k + 1, _FELL
-        if w.phase == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
-            keep_alive(buf)
-            return k + 1, _FELL
-    keep_alive(buf)
-    return n_ticks, _OK
-
 
 @dataclass(frozen=True)
 class SwingUpResult:
@@ -160,11 +96,11 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
-    done, status = _run_swingup(x, n, cfg.substeps, cfg.pendulum_ratio, cfg.plant.record(),
-                                KINDS.index(cfg.friction_kind),
-                                resolve_drift(cfg.friction.record(), n * h), gp, cp,
-                                swingup_row(sp), s, wx, make_sensor(cfg), cfg.sim.fall_angle,
-                                out, phase)
+    done, status, _, _ = run_loop(x, 0.0, n, THESIS.code, cfg.substeps, cfg.pendulum_ratio,
+                                  cfg.plant.record(), KINDS.index(cfg.friction_kind),
+                                  resolve_drift(cfg.friction.record(), n * h), gp, cp, s,
+                                  make_sensor(cfg), 0, 0.0, cfg.sim.fall_angle, out, True, True,
+                                  swingup_row(sp), wx, phase)
     phase = phase[:done]
     # the end state's fields, read as items (about 1 us each; an attribute of a
     # numpy record costs about 4 us from Python)
@@ -172,14 +108,15 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     stop_code, catch_tick, ticks, catches = (w[f] for f in ("stop", "catch_tick", "tick",
                                                              "catches"))
     balanced = bool((phase == BALANCING).any())
-    stop = STOP_CODES[int(stop_code)] if status == _STOPPED else ""
-    if status == _FELL:
+    stop = STOP_CODES[int(stop_code)] if status == SWING_STOPPED else ""
+    if status == FELL:
         stop = "fell"
     catch_time = float(catch_tick) * h if balanced and catch_tick >= 0 else None
     swinging = phase == 0
     u = out[:done, 3]
     max_u = float(np.abs(u[swinging]).max()) if swinging.any() else 0.0
-    traj = Trajectory(np.arange(done), h, out[:done], "fell" if status == _FELL else "ok", cfg,
+    traj = Trajectory(np.arange(done), h, out[:done], "fell" if status == FELL else "ok", cfg,
+                      noise=cfg.sim.noise,
                       meta={"phase": phase, "phases": PHASES, "ticks": int(ticks)})
     return SwingUpResult(traj, catch_time, balanced, stop, int(catches), max_u)
 
@@ -202,7 +139,7 @@ def swingup_outcome(res: SwingUpResult, window: float | None = None):
         return "fell", LimitCycleFeatures("fell", *([None] * 7))
     first = int(np.argmax(traj.meta["phase"] == BALANCING))
     part = Trajectory(traj.k[first:] - first, traj.h, traj.data[first:], traj.status,
-                      traj.config)
+                      traj.config, noise=traj.noise)
     if window is None:
         window = 0.5 * len(part) * traj.h
     feats = trajectory_features(part, window)

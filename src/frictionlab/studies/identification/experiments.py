@@ -47,7 +47,8 @@ from ...model.friction import stribeck_magnitude
 from ...model.params import ParamError, check_range
 from ...model.rig import RigScaling
 from ...model.sensor import measure
-from ...model.simulation import COLUMNS, NC, PlantState, SimulatedPlant, Trajectory, make_sensor
+from ...model.simulation import COLUMNS, NC, PlantState, Trajectory
+from ...runs import make_sensor, simulated_plant
 
 __all__ = [
     "EXPERIMENTS",
@@ -106,7 +107,7 @@ class _Recorder:
     def __init__(self, cfg: Config, theta0: float, name: str = "experiment"):
         self.cfg = cfg
         self.name = name
-        self.plant = SimulatedPlant(cfg)
+        self.plant = simulated_plant(cfg)
         self.state = self.plant.init(theta0=theta0)
         self.rows: list[np.ndarray] = []
         self.max_rows = round(MAX_EXPERIMENT_S / self.plant.h)
@@ -156,7 +157,8 @@ class _Recorder:
 
     def trajectory(self, **meta) -> Trajectory:
         data = np.array(self.rows) if self.rows else np.zeros((0, NC))
-        return Trajectory(np.arange(len(data)), self.h, data, "ok", self.cfg, meta)
+        return Trajectory(np.arange(len(data)), self.h, data, "ok", self.cfg, meta,
+                          noise=self.cfg.sim.noise)
 
 
 def _signal(log: Any, name: str) -> np.ndarray:

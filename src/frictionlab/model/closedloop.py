@@ -1,0 +1,226 @@
+r"""The closed loop, one tick at a time: the one compiled kernel of every simulated run.
+
+One tick k (Sec. 7.3, process *Regul*, with the plant of Sec. 5 between
+samples): measure the plant (:func:`frictionlab.model.sensor.measure`, App. B),
+run the controller (:func:`frictionlab.model.controller.controller_step`) or,
+in a swing-up run, the swing-up supervisor that wraps it
+(:func:`frictionlab.model.swingup.swingup_step`), record the tick, then
+advance the plant over the sample with u held
+(:func:`frictionlab.model.plants.plant_step`).  Time is the integer tick k,
+t = k h.
+
+:func:`run_loop` runs that tick for ``simulate``, the batch sweeps and fits
+(``studies.batch``), the swing-up simulation (``studies.swingup_sim``), and
+:func:`step_loop` is the same tick on a packed loop state for the periodic
+orbit (:mod:`frictionlab.model.periodic`).  The 200 Hz loop runs the same
+controller and swing-up steps on what a rig reports.
+
+Recorded columns
+----------------
+:data:`COLUMNS`: the ten signals the thesis's controller logs (Sec. 7.1,
+:data:`LOGGED`), the true plant signals, then the Coulomb and stiction levels
+the compensator used.  In a swing-up run the pendulum angles are wrapped into
+[-pi, pi) and, before the catch, the estimates are the swing-up observer's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._jit import jit, jit_inline, keep_alive
+from .controller import compensator_levels, controller_step, estimates
+from .friction import FRICTION_DTYPE, copy_friction_into, drifted_params, is_drifting
+from .plants import plant_step
+from .sensor import ideal_reading, measure, reading
+from .swingup import (
+    BALANCING,
+    CAUGHT,
+    STOPPED,
+    SWING_FIELDS,
+    SwingUpRecord,
+    swing_view,
+    swingup_record,
+    swingup_step,
+    wrap_angle,
+)
+
+__all__ = [
+    "COLUMNS",
+    "FELL",
+    "LOGGED",
+    "NC",
+    "OK",
+    "SWING_STOPPED",
+    "no_swing",
+    "record_tick",
+    "run_loop",
+    "step_loop",
+]
+
+#: The ten signals the thesis's controller saves (Sec. 7.1), in its order.
+LOGGED = (
+    "theta_m", "theta_hat", "theta_dot_hat", "u", "arm_m", "arm_dot_m", "arm_hat",
+    "arm_dot_hat", "friction_hat", "z_hat",
+)
+#: All recorded columns: the ten logged signals, the true plant signals, then the
+#: Coulomb and stiction levels the compensator used (the adaptive compensator's
+#: estimates; a fixed compensator's own ``compensation.coulomb``/``stiction``; 0
+#: without compensation).
+COLUMNS = (*LOGGED, "theta", "theta_dot", "arm", "arm_dot", "z", "friction", "coulomb_hat",
+           "stiction_hat")
+NC = len(COLUMNS)
+
+#: Status codes of :func:`run_loop`: ran to the end, fell (or a non-finite
+#: state), the swing-up supervisor stopped the run.
+OK, FELL, SWING_STOPPED = 0, 1, 2
+
+
+@jit_inline
+def record_tick(out, k, th_m, th_hat, thd_hat, u, arm_m, armd_m, arm_hat, armd_hat, f_hat,
+                z_hat, theta, x, fc_used, fs_used):
+    """Write tick ``k``'s signals into row k of ``out`` (columns :data:`COLUMNS`
+    but ``friction``, written after the plant step): the measurements and the
+    estimates the controller used, the plant state ``x`` with its angle given
+    as ``theta``, and the compensator's levels."""
+    out[k, 0] = th_m
+    out[k, 1] = th_hat
+    out[k, 2] = thd_hat
+    out[k, 3] = u
+    out[k, 4] = arm_m
+    out[k, 5] = armd_m
+    out[k, 6] = arm_hat
+    out[k, 7] = armd_hat
+    out[k, 8] = f_hat
+    out[k, 9] = z_hat
+    out[k, 10] = theta
+    out[k, 11] = x[1]
+    out[k, 12] = x[2]
+    out[k, 13] = x[3]
+    out[k, 14] = x[4]
+    out[k, 16] = fc_used
+    out[k, 17] = fs_used
+
+
+#: The controller's and the plant's steps inlined into the loop (their calls
+#: every tick cost about 10 % of a run; with a noisy converter, the sensor's
+#: call as much again): the same Python functions, compiled in place.
+_controller_step_inline = jit_inline(controller_step.py_func)
+_measure_inline = jit_inline(measure.py_func)
+
+
+@jit
+def run_loop(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
+             fall_angle, out, record, swing, sup_row, wx, phase_out):
+    """The closed loop for ``n_ticks`` ticks; returns (ticks done, status, mem, x0).
+
+    Parameters
+    ----------
+    x : ndarray (5,)
+        Plant state ``[theta, theta_dot, arm, arm_dot, z]``, advanced in place.
+    mem : float
+        The plant's friction memory (:func:`frictionlab.model.plants.plant_step`)
+        at the start; returned at the end.
+    n_ticks : int
+    pcode, substeps, ratio, pp : int, int, int, ndarray
+        Plant code (:data:`frictionlab.model.plants.PLANTS`), integration steps,
+        the plant's parameter row.
+    fkind, fp
+        Plant friction model code and record (by reference).  Its levels drift
+        with the time ``(n0 + k) h`` when it has a resolved drift
+        (:func:`frictionlab.model.friction.resolve_drift`).
+    gp, cp, s
+        Controller gains, the compensator's friction record and the controller
+        state (updated in place).
+    sp : SensorParams
+        The sensor; samples are numbered ``n0, n0 + 1, ...`` (its noise is a
+        function of the sample number, so a run continued in chunks is the
+        single run bit for bit).
+    x0 : float
+        The arm's zero (taken at sample 0; returned for a continuation chunk).
+    fall_angle : float
+        ``|theta|`` beyond which the pendulum has fallen (swing-up: once balancing).
+    out : ndarray (n_ticks, NC)
+        Row k receives tick k's signals when ``record`` is true.
+    swing : bool
+        Run the swing-up supervisor (settings row ``sup_row``, state vector
+        ``wx``, updated in place; ``phase_out[k]`` receives the phase of tick
+        k) instead of the balancing controller alone.
+
+    Returns
+    -------
+    (ticks done, status, mem, x0) with status :data:`OK`, :data:`FELL` or
+    :data:`SWING_STOPPED`.
+    """
+    h = gp.h
+    drifting = is_drifting(fp)
+    # the plant's levels at the tick, in a scratch record (kept alive to the end:
+    # a record does not hold its array)
+    buf = np.empty(1, FRICTION_DTYPE)
+    fpt = buf[0]
+    copy_friction_into(fp, fpt)
+    sup = swingup_record(sup_row)
+    w = swing_view(wx)
+    # an ideal noise-free sensor measures the true signals: its (inlined) reading
+    # saves the call of measure every tick; the same values bit for bit
+    ideal = not (sp.noise > 0.0) and not (sp.step > 0.0)
+    for k in range(n_ticks):
+        if ideal:
+            th_m, arm_m, armd_m, x0 = ideal_reading(x[0], x[2], x[3], n0 + k == 0, x0)
+        else:
+            th_m, arm_m, armd_m, x0 = _measure_inline(sp, x[0], x[2], x[3], n0 + k, x0)
+        th_hat, thd_hat, arm_hat, armd_hat, z_hat = estimates(s, gp)
+        if swing:
+            th_m = wrap_angle(th_m)
+            u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sup, th_m, arm_m, armd_m)
+        else:
+            u, _u_fb, f_hat = _controller_step_inline(s, gp, cp, th_m, arm_m, armd_m)
+        if record:
+            theta = x[0]
+            if swing:
+                theta = wrap_angle(theta)
+                phase_out[k] = w.phase
+                if not (CAUGHT <= w.phase <= BALANCING):
+                    th_hat, thd_hat = w.theta_hat, w.theta_dot_hat
+            fc_used, fs_used = compensator_levels(s, gp, cp)
+            record_tick(out, k, th_m, th_hat, thd_hat, u, arm_m, armd_m, arm_hat, armd_hat,
+                        f_hat, z_hat, theta, x, fc_used, fs_used)
+        if drifting:
+            drifted_params(fp, (n0 + k) * h, fpt)
+        f_mean, mem = plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fpt)
+        if record:
+            out[k, 15] = f_mean
+        if swing:
+            if w.phase == STOPPED:
+                keep_alive(buf)
+                return k + 1, SWING_STOPPED, mem, x0
+            if not np.isfinite(x[0] + x[1] + x[3] + x[4]):
+                keep_alive(buf)
+                return k + 1, FELL, mem, x0
+            if w.phase == BALANCING and not abs(wrap_angle(x[0])) <= fall_angle:
+                keep_alive(buf)
+                return k + 1, FELL, mem, x0
+        elif not (abs(x[0]) <= fall_angle) or not np.isfinite(x[1] + x[3] + x[4]):
+            keep_alive(buf)
+            return k + 1, FELL, mem, x0
+    keep_alive(buf)
+    return n_ticks, OK, mem, x0
+
+
+def no_swing() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`run_loop`'s swing-up arguments ``(sup_row, wx, phase_out)`` for a
+    run without the swing-up supervisor."""
+    return np.zeros(len(SwingUpRecord._fields)), np.zeros(len(SWING_FIELDS)), np.zeros(0)
+
+
+@jit
+def step_loop(x, s, mem, x0, pcode, substeps, ratio, pp, fkind, fp, gp, cp, sp, du):
+    """One tick of :func:`run_loop` (measure, controller, plant) on a plant state
+    ``x`` and a controller state ``s`` (both updated in place), not the first
+    sample (the arm's zero ``x0`` is given), noise-free; the plant receives the
+    controller's u plus ``du`` (an input disturbance, for linearisations).
+    Returns (u, mem)."""
+    th_m, arm_m, armd_m, _ = reading(sp, x[0], x[2], x[3], False, x0)
+    u, _u_fb, _f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
+    u_in = u + du if du != 0.0 else u
+    _f, mem = plant_step(pcode, x, u_in, mem, substeps, ratio, gp.h, pp, fkind, fp)
+    return u, mem

@@ -1,0 +1,69 @@
+r"""Plants: each plant is one module behind one interface, chosen by ``--plant NAME``.
+
+A plant module provides
+
+``Params``
+    A frozen dataclass of its physical parameters (keys ``plant.*``), each
+    field with its doc, unit and range; ``record()`` gives the float row the
+    compiled code reads.
+``tick(x, u, mem, substeps, ratio, h, pp, fkind, fp) -> (mean friction, mem)``
+    The compiled step: advance the state ``x = [theta, theta_dot, arm,
+    arm_dot, z]`` (theta the pendulum angle from upright) in place over one
+    sampling period h with u held, the arm's friction
+    (:func:`frictionlab.model.friction.friction_step`, code ``fkind``, record
+    ``fp``) in the units of u; ``mem`` is the friction model's memory.
+``rhs(t, x, u, params)``
+    The continuous dynamics in python-control's order.
+``linearization(params) -> (A, B)``
+    The continuous linearisation at upright, states (theta, theta_dot, arm,
+    arm_dot), input u.
+
+Every plant is measured the same way (the pendulum angle, the arm angle and
+the arm velocity: :mod:`frictionlab.model.sensor`).  :func:`plant_step` is the
+one dispatch the compiled closed loop (:mod:`frictionlab.model.closedloop`)
+calls; :data:`PLANTS` names the plants and their codes.
+
+Adding a plant: write its module to the interface above, add it to
+:data:`PLANTS` and one branch to :func:`plant_step`, and give it a preset in
+the configuration (docs/architecture.md, "Add a plant").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .._jit import jit_inline
+from . import thesis
+
+__all__ = ["PLANTS", "THESIS", "PlantKind", "plant_step"]
+
+
+@dataclass(frozen=True)
+class PlantKind:
+    """One plant: its name, the code :func:`plant_step` dispatches on, its
+    parameter class and the unit of its input u."""
+
+    name: str
+    code: int
+    params: type
+    u_unit: str
+    description: str
+
+
+#: The thesis's plant, eq. (6): an ideal arm-tip acceleration input.
+THESIS = PlantKind("thesis", 0, thesis.PlantParams, "m/s^2",
+                   "the thesis's rig, eq. (6): u is the arm tip's acceleration")
+
+#: Every plant by name.
+PLANTS = {THESIS.name: THESIS}
+
+
+#: Each plant's step inlined into the closed loop (a call every tick cost about
+#: 10 % of a run): the same Python function, compiled in place.
+_thesis_tick = jit_inline(thesis.tick.py_func)
+
+
+@jit_inline
+def plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp):
+    """Advance the plant of code ``pcode`` over one sample (its module's ``tick``)."""
+    return _thesis_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)

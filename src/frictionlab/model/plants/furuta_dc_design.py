@@ -1,0 +1,233 @@
+r"""The balancing design for the DC-motor Furuta pendulum (Sec. 2.2-2.4 on its
+linearisation).
+
+State feedback ``u = -L x`` (u in volts, x = theta, theta_dot, arm, arm_dot)
+by discrete pole placement at h on the zero-order-hold discretisation of
+:func:`frictionlab.model.plants.furuta_dc.linearization` (back-EMF and
+viscous damping included: they are part of this plant's linear dynamics),
+with the pole pattern of Sec. 2.4: the pendulum pair at
+:math:`(\omega_1, \zeta_1)`, the arm pair at :math:`(\omega_2, \zeta_2)`,
+mapped by eq. (8).  The thesis's presets (eqs. 13-16) are carried over by
+their pattern: :math:`\omega_1 = \omega_0`, the rate of this plant's unstable
+upright mode (12.5 rad/s for the QUBE-Servo 2 against the thesis rig's 6.8),
+the pendulum observer's :math:`\omega_{o1}` scaled by the same ratio, and the
+arm's frequencies (10 and 3 rad/s, observer 10 and 7.5) unchanged.  Given
+gains (``design.gains``: e.g. an LQR from python-control, docs/model.md)
+replace the placement.
+
+Not everything is measured: the QUBE gives theta and the arm angle from its
+encoders and the arm rate from its tachometer, but not theta_dot.  The
+observer is a discrete linear predictor on the same 4-state model,
+
+.. math:: \hat x_{k+1} = \Phi\hat x_k + \Gamma u_k + K(y_k - C\hat x_k),
+          \quad y = (\theta, \phi, \dot\phi)
+
+with its four poles at the z-images of the design's observer specs
+(:math:`(\omega_{o1}, \zeta_{o1})` and :math:`(\omega_{o2}, \zeta_{o2})`),
+placed on :math:`(\Phi^T, C^T)`.  As the thesis's controller does, the
+estimate used at tick k was formed at tick k-1 (read, compute u from
+:math:`\hat x_k`, output, then update: :func:`dc_observer_step`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._jit import jit
+from ..design import DesignSpec, discrete_pair, match_poles, place, requested_poles
+from ..design import preset as design_preset
+from .furuta_dc import QUBE2, FurutaDCParams, linearization
+from .thesis import zoh
+
+__all__ = [
+    "MEASURED",
+    "DCDesign",
+    "dc_design",
+    "dc_observer_step",
+    "dc_spec",
+    "observer_row",
+]
+
+#: Rows of C: what the rig measures (theta, arm, arm_dot).
+MEASURED = ("theta", "arm", "arm_dot")
+_C = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
+def dc_spec(spec: DesignSpec | str = "fast", params: FurutaDCParams = QUBE2,
+            h: float | None = None) -> DesignSpec:
+    """The design's specifications for this plant.
+
+    A preset name (``fast``, ``slow``) gives the thesis's Sec. 2.4 pattern on
+    this plant: ``omega0`` and ``omega1`` the plant's unstable rate
+    :attr:`FurutaDCParams.omega0`, ``observer_omega1`` scaled by the same
+    ratio as omega0, the arm's frequencies as in the thesis.  A
+    :class:`DesignSpec` is used as given, its ``omega0`` set to the plant's.
+    ``h`` replaces the sampling period.
+    """
+    w0 = params.omega0
+    if isinstance(spec, str):
+        base = design_preset(spec)
+        scale = w0 / base.omega0
+        spec = dataclasses.replace(base, omega1=base.omega1 * scale,
+                                   observer_omega1=base.observer_omega1 * scale)
+    spec = dataclasses.replace(spec, omega0=w0)
+    if h is not None:
+        spec = dataclasses.replace(spec, h=h)
+    return spec
+
+
+@dataclass(frozen=True)
+class DCDesign:
+    """A balancing design for the DC-motor plant (arrays read-only).
+
+    Attributes
+    ----------
+    spec : DesignSpec
+        The specifications used (:func:`dc_spec`).
+    params : FurutaDCParams
+    A, B : ndarray
+        The continuous linearisation at upright (input in volts).
+    Phi, Gamma : ndarray
+        Its ZOH discretisation at ``spec.h``.
+    C : ndarray (3, 4)
+        The measured states (:data:`MEASURED`).
+    L : ndarray (4,)
+        ``u = -L x`` (V per rad, V per rad/s).
+    K : ndarray (4, 3)
+        The observer's gain.
+    requested_poles, poles : ndarray (4,) complex
+        z-plane poles of ``Phi - Gamma L`` asked for and achieved (paired);
+        with given gains both are the achieved ones.
+    requested_observer_poles, observer_poles : ndarray (4,) complex
+        z-plane poles of ``Phi - K C`` asked for and achieved.
+    method : str
+        ``"numeric"`` (pole placement) or ``"given"`` (``spec.gains``).
+    """
+
+    spec: DesignSpec
+    params: FurutaDCParams
+    A: np.ndarray
+    B: np.ndarray
+    Phi: np.ndarray
+    Gamma: np.ndarray
+    C: np.ndarray
+    L: np.ndarray
+    K: np.ndarray
+    requested_poles: np.ndarray
+    poles: np.ndarray
+    requested_observer_poles: np.ndarray
+    observer_poles: np.ndarray
+    method: str
+
+    @property
+    def max_pole_error(self) -> float:
+        """Largest distance between a requested and an achieved pole (both loops)."""
+        return float(max(np.max(np.abs(self.poles - self.requested_poles)),
+                         np.max(np.abs(self.observer_poles - self.requested_observer_poles))))
+
+    def to_json(self) -> dict:
+        """The design as JSON (poles as ``[re, im]`` pairs; ``linearization`` the
+        continuous A and B at upright, input in volts)."""
+
+        def pairs(z):
+            return [[float(np.real(v)), float(np.imag(v))] for v in z]
+
+        return {
+            "L": [float(v) for v in self.L],
+            "K": [[float(v) for v in row] for row in self.K],
+            "poles": pairs(self.poles),
+            "observer_poles": pairs(self.observer_poles),
+            "requested_poles": pairs(self.requested_poles),
+            "requested_observer_poles": pairs(self.requested_observer_poles),
+            "spec": dataclasses.asdict(self.spec),
+            "method": self.method,
+            "linearization": {
+                "A": [[float(v) for v in row] for row in self.A],
+                "B": [[float(v) for v in row] for row in self.B],
+                "states": ["theta", "theta_dot", "arm", "arm_dot"],
+                "input": "u (V)",
+            },
+        }
+
+
+def dc_design(spec: DesignSpec | str = "fast", params: FurutaDCParams = QUBE2,
+              h: float | None = None) -> DCDesign:
+    """Design the state feedback and the observer (module docstring).
+
+    Parameters
+    ----------
+    spec : DesignSpec or {"fast", "slow"}
+        Specifications (:func:`dc_spec`); ``spec.gains`` (V per state unit)
+        replaces the placement.
+    params : FurutaDCParams
+        The plant (default the QUBE-Servo 2).
+    h : float, optional
+        Sampling period (s); default ``spec.h``.
+
+    Returns
+    -------
+    DCDesign
+        Frozen, its arrays read-only (cached: the same arguments give the same
+        object).
+    """
+    return _dc_design(dc_spec(spec, params, h), params)
+
+
+@functools.lru_cache(maxsize=256)
+def _dc_design(spec: DesignSpec, params: FurutaDCParams) -> DCDesign:
+    A, B = linearization(params)
+    Phi, Gamma = zoh(A, B, spec.h)
+    if spec.gains is not None:
+        L = np.array(spec.gains, dtype=float)
+        req = np.sort_complex(np.linalg.eigvals(Phi - Gamma @ L.reshape(1, 4)))
+        method = "given"
+    else:
+        req = requested_poles(spec)
+        L = place(Phi, Gamma, req)
+        method = "numeric"
+    ach = match_poles(np.linalg.eigvals(Phi - Gamma @ L.reshape(1, 4)), req)
+
+    obs_req = np.concatenate([
+        discrete_pair(spec.observer_omega1, spec.observer_zeta1, spec.h),
+        discrete_pair(spec.observer_omega2, spec.observer_zeta2, spec.h),
+    ])
+    from scipy.signal import place_poles  # heavy import, only when used
+
+    K = np.asarray(place_poles(Phi.T, _C.T, obs_req).gain_matrix, dtype=float).T
+    obs_ach = match_poles(np.linalg.eigvals(Phi - K @ _C), obs_req)
+    C = _C.copy()
+    for arr in (A, B, Phi, Gamma, C, L, K, req, ach, obs_req, obs_ach):
+        arr.flags.writeable = False
+    return DCDesign(spec, params, A, B, Phi, Gamma, C, L, K, req, ach, obs_req, obs_ach,
+                    method)
+
+
+def observer_row(result: DCDesign) -> np.ndarray:
+    """The float row :func:`dc_observer_step` reads: Phi (16, row by row),
+    Gamma (4), K (12, row by row: 4 rows of 3), 32 floats."""
+    return np.concatenate([result.Phi.ravel(), result.Gamma.ravel(), result.K.ravel()])
+
+
+@jit
+def dc_observer_step(xhat, theta_m, arm_m, arm_dot_m, u, obs_row):
+    """One step of the predictor observer: ``xhat`` (4,) becomes the estimate
+    for the next tick, in place, from this tick's measurements and the
+    voltage u applied over it.
+
+    ``xhat <- Phi xhat + Gamma u + K (y - C xhat)``, y = (theta_m, arm_m,
+    arm_dot_m); ``obs_row`` from :func:`observer_row`.
+    """
+    e0 = theta_m - xhat[0]
+    e1 = arm_m - xhat[2]
+    e2 = arm_dot_m - xhat[3]
+    x0, x1, x2, x3 = xhat[0], xhat[1], xhat[2], xhat[3]
+    for i in range(4):
+        p = 4 * i
+        kk = 20 + 3 * i
+        xhat[i] = (obs_row[p] * x0 + obs_row[p + 1] * x1 + obs_row[p + 2] * x2
+                   + obs_row[p + 3] * x3 + obs_row[16 + i] * u
+                   + obs_row[kk] * e0 + obs_row[kk + 1] * e1 + obs_row[kk + 2] * e2)
