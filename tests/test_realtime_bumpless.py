@@ -10,7 +10,7 @@ classical plant friction).  Each switch type is checked in the simulator
 spread over a cycle, and in the 200 Hz loop (the in-process simulated rig, lockstep, on a
 fake clock) once, where its log must also be the simulator's run tick for tick: both
 runners make the switch with the same code
-(:func:`~frictionlab.model.controller.switch_controller`).
+(:func:`~frictionlab.model.switching.switch_controller`).
 """
 
 import dataclasses
@@ -19,15 +19,10 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
-from frictionlab.model.controller import (
-    LUGRE,
-    Transition,
-    new_state,
-    start_compensator,
-    switch_controller,
-)
+from frictionlab.model.controller import LUGRE, new_state
 from frictionlab.model.design import PRESETS, design, gain_path
 from frictionlab.model.friction import FrictionParams, lugre_dz, steady_state
+from frictionlab.model.switching import Transition, start_compensator, switch_controller
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime.params import ControlParams
 from frictionlab.realtime.rigs import SimRig

@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 from frictionlab.config import ConfigError, build_config
-from frictionlab.model.controller import controller_step, start_compensator
+from frictionlab.model.controller import controller_step
 from frictionlab.model.design import PRESETS, design
 from frictionlab.model.friction import friction_record
+from frictionlab.model.switching import start_compensator
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime import loop as loop_mod
 from frictionlab.realtime.loop import Loop

@@ -24,7 +24,7 @@ import numpy as np
 
 from ._jit import jit
 from .closedloop import COLUMNS, LOGGED, NC, no_swing, run_loop
-from .controller import STATE_DTYPE, Controller, switch_controller
+from .controller import STATE_DTYPE, Controller
 from .design import DesignSpec, gain_path
 from .friction import (
     KINDS,
@@ -38,6 +38,7 @@ from .friction import (
 from .plants import PlantKind, plant_step
 from .plants.thesis import PlantParams
 from .sensor import SensorParams
+from .switching import switch_controller
 
 __all__ = [
     "COLUMNS",
@@ -331,7 +332,7 @@ def simulate(
         the 200 Hz loop: from the tick nearest ``t`` (s) on, that controller runs
         on the plant, the sensor and the controller state as they are, made
         bumpless as the loop makes it
-        (:func:`frictionlab.model.controller.switch_controller`: a new
+        (:func:`frictionlab.model.switching.switch_controller`: a new
         compensator started at its steady value for the last measured arm
         velocity and ramped in, new gains moved through the designs in between)
         over ``transition`` = (gain, compensation) seconds (the loop's
@@ -376,7 +377,7 @@ def simulate(
 def _simulate_switched(spec: LoopSpec, duration: float | None, switches, transition
                        ) -> Trajectory:
     """:func:`simulate` with switches: :func:`run_loop` in chunks between them, and tick
-    by tick through each switch's transition (:class:`frictionlab.model.controller.Transition`);
+    by tick through each switch's transition (:class:`frictionlab.model.switching.Transition`);
     the plant, its friction memory, the sensor's arm zero and the controller state carry
     over (a chunked run is the single run bit for bit)."""
     h = spec.h

@@ -31,7 +31,7 @@ nanoseconds on the monotonic clock, so there is no drift):
 
 Switching while running (bumpless; docs/realtime.md and docs/compensation.md,
 "Switching while running"): a change is made by
-:func:`frictionlab.model.controller.switch_controller`, as the simulator makes
+:func:`frictionlab.model.switching.switch_controller`, as the simulator makes
 it.  New gains (a design change) move from the gains in use to the new ones
 over :attr:`Safety.gain_transition` seconds (2 s), along the gains of the
 designs in between (:func:`frictionlab.model.design.gain_path`, computed
@@ -99,7 +99,6 @@ from ..model.controller import (
     state_index,
     state_record,
     state_vector,
-    switch_controller,
 )
 from ..model.params import Validated, param
 from ..model.rig import RigScaling
@@ -117,6 +116,7 @@ from ..model.swingup import (
     swingup_row,
     swingup_step_rows,
 )
+from ..model.switching import switch_controller
 from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
 from .protocol import STATUS_HELD, STATUS_WATCHDOG
@@ -451,7 +451,7 @@ class Loop:
         comp_flag = COMPENSATE if params.comp_enabled else 0
         ramp_n = round(safety.gain_transition / h)
         comp_n = round(safety.compensation_transition / h)
-        # a change's transition (model.controller.Transition): the gains of the ticks
+        # a change's transition (model.switching.Transition): the gains of the ticks
         # after it, with L and the compensator's weight moving (the record's field types
         # stay: nothing is compiled mid-run)
         trans = None
