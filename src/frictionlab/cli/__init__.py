@@ -37,6 +37,7 @@ from .common import (
     config_from_args,
     emit_json,
     error_message,
+    feature_lines,
     finite,
     flush_notes,
     hanging_start,
@@ -142,8 +143,8 @@ def cmd_simulate(args) -> int:
                     else f"at {swing.swing_up_time:.2f} s")
             print(f"  swing-up: caught {when}, {swing.catches} catch(es)"
                   + (f", stopped: {swing.stop_reason}" if swing.stop_reason else ""))
-        for k, v in feats.interface_dict().items():
-            print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+        for line in feature_lines(feats.interface_dict()):
+            print(line)
     return 0
 
 

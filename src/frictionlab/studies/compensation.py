@@ -93,6 +93,7 @@ from ..model.controller import (
     new_state,
 )
 from ..model.friction import LUGRE, FrictionParams, copy_friction, with_levels
+from ..model.plants.thesis import PlantParams
 from ..model.rig import RigScaling
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
@@ -274,8 +275,8 @@ class AdaptiveCompensator(LuGreCompensator):
     """
 
     kind: ClassVar[str] = "adaptive"
-    arm_length: float = 0.21
-    u_max: float = 1.0 / 0.022
+    arm_length: float = PlantParams().arm_length
+    u_max: float = RigScaling().u_max
 
     def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0, e: float = 0.0,
              u_prev: float = 0.0) -> tuple[float, CompensatorState]:
@@ -465,7 +466,7 @@ def features_and_chatter(cfg: Config, duration: float | None,
     cfg : Config
         The run's configuration.
     duration, window : float or None
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
 
     Returns
     -------
@@ -487,7 +488,7 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
     cfg : Config
         The compensated configuration (``cfg.compensation_kind`` != none).
     duration, window : float, optional
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
     controller : Controller, optional
         A controller for the compensated run (e.g. another error signal).
     return_trajectories : bool

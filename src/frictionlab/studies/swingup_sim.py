@@ -3,7 +3,7 @@ r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.model.swingup`).
 The closed loop of :func:`frictionlab.model.closedloop.run_loop` with its
 swing-up supervisor (:func:`frictionlab.model.swingup.swingup_step`) on: the
 same compiled tick, plant, sensor and friction drift as
-:func:`frictionlab.model.simulation.simulate_config`.  The pendulum's angle is
+:func:`frictionlab.runs.simulate_config`.  The pendulum's angle is
 unbounded in the plant (it may go over the top); the recorded ``theta`` and
 ``theta_m`` columns are wrapped into [-pi, pi).
 

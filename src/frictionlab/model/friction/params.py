@@ -72,8 +72,9 @@ class FrictionParams(Validated):
                            lo=0.0, hi=1e3)
     stribeck_velocity: float = param(1.0, "Stribeck velocity [v_S]", "rad/s", lo=0.0, hi=1e3,
                                      lo_open=True)
-    sigma0: float = param(100.0, "LuGre bristle stiffness [sigma_0]", "1/s^2", lo=0.0, hi=1e7,
-                          lo_open=True)
+    sigma0: float = param(100.0, "LuGre bristle stiffness [sigma_0]; at least 1 (a bristle "
+                          "deflection F_S / sigma_0 of radians is no bristle, and 1e-300 breaks "
+                          "the numbers)", "1/s^2", lo=1.0, hi=1e7)
     sigma1: float = param(5.0, "LuGre bristle damping [sigma_1]", "1/s", lo=0.0, hi=1e5)
     observer_gain: float = param(0.0, "LuGre observer gain [k] of eq. (19); the plant's "
                                  "error is e = -theta (rad)", "1/s (plant; 1 for a velocity "
