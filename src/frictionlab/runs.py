@@ -12,7 +12,7 @@ module, one layer above the configuration, builds them: the sensor
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 from .config import Config, build_config
 from .model.actuator import ActuatedPlant
@@ -81,6 +81,8 @@ def simulate_config(
     record: bool = True,
     progress: Callable[[float], None] | None = None,
     controller: Controller | None = None,
+    switches: Sequence[tuple[float, Controller]] = (),
+    transition: tuple[float, float] = (2.0, 2.0),
 ) -> Trajectory:
     """Run the closed loop described by ``cfg``.
 
@@ -97,8 +99,12 @@ def simulate_config(
         report progress).
     controller : Controller, optional
         Use this controller instead of the one ``cfg`` describes.
+    switches, transition
+        Changes of controller while the loop runs, made bumpless as the 200 Hz
+        loop makes them (:func:`frictionlab.model.simulation.simulate`).
     """
-    return simulate_spec(loop_spec(cfg, controller), duration, record=record, progress=progress)
+    return simulate_spec(loop_spec(cfg, controller), duration, record=record, progress=progress,
+                         switches=switches, transition=transition)
 
 
 def run_features(cfg: Config, duration: float | None = None,

@@ -150,6 +150,7 @@ def note_text(note: str, options: dict[str, str] = OPTIONS) -> str:
 SAFETY_OPTIONS = {"safety.angle_limit": "--angle-limit",
                   "safety.start_tolerance": "--start-tolerance",
                   "safety.gain_transition": "--gain-transition",
+                  "safety.compensation_transition": "--compensation-transition",
                   "safety.silent_periods": "--silent-periods",
                   "safety.max_pause": "--max-pause"}
 

@@ -107,10 +107,14 @@ def register_cli(sub) -> None:
                    help="start only if |theta| <= this (default 0.15 rad; no swing-up)")
     add_stall_args(p)
     p.add_argument("--gain-transition", type=float, default=2.0, metavar="S",
-                   help="new state-feedback gains (a design change while running) replace "
-                        "the running ones linearly over S seconds, so a switch in mid-cycle "
-                        "does not throw the pendulum past the angle limit; 0: at once "
-                        "(default: 2)")
+                   help="new gains (a design change while running) replace the running "
+                        "ones over S seconds, through the designs in between, so a switch in "
+                        "mid-cycle does not throw the pendulum past the angle limit; 0: at "
+                        "once (default: 2)")
+    p.add_argument("--compensation-transition", type=float, default=2.0, metavar="S",
+                   help="a compensator switched on while running (or to another kind) "
+                        "starts at its steady estimate and is ramped in over S seconds, so "
+                        "that u does not jump; 0: at once (default: 2)")
     p.add_argument("--prewarm-us", type=float, default=PREWARM_US, metavar="US",
                    help="wake US microseconds before each deadline, run the tick's code on "
                         f"scratch data and busy-wait to the deadline (default {PREWARM_US:g}; "
@@ -191,7 +195,8 @@ def _cmd_run(args) -> int:
         raise UsageError(f"--port must be in 0..65535, got {args.port}")
     safety = safety_from_args(args, angle_limit=args.angle_limit,
                               start_tolerance=args.start_tolerance,
-                              gain_transition=args.gain_transition)
+                              gain_transition=args.gain_transition,
+                              compensation_transition=args.compensation_transition)
     check_output_dir(args.log_dir, "--log-dir")
     flush_notes(args)
     with _RunSignals() as signals:

@@ -229,6 +229,14 @@ class Gains(NamedTuple):
         Index in :data:`ERROR_SIGNALS` of the LuGre observer's error e.
     feed_net : float
         1.0: the observers receive :math:`u - \\hat F` (module docstring), 0.0: u.
+    comp_weight : float
+        The share of the compensator's estimate that is applied (and fed to the
+        observers): 1 but while a compensator is being ramped in after a switch
+        (:class:`frictionlab.model.switching.Transition`).
+    error_weight : float
+        The share of the error signal e that the LuGre observer receives: 1 but
+        while it is being ramped in after a switch
+        (:class:`frictionlab.model.switching.Transition`).
     """
 
     l1: float
@@ -247,11 +255,23 @@ class Gains(NamedTuple):
     compensator: int
     error_signal: int
     feed_net: float
+    comp_weight: float = 1.0
+    error_weight: float = 1.0
 
     @property
     def feedback(self) -> np.ndarray:
         """The state feedback L = (l1, l2, l3, l4)."""
         return np.array(self[:4])
+
+    @property
+    def gains8(self) -> np.ndarray:
+        """The state feedback and the observer gains (l1, l2, l3, l4, k1, k2, k3, k4)."""
+        return np.array(self[:8])
+
+    def with_gains8(self, g) -> Gains:
+        """These gains with L and K replaced by ``g`` (as :attr:`gains8`)."""
+        return self._replace(l1=float(g[0]), l2=float(g[1]), l3=float(g[2]), l4=float(g[3]),
+                             k1=float(g[4]), k2=float(g[5]), k3=float(g[6]), k4=float(g[7]))
 
     def with_feedback(self, L) -> Gains:
         """These gains with the state feedback L replaced."""
@@ -268,7 +288,8 @@ class Gains(NamedTuple):
 def gains_record(row):
     """The :class:`Gains` stored as the float row ``np.array(gains, dtype=float)``."""
     return Gains(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8],
-                 row[9], row[10], row[11], row[12], int(row[13]), int(row[14]), row[15])
+                 row[9], row[10], row[11], row[12], int(row[13]), int(row[14]), row[15],
+                 row[16], row[17])
 
 
 #: Candidate error signals e for the LuGre compensator's observer, eq. (19):
@@ -438,10 +459,12 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
             e = arm_dot_m
         elif err == E_ARM_ANGLE:
             e = arm_m
+        e *= gp.error_weight  # ramped in after a switch (model.switching)
         if kind == ADAPTIVE:
             f_hat = adaptive_force(s, cp, arm_dot_m, e, h, gp.arm_length, gp.u_max)
         else:
             f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
+        f_hat *= gp.comp_weight
     u = u_fb + f_hat
     umax = gp.u_max
     if u > umax:

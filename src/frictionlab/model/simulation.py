@@ -16,7 +16,7 @@ becomes non-finite stops at once with status ``"fell"``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +25,7 @@ import numpy as np
 from ._jit import jit
 from .closedloop import COLUMNS, LOGGED, NC, no_swing, run_loop
 from .controller import STATE_DTYPE, Controller
+from .design import DesignSpec, gain_path
 from .friction import (
     KINDS,
     FrictionParams,
@@ -35,7 +36,9 @@ from .friction import (
     resolve_drift,
 )
 from .plants import PlantKind, plant_step
+from .plants.thesis import PlantParams
 from .sensor import SensorParams
+from .switching import switch_controller
 
 __all__ = [
     "COLUMNS",
@@ -308,6 +311,8 @@ def simulate(
     *,
     record: bool = True,
     progress: Callable[[float], None] | None = None,
+    switches: Sequence[tuple[float, Controller]] = (),
+    transition: tuple[float, float] = (2.0, 2.0),
 ) -> Trajectory:
     """Run the closed loop ``spec`` (:func:`frictionlab.model.closedloop.run_loop`).
 
@@ -322,7 +327,20 @@ def simulate(
     progress : callable, optional
         Called with the fraction done (runs are chunked so long runs can
         report progress).
+    switches : sequence of (t, Controller)
+        Changes of controller while the loop runs, as the operator makes them in
+        the 200 Hz loop: from the tick nearest ``t`` (s) on, that controller runs
+        on the plant, the sensor and the controller state as they are, made
+        bumpless as the loop makes it
+        (:func:`frictionlab.model.switching.switch_controller`: a new
+        compensator started at its steady value for the last measured arm
+        velocity and ramped in, new gains moved through the designs in between)
+        over ``transition`` = (gain, compensation) seconds (the loop's
+        ``safety.gain_transition`` and ``safety.compensation_transition``).
+        A run with switches is recorded and reports no progress.
     """
+    if switches:
+        return _simulate_switched(spec, duration, switches, transition)
     h = spec.h
     n = run_ticks(h, spec.duration if duration is None else duration, record)
     ctrl = spec.controller
@@ -352,5 +370,54 @@ def simulate(
         if progress is not None:
             progress(done / n)
     data = out[:done] if record else out[:0]
+    return Trajectory(np.arange(len(data)), h, data, STATUS[status], spec.source,
+                      noise=float(spec.sensor.noise))
+
+
+def _simulate_switched(spec: LoopSpec, duration: float | None, switches, transition
+                       ) -> Trajectory:
+    """:func:`simulate` with switches: :func:`run_loop` in chunks between them, and tick
+    by tick through each switch's transition (:class:`frictionlab.model.switching.Transition`);
+    the plant, its friction memory, the sensor's arm zero and the controller state carry
+    over (a chunked run is the single run bit for bit)."""
+    h = spec.h
+    n = run_ticks(h, spec.duration if duration is None else duration, True)
+    ctrl = spec.controller
+    gp, cp = ctrl.record()
+    x = np.zeros(5)
+    x[0] = spec.initial_angle
+    s = ctrl.init(spec.initial_angle)
+    out = np.zeros((n, NC))
+    fkind = KINDS.index(spec.friction_kind)
+    fp = resolve_drift(spec.friction.record(), n * h)
+    pp = spec.plant_params.record()
+    sup_row, wx, phase = no_swing()
+    thesis = isinstance(spec.plant_params, PlantParams)
+    events = sorted((round(t / h), i, c) for i, (t, c) in enumerate(switches))
+    n_gain, n_comp = (round(t / h) for t in transition)
+    arm_dot_m = COLUMNS.index("arm_dot_m")
+    done, status, mem, x0 = 0, 0, 0.0, 0.0
+    trans = None
+    while done < n and status == 0:
+        while events and events[0][0] <= done:
+            new = events.pop(0)[2]
+            new_gp, new_cp = new.record()
+            a, b = ctrl.design.spec, new.design.spec
+            path = (gain_path(a, b, spec.plant_params)
+                    if thesis and isinstance(a, DesignSpec) and isinstance(b, DesignSpec)
+                    and a != b else None)
+            v = out[done - 1, arm_dot_m] if done else 0.0
+            trans = switch_controller(s, gp, cp, new_gp, new_cp, v, n_gain, n_comp, path)
+            gp, cp, ctrl = trans.current(), new_cp, new
+        if trans is not None and not trans.done:
+            gp, m = trans.advance(), 1
+        else:
+            m = min(n, events[0][0] if events else n) - done
+        d, status, mem, x0 = run_loop(x, mem, m, spec.plant.code, spec.substeps, spec.ratio, pp,
+                                      fkind, fp, gp, cp, s, spec.sensor, done, x0,
+                                      spec.fall_angle, out[done:done + m], True, False, sup_row,
+                                      wx, phase)
+        done += d
+    data = out[:done]
     return Trajectory(np.arange(len(data)), h, data, STATUS[status], spec.source,
                       noise=float(spec.sensor.noise))

@@ -367,6 +367,7 @@ class RealtimeController:
             new = current.apply(changes)
             if not confirm and not new.loop_check.ok:
                 raise current.refusal(new)
+            new.l_path  # noqa: B018 - the gain transition's path, designed here, not in a tick
             self._params = new
             fut: Future = Future()
             loop = self._loop
