@@ -464,12 +464,12 @@ def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
 
 
 def test_run_s_signal_handling_before_and_after_the_run(tmp_path):
-    from frictionlab.cli.run import _RunSignals
+    from frictionlab.cli.run import RunSignals
     from frictionlab.realtime import FakeClock, RealtimeController
     from frictionlab.realtime.osrt import STOP_SIGNALS
 
     before = {sig: signal.getsignal(sig) for sig in (*STOP_SIGNALS, signal.SIGXFSZ)}
-    with _RunSignals() as sigs:
+    with RunSignals() as sigs:
         assert signal.getsignal(signal.SIGXFSZ) == signal.SIG_IGN
         assert all(signal.getsignal(sig) == sigs._stop for sig in STOP_SIGNALS)
         signal.raise_signal(signal.SIGHUP)  # no controller yet: remembered

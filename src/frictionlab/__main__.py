@@ -14,11 +14,13 @@ def main() -> int:
     argv = sys.argv[1:]
     interrupted: tuple = ()  # catches nothing
     if argv[:1] == ["run"]:
+        # start-up: the stop handler before anything slow is imported (docs/realtime.md)
         from . import startsignals
 
         startsignals.install()
         interrupted = (startsignals.Interrupted,)
     try:
+        # start-up: the command line (and what it imports) after the stop handler
         from .cli import main as cli_main
 
         return cli_main(argv)

@@ -356,7 +356,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
     from ..io.logs import read_log
     from ..realtime import RigError
     from ..studies.identification.onrig import run_on_rig
-    from .run import _RunSignals, interface_stats
+    from .run import RunSignals, interface_stats
 
     safety = safety_from_args(args)  # a refused value exits 2 before the announcement
     err = sys.stderr
@@ -376,7 +376,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
             last[0] = e.phase
             print(f"  {100 * e.progress:3.0f} %  {e.phase}", file=err)
 
-    with _RunSignals() as signals, progress_bar(exp.name, tty and clock is None) as upd:
+    with RunSignals() as signals, progress_bar(exp.name, tty and clock is None) as upd:
         def on_start(ctl):
             signals.ctl = ctl
 
@@ -447,10 +447,10 @@ def cmd_experiment(args) -> int:
         from ..studies.identification.onrig import make_rig_experiment
 
         if args.backend not in (None, "sim"):
-            from ..realtime.api import _check_backend
+            from ..realtime.api import check_backend
 
             try:
-                _check_backend(args.backend)
+                check_backend(args.backend)
             except ValueError as exc:
                 raise UsageError(error_message(exc)) from None
         if args.backend is None and args.save and not args.save.endswith(".csv"):

@@ -199,7 +199,7 @@ def _cmd_run(args) -> int:
                               compensation_transition=args.compensation_transition)
     check_output_dir(args.log_dir, "--log-dir")
     flush_notes(args)
-    with _RunSignals() as signals:
+    with RunSignals() as signals:
         if signals.received is not None:  # came during the start-up: nothing ran
             return _report(not_started(signals.received), args)
         ctl = RealtimeController(cfg, args.backend, log_dir=args.log_dir,
@@ -253,7 +253,7 @@ def start_console(ctl, host: str, port: int, token: str | None = None) -> bool:
     return True
 
 
-class _RunSignals:
+class RunSignals:
     """The signals of ``frictionlab run``, from the controller's creation to the output.
 
     SIGINT, SIGTERM, SIGHUP and SIGQUIT (:data:`~.realtime.osrt.STOP_SIGNALS`)

@@ -46,7 +46,7 @@ of their wiggles passes 3 of those).
 
 This is the one definition: ``simulate``, ``features`` (run logs), sweeps,
 fits, ``reproduce``, ``predict`` and the console all reduce a run through
-:func:`_features_kernel` (the batch evaluator calls it compiled, the others
+:func:`features_kernel` (the batch evaluator calls it compiled, the others
 through :func:`features`).
 
 ``status`` is ``"fell"`` when the run fell; ``"settled"`` when the angle's
@@ -129,7 +129,7 @@ def _crossings_kernel(t, y, hyst):
     return up_t[:nu], up_i[:nu], dn_t[:nd], dn_i[:nd]
 
 
-def _crossings(t: np.ndarray, y: np.ndarray, hyst: float):
+def crossings(t: np.ndarray, y: np.ndarray, hyst: float):
     """Interpolated times and sample indices of upward / downward zero crossings.
 
     A crossing counts once the signal has moved from beyond ``-hyst`` to beyond
@@ -411,16 +411,16 @@ SETTLE_TOL = 2e-3
 #: Default moving-average length (samples) for noisy measurements.
 SMOOTH = 9
 
-#: Status codes of :func:`_features_kernel`.
+#: Status codes of :func:`features_kernel`.
 ST_LIMIT_CYCLE, ST_SETTLED, ST_FELL = 0, 1, 2
 STATUS_CODES = ("limit_cycle", "settled", "fell")
-#: Value order of :func:`_features_kernel`'s result (nan = None).
+#: Value order of :func:`features_kernel`'s result (nan = None).
 KERNEL_VALUES = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity",
                  "peak_to_peak", "neg_peak1", "neg_peak2", "neg_valley")
 
 
 @jit
-def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, smooth):
+def features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, smooth):
     """The features of :func:`features`, compiled (also run by the batch evaluator).
 
     ``u`` and ``v`` of length 0 stand for "not given".  Returns ``(status code,
@@ -516,7 +516,7 @@ def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, 
 
 
 def _from_kernel(code: int, vals: np.ndarray, cycles: int) -> LimitCycleFeatures:
-    """:class:`LimitCycleFeatures` from :func:`_features_kernel`'s result."""
+    """:class:`LimitCycleFeatures` from :func:`features_kernel`'s result."""
     f = [None if math.isnan(x) else float(x) for x in vals]
     return LimitCycleFeatures(STATUS_CODES[code], *f[:7], *f[7:], int(cycles))
 
@@ -576,7 +576,7 @@ def features(
     for name, a in (("u", us), ("arm_velocity", vs)):
         if a is not none and a.shape != t.shape:
             raise ValueError(f"{name} must have the length of t ({n}), got {a.shape}")
-    return _from_kernel(*_features_kernel(t, y, us, vs, float(span), bool(fell), float(noise),
+    return _from_kernel(*features_kernel(t, y, us, vs, float(span), bool(fell), float(noise),
                                           float(rel_prominence), float(settle_tol),
                                           int(smooth)))
 

@@ -11,7 +11,7 @@ compiled driver, which for every set runs the same compiled closed loop as
 (:func:`~frictionlab.model.closedloop.run_loop`:
 sensor model, controller step, plant tick) and the same compiled feature
 extraction as :func:`frictionlab.model.limit_cycles.features`
-(:func:`~frictionlab.model.limit_cycles._features_kernel`), with no Python per run.
+(:func:`~frictionlab.model.limit_cycles.features_kernel`), with no Python per run.
 The features are those of :func:`frictionlab.runs.run_features`, bit
 for bit (noise included: :func:`frictionlab.model.sensor.measure`'s noise is a
 function of the seed and the sample number, with no generator state to share
@@ -47,7 +47,7 @@ from ..model.limit_cycles import (
     SETTLE_TOL,
     SMOOTH,
     STATUS_CODES,
-    _features_kernel,
+    features_kernel,
 )
 from ..model.plants import THESIS
 from ..model.sensor import SensorParams, sensor_record
@@ -139,7 +139,7 @@ def _one(i, x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
         lo -= 1
     lo = min(lo, done - 3)
     t = np.arange(lo, done) * hi
-    code, fv, cyc = _features_kernel(t, sig[0, lo:done], sig[1, lo:done], sig[2, lo:done], span,
+    code, fv, cyc = features_kernel(t, sig[0, lo:done], sig[1, lo:done], sig[2, lo:done], span,
                                      fell, sp.noise, REL_PROMINENCE, SETTLE_TOL, SMOOTH)
     codes[i] = code
     vals[i, :] = fv

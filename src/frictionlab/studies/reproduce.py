@@ -50,8 +50,12 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from .. import runs
 from ..config import Config, build_config
-from ..model.limit_cycles import FEATURES
+from ..model.design import PRESETS
+from ..model.limit_cycles import FEATURES, comparable, trajectory_features
+from ..plotting import plot_cycle_figure, plot_rig_rows
+from . import sweep
 from .reference import SIMULATED_PERIODS, TABLE1, TABLE2, TABLE3, TABLE_COLUMNS
 
 __all__ = [
@@ -226,10 +230,8 @@ def reduce_with_trace(cfg: Config, duration: float | None,
     The features of :func:`frictionlab.studies.sweep.reduce_features`, plus ``trace``:
     :data:`TRACE` over the last six periods (at least 5 s).
     """
-    from ..model.limit_cycles import trajectory_features
-    from ..runs import simulate_config
 
-    traj = simulate_config(cfg, duration)
+    traj = runs.simulate_config(cfg, duration)
     feats = trajectory_features(traj, window)
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
     out["status"] = feats.status
@@ -300,7 +302,6 @@ def run(workers: int | None = None, dask: str | None = None,
     -------
     Results
     """
-    from .sweep import evaluate
 
     groups, total = _jobs()
     if workers is None and dask is None:
@@ -314,7 +315,7 @@ def run(workers: int | None = None, dask: str | None = None,
             if progress is not None:
                 progress(base + n, total)
 
-        results[(setting, trace)] = evaluate(
+        results[(setting, trace)] = sweep.evaluate(
             setting.config(), points, duration=DURATION, workers=workers, dask=dask,
             progress=step, reduce=reduce_with_trace if trace else None)
         done += len(points)
@@ -364,7 +365,6 @@ def table1(results: Results) -> dict[str, Any]:
     :func:`frictionlab.model.limit_cycles.comparable`; a run without a limit
     cycle counts as 100 % off), ``set``, and per row its features and relative
     errors (``rows``)."""
-    from ..model.limit_cycles import comparable
 
     errs: list[float] = []
     rows = {}
@@ -543,7 +543,6 @@ def _f(v: float | None) -> str:
 
 
 def _design_name(cfg: Config) -> str:
-    from ..model.design import PRESETS
 
     for name, spec in PRESETS.items():
         if dataclasses.replace(spec, omega0=cfg.design.omega0) == cfg.design:
@@ -589,6 +588,7 @@ def _table_md(table: Table, rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 
 def _report_md(results: Results, seconds: float, figures: Sequence[str]) -> str:
+    # the package's root, which no layer imports at module level (it names them all)
     from .. import __version__
 
     lines = [
@@ -678,7 +678,6 @@ def write_report(results: Results, out: str, seconds: float,
     list of str
         The figure paths, in order.
     """
-    from ..plotting import plot_cycle_figure
 
     jobs = sorted(((case, row, stem, kind)
                    for case, row in results.cases if case.figures and "trace" in row
@@ -699,7 +698,6 @@ def write_report(results: Results, out: str, seconds: float,
     t1_rows = {rig: row for rig in ("fast", "slow")
                for case, row in results.cases if case.name == f"table1_{rig}"}
     if all("trace" in row for row in t1_rows.values()):
-        from ..plotting import plot_rig_rows
 
         path = os.path.join(out, "table1.png")
         plot_rig_rows({rig: row["trace"] for rig, row in t1_rows.items()},

@@ -89,6 +89,7 @@ from ...config import (
 )
 from ...io.notes import Note
 from ...model.limit_cycles import FEATURES, comparable
+from ..sweep import auto_workers, evaluate
 from .measured import (
     DEFAULT_BOUNDS,
     PENALTY,
@@ -132,7 +133,6 @@ Evaluator = Callable[..., list[dict]]
 
 
 def _sweep_evaluate(base, points, **kw) -> list[dict]:
-    from ..sweep import evaluate
 
     return evaluate(base, points, **kw)
 
@@ -657,7 +657,6 @@ def fit_limit_cycle(
         raise ConfigError(f"rel_step must be in [1e-5, 0.2], got {rel_step}")
     prob = LimitCycleProblem(experiments, keys, **problem)
     if prob.workers is None and prob.dask is None:
-        from ..sweep import auto_workers
 
         prob.workers = auto_workers(prob.base, _max_runs(prob, maxiter, popsize), prob.duration)
     search = prob
