@@ -337,11 +337,10 @@ def simulate(
         velocity and ramped in, new gains moved through the designs in between)
         over ``transition`` = (gain, compensation) seconds (the loop's
         ``safety.gain_transition`` and ``safety.compensation_transition``).
-        A run with switches is recorded and reports no progress.
+        A run with switches is recorded.
     """
-    if switches:
-        return _simulate_switched(spec, duration, switches, transition)
     h = spec.h
+    record = record or bool(switches)
     n = run_ticks(h, spec.duration if duration is None else duration, record)
     ctrl = spec.controller
     gp, cp = ctrl.record()
@@ -355,47 +354,16 @@ def simulate(
     pp = spec.plant_params.record()
     # the swing-up supervisor's arguments, unused here (run_loop's swing is off)
     sup_row, wx, phase = no_swing()
-    # chunks of whole ticks when progress is reported; the noise of sample n is a
-    # function of (seed, n), and the arm's zero x0 is carried over, so a chunked
-    # run is the unchunked one bit for bit
-    chunk = n if progress is None else max(1, n // 50)
-    done, status, mem, x0 = 0, 0, 0.0, 0.0
-    while done < n and status == 0:
-        m = min(chunk, n - done)
-        view = out[done:done + m] if record else out
-        d, status, mem, x0 = run_loop(x, mem, m, spec.plant.code, spec.substeps, spec.ratio, pp,
-                                      fkind, fp, gp, cp, s, spec.sensor, done, x0,
-                                      spec.fall_angle, view, record, False, sup_row, wx, phase)
-        done += d
-        if progress is not None:
-            progress(done / n)
-    data = out[:done] if record else out[:0]
-    return Trajectory(np.arange(len(data)), h, data, STATUS[status], spec.source,
-                      noise=float(spec.sensor.noise))
-
-
-def _simulate_switched(spec: LoopSpec, duration: float | None, switches, transition
-                       ) -> Trajectory:
-    """:func:`simulate` with switches: :func:`run_loop` in chunks between them, and tick
-    by tick through each switch's transition (:class:`frictionlab.model.switching.Transition`);
-    the plant, its friction memory, the sensor's arm zero and the controller state carry
-    over (a chunked run is the single run bit for bit)."""
-    h = spec.h
-    n = run_ticks(h, spec.duration if duration is None else duration, True)
-    ctrl = spec.controller
-    gp, cp = ctrl.record()
-    x = np.zeros(5)
-    x[0] = spec.initial_angle
-    s = ctrl.init(spec.initial_angle)
-    out = np.zeros((n, NC))
-    fkind = KINDS.index(spec.friction_kind)
-    fp = resolve_drift(spec.friction.record(), n * h)
-    pp = spec.plant_params.record()
-    sup_row, wx, phase = no_swing()
     thesis = isinstance(spec.plant_params, PlantParams)
     events = sorted((round(t / h), i, c) for i, (t, c) in enumerate(switches))
     n_gain, n_comp = (round(t / h) for t in transition)
     arm_dot_m = COLUMNS.index("arm_dot_m")
+    # run_loop in chunks of whole ticks: up to each switch, tick by tick through
+    # its transition (:class:`frictionlab.model.switching.Transition`), and in 50
+    # chunks when progress is reported.  The plant, its friction memory, the
+    # sensor's arm zero and the controller state carry over, and the noise of
+    # sample n is a function of (seed, n): a chunked run is the single run bit for bit
+    chunk = n if progress is None else max(1, n // 50)
     done, status, mem, x0 = 0, 0, 0.0, 0.0
     trans = None
     while done < n and status == 0:
@@ -412,12 +380,14 @@ def _simulate_switched(spec: LoopSpec, duration: float | None, switches, transit
         if trans is not None and not trans.done:
             gp, m = trans.advance(), 1
         else:
-            m = min(n, events[0][0] if events else n) - done
+            m = min(done + chunk, events[0][0] if events else n, n) - done
+        view = out[done:done + m] if record else out
         d, status, mem, x0 = run_loop(x, mem, m, spec.plant.code, spec.substeps, spec.ratio, pp,
                                       fkind, fp, gp, cp, s, spec.sensor, done, x0,
-                                      spec.fall_angle, out[done:done + m], True, False, sup_row,
-                                      wx, phase)
+                                      spec.fall_angle, view, record, False, sup_row, wx, phase)
         done += d
-    data = out[:done]
+        if progress is not None:
+            progress(done / n)
+    data = out[:done] if record else out[:0]
     return Trajectory(np.arange(len(data)), h, data, STATUS[status], spec.source,
                       noise=float(spec.sensor.noise))
