@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
+from frictionlab.io.logs import read_log
 from frictionlab.model.limit_cycles import features
 from frictionlab.realtime import FakeClock, RealtimeController
-from frictionlab.realtime.datalog import read_csv_log
 from frictionlab.realtime.samples import CHANGED, STOP
 from frictionlab.runs import simulate_config
 from frictionlab.studies.compensation import COMPENSATORS
@@ -42,7 +42,7 @@ def run_logged(cfg, duration, log_dir, changes_at=None):
     stats = ctl.run()
     assert stats["stop_reason"] == "duration"
     assert stats["ticks"] == round(duration / H) and stats["missed"] == 0
-    log = read_csv_log(stats["log"])
+    log = read_log(stats["log"])
     assert int(log["flags"][-1]) & STOP
     return {k: v[:-1] for k, v in log.items()}
 
@@ -197,5 +197,5 @@ def test_a_glitched_velocity_reading_does_not_move_the_adapted_levels(tmp_path):
     assert at[0] == A_BAD and after[0] in (A_BAD, A_PRESLIDING, A_STUCK)
     np.testing.assert_array_equal(at[1:], before[1:])
     np.testing.assert_array_equal(after[1:], before[1:])
-    log = read_csv_log(stats["log"])
+    log = read_log(stats["log"])
     assert np.all(np.isfinite(log["friction_hat"][:-1]))

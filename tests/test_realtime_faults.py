@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
+from frictionlab.io.logs import read_log
 from frictionlab.realtime import FakeClock, RealtimeController, RigError, Safety, datalog
 from frictionlab.realtime import loop as loop_mod
 from frictionlab.realtime import protocol as P
-from frictionlab.realtime.datalog import LogWriter, read_csv_log, read_sidecar
+from frictionlab.realtime.datalog import LogWriter, read_sidecar
 from frictionlab.realtime.rigs import FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
 from frictionlab.realtime.samples import STOP, Sample
@@ -316,7 +317,7 @@ def test_a_pause_longer_than_max_pause_stops_before_acting(cfg, tmp_path, pause_
     cmds = commands(tx)
     assert [c for c in cmds if c[0] < k][-1][0] == 299
     assert {c for c in cmds if c[0] >= k} == {(k, 0.0)}
-    log = read_csv_log(stats["log_files"]["csv"])
+    log = read_log(stats["log_files"]["csv"], partial=True)
     assert int(log["tick"][-2]) == 299 and int(log["flags"][-1]) & STOP
 
 
@@ -466,7 +467,7 @@ def test_a_failing_write_cuts_the_files_to_complete_rows_and_reports_once(tmp_pa
     csv = (tmp_path / "run1.csv").read_bytes()
     assert dat.endswith(b"\n") and csv.endswith(b"\n")  # never cut mid-line
     assert dat.count(b"\n") == w.written == csv.count(b"\n") - 1  # the same rows in both
-    np.testing.assert_array_equal(read_csv_log(tmp_path / "run1.csv")["tick"],
+    np.testing.assert_array_equal(read_log(tmp_path / "run1.csv", partial=True)["tick"],
                                   np.arange(w.written))
     # the disk is full, yet the final sidecar was written, from the space set aside
     assert json.loads((tmp_path / "run1.json").read_text())["stop_reason"] == "log_failed"
@@ -485,7 +486,7 @@ def test_a_full_disk_stops_the_run_with_the_motor_at_zero(cfg, tmp_path, monkeyp
     assert "No space left on device" in stats["stop_detail"]
     assert stats["stop_tick"] < 12_000
     assert_zero_at_stop(tx, stats, emu)
-    log = read_csv_log(stats["log_files"]["csv"])
+    log = read_log(stats["log_files"]["csv"], partial=True)
     assert 0 < len(log["tick"]) == stats["log_written"] <= stats["stop_tick"]
     meta = read_sidecar(stats["log_files"]["json"])
     assert meta["state"] == "finished" and meta["stop_reason"] == "log_failed"
@@ -532,7 +533,7 @@ def test_nothing_existing_is_overwritten_by_a_run_or_a_recording(cfg, tmp_path):
     second = w.record_stop()
     w.close()
     assert second["csv"].endswith("run3-save3.csv") and second["rows"] == 3
-    np.testing.assert_array_equal(read_csv_log(tmp_path / "run3-save2.csv")["tick"],
+    np.testing.assert_array_equal(read_log(tmp_path / "run3-save2.csv", partial=True)["tick"],
                                   np.arange(5))
     # and a rename onto an existing name is refused
     with pytest.raises(FileExistsError):

@@ -262,8 +262,8 @@ def test_cli_simulate_swing_up_json():
 
 @pytest.mark.slow
 def test_loop_runs_the_simulators_swing_up_tick_for_tick(tmp_path):
+    from frictionlab.io.logs import read_log
     from frictionlab.realtime import FakeClock, RealtimeController
-    from frictionlab.realtime.datalog import read_csv_log
     from frictionlab.realtime.samples import CAUGHT_FLAG, STOP, SWINGING_FLAG
 
     cfg = build_config("fast", "classical", sets=[HANGING])
@@ -275,7 +275,7 @@ def test_loop_runs_the_simulators_swing_up_tick_for_tick(tmp_path):
     res = simulate_swingup(cfg, 6.0)
     assert st["swing_up"]["phase"] == "balancing"
     assert st["swing_up"]["swing_up_time"] == pytest.approx(res.swing_up_time)
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"])
     assert int(log["flags"][-1]) & STOP
     u = log["u"][:-1]
     assert len(u) == 1200
@@ -315,8 +315,8 @@ def test_a_design_change_mid_swing_reaches_the_swing_up(tmp_path):
 @pytest.mark.parametrize("limit,reason", [("swingup.time_limit=1", "not_caught"),
                                           ("swingup.arm_limit=0.5", "arm_travel")])
 def test_loop_swing_up_stops_with_its_reason_and_zeroes_the_motor(tmp_path, limit, reason):
+    from frictionlab.io.logs import read_log
     from frictionlab.realtime import FakeClock, RealtimeController
-    from frictionlab.realtime.datalog import read_csv_log
 
     sets = [HANGING, limit]
     if reason == "not_caught":
@@ -327,7 +327,7 @@ def test_loop_swing_up_stops_with_its_reason_and_zeroes_the_motor(tmp_path, limi
                              swing_up=True)
     st = ctl.run()
     assert st["stop_reason"] == reason
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"])
     assert log["u_da"][-1] == 0.0
     assert st["swing_up"]["swing_up_time"] is None
 
@@ -360,7 +360,7 @@ def test_run_headless_swing_up_against_rig_sim_started_hanging_over_udp(tmp_path
     import subprocess
     import sys
 
-    from frictionlab.realtime.datalog import read_csv_log
+    from frictionlab.io.logs import read_log
 
     cli = [sys.executable, "-m", "frictionlab"]
     rig = subprocess.Popen([*cli, "rig-sim", "--port", "0", "--hanging", "--json",
@@ -389,7 +389,7 @@ def test_run_headless_swing_up_against_rig_sim_started_hanging_over_udp(tmp_path
     assert st["stop_reason"] == "duration"
     assert st["swing_up"]["phase"] == "balancing"
     assert 0 < st["swing_up"]["swing_up_time"] < 8
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"])
     ok = np.isfinite(log["theta_m"])
     theta = np.array([wrap_angle(v) for v in log["theta_m"][ok]])
     assert abs(theta[0]) > 3.0  # started hanging

@@ -63,8 +63,8 @@ def test_every_swing_up_command_is_within_the_limit():
 
 @pytest.mark.slow
 def test_the_loop_bounds_its_commands_and_keeps_the_dac_bound(tmp_path):
+    from frictionlab.io.logs import read_log
     from frictionlab.realtime import FakeClock, RealtimeController
-    from frictionlab.realtime.datalog import read_csv_log
 
     cfg = build_config("fast", "classical", sets=[HANGING, ("controller.u_max", 6.0)])
     ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), duration=2.0,
@@ -72,7 +72,7 @@ def test_the_loop_bounds_its_commands_and_keeps_the_dac_bound(tmp_path):
                              swing_up=True)
     st = ctl.run()
     assert st["stop_reason"] == "duration"
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"], partial=True)
     assert np.abs(log["u"]).max() == pytest.approx(6.0)  # swinging at the limit
     assert np.abs(log["u_da"]).max() <= 6.0 * abs(cfg.rig.u_scale) + 1e-9 < 1.0
 
