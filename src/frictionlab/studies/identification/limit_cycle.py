@@ -89,7 +89,7 @@ from ...config import (
 )
 from ...io.notes import Note
 from ...model.limit_cycles import FEATURES, comparable
-from ..sweep import auto_workers, evaluate
+from .. import sweep
 from .measured import (
     DEFAULT_BOUNDS,
     PENALTY,
@@ -134,7 +134,7 @@ Evaluator = Callable[..., list[dict]]
 
 def _sweep_evaluate(base, points, **kw) -> list[dict]:
 
-    return evaluate(base, points, **kw)
+    return sweep.evaluate(base, points, **kw)
 
 
 class LimitCycleProblem:
@@ -157,7 +157,7 @@ class LimitCycleProblem:
     duration, window : float
         Simulated time per run and the analysed final window (s).
     evaluate : callable, optional
-        ``evaluate(base, points, duration=, window=, workers=, dask=)`` with
+        ``sweep.evaluate(base, points, duration=, window=, workers=, dask=)`` with
         the contract of :func:`frictionlab.studies.sweep.evaluate` (the default).
     workers, dask
         Passed to ``evaluate``.
@@ -658,7 +658,8 @@ def fit_limit_cycle(
     prob = LimitCycleProblem(experiments, keys, **problem)
     if prob.workers is None and prob.dask is None:
 
-        prob.workers = auto_workers(prob.base, _max_runs(prob, maxiter, popsize), prob.duration)
+        prob.workers = sweep.auto_workers(prob.base, _max_runs(prob, maxiter, popsize),
+                                          prob.duration)
     search = prob
     s_duration, s_window = search_settings(prob.duration, prob.window, search_duration,
                                            search_window)
