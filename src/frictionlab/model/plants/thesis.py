@@ -349,9 +349,11 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     dt = h / substeps
     # the actuator (App. B.4): the acceleration the motor gives for k_u u, at the
     # substep's arm velocity when it has a back-EMF
-    act_c, act_b = p.act_curvature, p.act_back_emf
-    fe = actuator_accel(act_c, 0.0, ku * u, 0.0, arm_len)
-    fe_cmd = fe
+    fe_cmd = actuator_accel(p.act_curvature, 0.0, ku * u, 0.0, arm_len)
+    # its back-EMF, b L_1 times the arm velocity, taken off at each substep (no
+    # branch in the substep loop: with b = 0 the product is 0 and fe is fe_cmd)
+    emf = p.act_back_emf * arm_len
+    fe = fe_cmd
     half_dt_over_l = 0.5 * dt / arm_len
     f_sum = 0.0
     th, thd, arm, ad, z = x[0], x[1], x[2], x[3], x[4]
@@ -372,8 +374,7 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
             th_acc, _ = accelerations_sc(sn, cs, thd, ad, fe - mem, omega0, zeta, g, arm_len)
             tau = 0.5 * dt
         for _ in range(m):
-            if act_b != 0.0:
-                fe = actuator_accel(0.0, act_b, fe_cmd, ad, arm_len)
+            fe = fe_cmd - emf * ad
             if fkind == LUGRE:
                 # the bristle sees the velocity at the substep's midpoint, predicted
                 # with the last friction: second order for this smooth model
