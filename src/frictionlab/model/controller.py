@@ -78,6 +78,7 @@ from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
 from .plants.thesis import PlantParams
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
+from .rig import RigScaling
 
 __all__ = [
     "ADAPTIVE",
@@ -538,7 +539,8 @@ class Controller:
     error_signal : str
         The LuGre observer's error e (one of :data:`ERROR_SIGNALS`).
     u_max : float
-        Saturation of u (the DAC range, App. B: 1/0.022 m/s^2).
+        Saturation of u (default the DAC's range with the default ``rig.u_scale``,
+        App. B: 1/0.022 m/s^2).
     feed_net : bool
         Feed the observers ``u - F_hat`` (see the module docstring).
     """
@@ -548,7 +550,7 @@ class Controller:
     compensation_params: FrictionParams = dataclasses.field(
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
     error_signal: str = DEFAULT_ERROR_SIGNAL
-    u_max: float = 1.0 / 0.022
+    u_max: float = dataclasses.field(default_factory=lambda: RigScaling().u_max)
     feed_net: bool = True
 
     def __post_init__(self) -> None:
