@@ -97,3 +97,25 @@ def test_simulated_run_stops_at_the_experiments_limit():
     assert "no breakaway" in run.detail
     u_max = 0.05 / abs(cfg.rig.u_scale)
     assert np.max(np.abs(run.commands)) <= u_max
+
+
+def test_stiction_progress_moves_from_its_first_level():
+    # the operator sees the staircase advance (it used to read 0 % until the first
+    # breakaway, 30 s into an 80 s experiment): an arm that breaks away at 2.0 m/s^2
+    from frictionlab.realtime.experiment import ExperimentEnd, make_experiment
+
+    exp = make_experiment("stiction", 0.005)
+    seen, t, v = [], 0.0, 0.0
+    try:
+        for _ in range(200_000):
+            u = exp.step(t, 3.14, 0.0, v, 0.0, 0.0, 0.0)
+            v = 0.5 * (1 if u > 0 else -1) if abs(u) > 2.0 else 0.0  # sticks below 2.0
+            seen.append((exp.phase, exp.progress))
+            t += 0.005
+    except ExperimentEnd:
+        pass
+    first = [p for ph, p in seen if ph.startswith("staircase, positive")]
+    assert 0.0 < first[-1] < 1.0 and first[0] < first[-1]
+    progress = [p for _, p in seen]
+    assert all(b >= a for a, b in zip(progress, progress[1:], strict=False))
+    assert progress[-1] <= 1.0
