@@ -9,6 +9,7 @@ converters and measurement noise both read the same values, so the command seque
 must be equal, not close.  Short schedules keep each pair to a few simulated seconds.
 """
 
+import itertools
 import math
 
 import numpy as np
@@ -117,5 +118,5 @@ def test_stiction_progress_moves_from_its_first_level():
     first = [p for ph, p in seen if ph.startswith("staircase, positive")]
     assert 0.0 < first[-1] < 1.0 and first[0] < first[-1]
     progress = [p for _, p in seen]
-    assert all(b >= a for a, b in zip(progress, progress[1:], strict=False))
+    assert all(b >= a for a, b in itertools.pairwise(progress))
     assert progress[-1] <= 1.0
