@@ -52,9 +52,9 @@ def test_a_motor_plant_takes_its_preset_friction_in_volts_and_scaled_compensator
 def test_plant_keys_follow_the_plant_and_a_wrong_plants_key_is_refused():
     cfg = build_config(plant="qube2", sets=[("plant.resistance", "7.5")])
     assert cfg.plant.resistance == 7.5 and cfg.get("plant.resistance") == 7.5
-    with pytest.raises(ConfigError, match="plant.omega0"):
+    with pytest.raises(ConfigError, match=r"plant\.omega0"):
         build_config(plant="qube2", sets=[("plant.omega0", "7")])
-    with pytest.raises(ConfigError, match="plant.resistance"):
+    with pytest.raises(ConfigError, match=r"plant\.resistance"):
         build_config(sets=[("plant.resistance", "7")])
     with pytest.raises(ConfigError, match="plant must be one of"):
         build_config(plant="qube9")
