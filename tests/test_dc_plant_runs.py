@@ -237,3 +237,41 @@ def test_a_loop_spec_carries_the_plant():
     spec = loop_spec(build_config(plant="qube3"))
     assert spec.plant is FURUTA_DC and spec.plant_params == QUBE3
     assert spec.controller.u_max == 10.0
+
+
+def test_sweep_runs_the_motor_plant_as_simulate_does(cli, tmp_path):
+    from frictionlab.model.limit_cycles import trajectory_features
+
+    out = tmp_path / "dc.csv"
+    res = cli("sweep", "--plant", "qube2", "--vary", "friction.coulomb=0.1,0.2",
+              "--vary", "plant.voltage_limit=8", "--duration", "6", "--workers", "1",
+              "--out", str(out), "--no-progress")
+    assert res.returncode == 0, res.stderr
+    import csv
+
+    rows = list(csv.DictReader(out.open()))
+    assert [float(r["friction.coulomb"]) for r in rows] == [0.1, 0.2]
+    for r in rows:
+        cfg = build_config(plant="qube2", sets=[("friction.coulomb", r["friction.coulomb"]),
+                                                ("plant.voltage_limit", "8")])
+        f = trajectory_features(simulate_config(cfg, 6.0))
+        assert float(r["period"]) == pytest.approx(f.period, rel=1e-9)
+        assert float(r["max_u"]) == pytest.approx(f.max_u, rel=1e-9) and f.max_u <= 8.0
+
+
+@pytest.mark.slow
+def test_predict_finds_the_qube2_limit_cycle(cli):
+    res = cli("predict", "--plant", "qube2", "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    orbit = out["periodic_orbit"]
+    assert orbit["found"] and orbit["stable"]
+    sim = trajectory_features_of(build_config(plant="qube2"))
+    assert orbit["features"]["period"] == pytest.approx(sim.period, rel=0.05)
+    assert out["describing_function"]["period"] > 0
+
+
+def trajectory_features_of(cfg):
+    from frictionlab.model.limit_cycles import trajectory_features
+
+    return trajectory_features(simulate_config(cfg, 40.0))
