@@ -275,3 +275,24 @@ def trajectory_features_of(cfg):
     from frictionlab.model.limit_cycles import trajectory_features
 
     return trajectory_features(simulate_config(cfg, 40.0))
+
+
+@pytest.mark.slow  # imports python-control
+def test_to_control_and_linearize_take_the_motor_plant():
+    import control
+
+    import frictionlab as fl
+    from frictionlab.model.plants.furuta_dc import linearization
+
+    cfg = build_config(plant="qube2", friction="none")
+    ss = fl.linearize(cfg)
+    A, B = linearization(cfg.plant)
+    np.testing.assert_allclose(ss.A, A, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(ss.B, B, rtol=1e-6, atol=1e-6)
+    # the classical law holds a resting arm against a voltage below stiction
+    sys = fl.to_control(build_config(plant="qube2"))
+    dx = sys.dynamics(0.0, np.zeros(4), [0.1])
+    assert dx[3] == pytest.approx(0.0, abs=1e-12)
+    moving = sys.dynamics(0.0, np.zeros(4), [1.0])
+    assert moving[3] > 0
+    assert isinstance(sys, control.NonlinearIOSystem)
