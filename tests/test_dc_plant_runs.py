@@ -296,3 +296,26 @@ def test_to_control_and_linearize_take_the_motor_plant():
     moving = sys.dynamics(0.0, np.zeros(4), [1.0])
     assert moving[3] > 0
     assert isinstance(sys, control.NonlinearIOSystem)
+
+
+def test_the_qube_servo_2_gymnasium_env_steps_the_motor_plant_in_volts():
+    import gymnasium
+
+    import frictionlab.gym  # noqa: F401  (registers the ids)
+
+    env = gymnasium.make("frictionlab/QubeServo2-v0")
+    obs, _ = env.reset(seed=1, options={"initial_angle": 0.05})
+    assert env.action_space.high[0] == 10.0
+    cfg = build_config(plant="qube2")
+    spec = loop_spec(cfg)
+    from frictionlab.model.simulation import SimulatedPlant
+
+    plant = SimulatedPlant(spec)
+    st = plant.init(0.05)
+    for u in (3.0, -2.0, 20.0):
+        obs, _r, term, _trunc, info = env.step(np.array([u]))
+        st = plant.step(st, min(u, 10.0))
+        assert info["theta"] == pytest.approx(st.x[0], abs=1e-12)
+        assert info["u"] == min(u, 10.0)
+    with pytest.raises(ValueError, match="converters"):
+        gymnasium.make("frictionlab/QubeServo2-v0", observation="raw")
