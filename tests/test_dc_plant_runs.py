@@ -319,3 +319,20 @@ def test_the_qube_servo_2_gymnasium_env_steps_the_motor_plant_in_volts():
         assert info["u"] == min(u, 10.0)
     with pytest.raises(ValueError, match="converters"):
         gymnasium.make("frictionlab/QubeServo2-v0", observation="raw")
+
+
+@pytest.mark.slow
+def test_identify_limit_cycle_fits_the_motor_plants_coulomb_level_in_volts(cli, tmp_path):
+    from frictionlab.model.limit_cycles import trajectory_features
+
+    f = trajectory_features(simulate_config(build_config(plant="qube2"), 10.0), 5.0)
+    measured = tmp_path / "m.json"
+    measured.write_text(json.dumps({"experiments": [{"design": "fast", "features": {
+        "peak1": f.peak1, "peak2": f.peak2, "valley": f.valley, "period": f.period}}]}))
+    res = cli("identify", "limit-cycle", "--plant", "qube2", "--measured", str(measured),
+              "--fit", "friction.coulomb", "--duration", "10", "--window", "5",
+              "--maxiter", "3", "--popsize", "4", "--workers", "1", "--json")
+    assert res.returncode == 0, res.stderr
+    # the thesis's default bounds (0.2-4) would exclude 0.15 V: the plant's are [v/2, 2v]
+    assert json.loads(res.stdout)["estimate"]["friction.coulomb"] == pytest.approx(0.15,
+                                                                                   rel=1e-3)
