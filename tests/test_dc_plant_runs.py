@@ -298,14 +298,15 @@ def test_to_control_and_linearize_take_the_motor_plant():
     assert isinstance(sys, control.NonlinearIOSystem)
 
 
+@pytest.mark.slow  # imports gymnasium
 def test_the_qube_servo_2_gymnasium_env_steps_the_motor_plant_in_volts():
     import gymnasium
 
     import frictionlab.gym  # noqa: F401  (registers the ids)
 
     env = gymnasium.make("frictionlab/QubeServo2-v0")
-    obs, _ = env.reset(seed=1, options={"initial_angle": 0.05})
-    assert env.action_space.high[0] == 10.0
+    obs0, _ = env.reset(seed=1, options={"initial_angle": 0.05})
+    assert env.action_space.high[0] == 10.0 and obs0[0] == pytest.approx(0.05)
     cfg = build_config(plant="qube2")
     spec = loop_spec(cfg)
     from frictionlab.model.simulation import SimulatedPlant
@@ -313,7 +314,7 @@ def test_the_qube_servo_2_gymnasium_env_steps_the_motor_plant_in_volts():
     plant = SimulatedPlant(spec)
     st = plant.init(0.05)
     for u in (3.0, -2.0, 20.0):
-        obs, _r, term, _trunc, info = env.step(np.array([u]))
+        _obs, _r, _term, _trunc, info = env.step(np.array([u]))
         st = plant.step(st, min(u, 10.0))
         assert info["theta"] == pytest.approx(st.x[0], abs=1e-12)
         assert info["u"] == min(u, 10.0)
@@ -336,3 +337,14 @@ def test_identify_limit_cycle_fits_the_motor_plants_coulomb_level_in_volts(cli, 
     # the thesis's default bounds (0.2-4) would exclude 0.15 V: the plant's are [v/2, 2v]
     assert json.loads(res.stdout)["estimate"]["friction.coulomb"] == pytest.approx(0.15,
                                                                                    rel=1e-3)
+
+
+def test_compensate_compare_runs_the_compensator_in_volts_on_the_qube2(cli):
+    res = cli("compensate", "compare", "--plant", "qube2", "--compensation", "lugre",
+              "--duration", "10", "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["status"] == "limit_cycle"
+    assert out["features"]["max_u"] <= 10.0
+    # the LuGre compensator with the scaled defaults shrinks the QUBE's cycle
+    assert out["reduction"] > 1.5

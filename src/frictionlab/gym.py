@@ -66,7 +66,7 @@ Randomisation per episode (``randomize=True`` or a dict)
     friction model per episode.  The controller design is not part of the
     environment.
 
-QUBE-Servo 2 (``frictionlab/QubeServo2-v0``, or ``plant="qube2"``; also ``"qube3"``, ``"furuta-dc"``)
+QUBE-Servo 2 (``frictionlab/QubeServo2-v0``, ``plant="qube2"``; or ``"qube3"``, ``"furuta-dc"``)
     The same environment on the DC-motor Furuta pendulum
     (:mod:`frictionlab.model.plants.furuta_dc`): the action is the motor
     voltage, saturated at ``plant.voltage_limit`` (10 V), the friction levels
