@@ -81,20 +81,20 @@ def _fake_controller(cfg, backend="sim", *args, **kwargs):
 WORK = {
     ("design",): (),
     ("keys",): (),
-    ("simulate",): (("frictionlab.model.simulation", "simulate_config", _reach),),
+    ("simulate",): (("frictionlab.runs", "simulate_config", _reach),),
     ("sweep",): (("frictionlab.studies.sweep", "iter_evaluate", _reach),
-                 ("frictionlab.studies.sweep", "_get_dask", _reach)),
+                 ("frictionlab.studies.sweep", "get_dask", _reach)),
     ("identify", "limit-cycle"): (
         ("frictionlab.studies.identification.limit_cycle", "fit_limit_cycle", _reach),),
     # the simulated rig is stubbed; a --log is analysed for real
     ("identify", "experiment"): (
-        ("frictionlab.studies.identification.experiments", "_Recorder", _reach),),
+        ("frictionlab.studies.identification.simulated", "run_simulated", _reach),),
     ("compensate", "compare"): (("frictionlab.studies.compensation", "compare", _reach),),
     ("compensate", "tune"): (("frictionlab.studies.compensation", "tune", _reach),),
     ("run",): (("frictionlab.realtime", "RealtimeController", _fake_controller),),
     ("rig-sim",): (("frictionlab.realtime.rigsim", "run_rig_sim", _reach),),
     ("reproduce",): (("frictionlab.studies.reproduce", "run", _reach),
-                     ("frictionlab.studies.sweep", "_get_dask", _reach)),
+                     ("frictionlab.studies.sweep", "get_dask", _reach)),
     ("predict",): (("frictionlab.studies.predict", "predict", _reach),),
     # the log's features are computed for real (a generated log is small)
     ("features",): (),

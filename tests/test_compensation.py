@@ -345,7 +345,7 @@ def test_cli_rejects_singular_lugre_compensator_before_running(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("a simulation started")
 
-    monkeypatch.setattr("frictionlab.model.simulation.simulate_config", boom)
+    monkeypatch.setattr("frictionlab.runs.simulate_config", boom)
     monkeypatch.setattr("frictionlab.studies.sweep.evaluate", boom)
     zero = ["--set", "compensation.stiction=0", "--set", "compensation.coulomb=0"]
     rc, out, err = run_cli("compensate", "compare", "--compensation", "lugre", *zero, "--json")
@@ -378,7 +378,7 @@ def test_cli_rejects_bad_compensator_before_running(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("a simulation started")
 
-    monkeypatch.setattr("frictionlab.model.simulation.simulate_config", boom)
+    monkeypatch.setattr("frictionlab.runs.simulate_config", boom)
     monkeypatch.setattr("frictionlab.studies.sweep.evaluate", boom)
     rc, out, err = run_cli("simulate", "--compensation", "lugre", "--set",
                            "compensation.sigma0=-5", "--json")
@@ -488,10 +488,10 @@ def test_tune_ranks_the_grid_and_the_baseline_from_the_engine_rows(monkeypatch):
     compensation), both with the caller's workers/dask and reduced by
     features_and_chatter; the ranking, the chatter and the baseline come from
     their rows (here doctored) and nothing is simulated outside them."""
-    import frictionlab.model.simulation
+    import frictionlab.runs
     from frictionlab.studies import sweep
 
-    real_eval, real_sim = sweep.evaluate, frictionlab.model.simulation.simulate_config
+    real_eval, real_sim = sweep.evaluate, frictionlab.runs.simulate_config
     calls, outside = [], []
     inside = [False]
 
@@ -517,7 +517,7 @@ def test_tune_ranks_the_grid_and_the_baseline_from_the_engine_rows(monkeypatch):
         return real_sim(*a, **k)
 
     monkeypatch.setattr(sweep, "evaluate", spy)
-    monkeypatch.setattr(frictionlab.model.simulation, "simulate_config", counting_simulate)
+    monkeypatch.setattr(frictionlab.runs, "simulate_config", counting_simulate)
     cfg = build_config("fast", "classical", "coulomb", sets=[NOISE])
     progress = []
     res = tune(cfg, [("compensation.hysteresis", [0.0, 0.05])], duration=20.0, workers=1,

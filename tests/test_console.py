@@ -7,6 +7,7 @@ The console in a real browser is tested in ``tests/browser``.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import json
 import math
@@ -149,7 +150,9 @@ def test_push_range(kick, ok):
 
 @pytest.mark.parametrize("name, clean", [("run1", "run1"), ("run1.dat", "run1"),
                                          (" a-b_c ", "a-b_c"), ("../etc/passwd", None),
-                                         ("a b", None), ("", None), (".hidden", None)])
+                                         ("a b", None), ("", None), (".hidden", None),
+                                         ("name\n", None), ("x\n.dat", None),
+                                         ("run1.dat\n", None), ("a\tb", None)])
 def test_record_names(name, clean):
     if clean is None:
         with pytest.raises(ValidationError):
@@ -337,6 +340,51 @@ def test_stream_figures_measure_a_synthetic_limit_cycle():
     assert fig["status"] == "limit_cycle"
     assert fig["peak_to_peak"] == pytest.approx(2 * amp, rel=0.02)
     assert fig["period"] == pytest.approx(period, rel=0.02)
+
+
+def _figures_of(theta_of_t, seconds: float = 6.0) -> dict:
+    ctl = _FakeController()
+    stream = SampleStream(ctl, h=0.005, history=10.0)
+    stream.open()
+    for k in range(round(seconds / 0.005)):
+        ctl.sub.put(_sample(k, theta=theta_of_t(k * 0.005)))
+    stream.poll()
+    return stream.figures(5.0)
+
+
+@pytest.mark.parametrize("theta, running, kw, state", [
+    # a limit cycle while balancing: the only case with figures
+    (lambda t: 0.08 * math.sin(2 * math.pi * t / 0.9), True, {}, "balancing"),
+    # after an experiment: hanging, swinging a little about pi (wrapped either way)
+    (lambda t: math.pi + 0.3 * math.sin(2 * math.pi * t), False, {}, "hanging"),
+    (lambda t: -math.pi + 0.3 * math.sin(2 * math.pi * t), True, {"experiment": True},
+     "hanging"),
+    # an experiment moving the pendulum: never a limit cycle
+    (lambda t: 0.05 * math.sin(2 * math.pi * t), True, {"experiment": True}, "swinging"),
+    # swinging up
+    (lambda t: 2.5 * math.sin(2 * math.pi * t / 1.5), True, {"phase": "swinging"},
+     "swinging"),
+    (lambda t: 0.1 * math.sin(2 * math.pi * t), True, {"phase": "caught"}, "catching"),
+    # balancing after a catch, the swing still in the window: no figures yet
+    (lambda t: 2.5 if t < 2.0 else 0.05 * math.sin(2 * math.pi * t), True,
+     {"phase": "balancing"}, "catching"),
+    # fell: the last angle is beyond the limit, the loop stopped
+    (lambda t: 0.01 * math.exp(t), False, {}, "fallen"),
+    (lambda t: 0.01, False, {}, "stopped"),
+])
+def test_the_status_says_what_the_pendulum_does_and_figures_only_while_balancing(
+        theta, running, kw, state):
+    from frictionlab.console.stream import honest_figures, pendulum_state
+
+    fig = _figures_of(theta)
+    got = pendulum_state(fig, running=running, upright=0.35, **kw)
+    assert got == state
+    shown = honest_figures(fig, got)
+    if state == "balancing":
+        assert shown["status"] == "limit_cycle" and shown["peak_to_peak"] > 0
+    else:
+        assert shown["status"] == state and shown["status"] != "limit_cycle"
+        assert shown["peak_to_peak"] is None and shown["period"] is None
 
 
 def test_hub_fans_frames_out_and_drops_the_oldest_for_a_slow_page():
@@ -596,7 +644,7 @@ def test_refusals_are_located_by_key_not_by_message(app_and_controller, monkeypa
 
 
 @pytest.mark.slow
-def test_run_record_download_and_exit(app_and_controller, tmp_path):
+def test_run_record_download_and_exit(app_and_controller, tmp_path, cli):
     client, ctl, exits = app_and_controller
     assert client.post("/api/record/start", json={}).status_code == 409  # not running
     r = client.post("/api/start", json={})
@@ -624,6 +672,13 @@ def test_run_record_download_and_exit(app_and_controller, tmp_path):
     csv = client.get("/api/files/trial.csv").text.splitlines()
     assert csv[0].startswith("t,") and len(csv) == rows + 1
     assert client.post("/api/record/name", json={"name": "again"}).status_code == 409
+    # the recording has the run's sidecar: `features` needs no --design, no design.h
+    side = json.loads((tmp_path / "trial.json").read_text())
+    assert side["h"] == 0.005 and side["current"]["design"]["preset"] == "fast"
+    assert side["recording"]["rows"] == rows
+    res = cli("features", str(tmp_path / "trial.dat"), "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["design"] == "fast"
     assert client.get("/api/files/..%2Fsecret.dat").status_code == 404
     assert client.get("/api/files/missing.dat").status_code == 404
 
@@ -642,6 +697,14 @@ def test_run_record_download_and_exit(app_and_controller, tmp_path):
     assert r.status_code == 200 and exits == [True]
     assert client.post("/api/start", json={}).status_code == 409
     assert not ctl.running
+
+
+@pytest.mark.parametrize("name", ["nope.csv", "nope.dat"])
+def test_features_of_a_missing_log_says_it_is_missing_once(cli, tmp_path, name):
+    path = str(tmp_path / name)
+    res = cli("features", path)
+    assert res.returncode == 2
+    assert res.stderr.strip() == f"frictionlab features: error: {path}: no such file"
 
 
 def test_stop_while_recording_asks_for_the_name(app_and_controller, tmp_path):
@@ -725,6 +788,48 @@ def test_closing_line_names_the_stop_reason_and_the_log():
                          "log": "runs/run-1.csv"}))
     assert line == " (signal; 1413 ticks, 2 missed; log runs/run-1.csv)"
     assert _summary(Ctl({"stop_reason": None, "ticks": 0})) == " (the loop did not run)"
+
+
+@pytest.mark.slow
+def test_the_address_is_printed_when_the_console_answers(tmp_path):
+    """`serve` prints the address after the start-up's one-time work (the warm-up, the
+    automatic start of the loop), once the server accepts connections: the first
+    request at the printed address is answered, and nothing was still starting."""
+    cfg = build_config("fast", "classical")
+    # paced by the real clock (a fake one would run the loop flat out beside the server);
+    # the lockstep simulated plant waits for a stalled host instead of stopping
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, realtime=False, manage_gc=False,
+                             sim_lockstep=True)
+    printed = threading.Event()
+    at_print = {}
+
+    class Out:
+        def write(self, text):
+            m = re.search(r"(http://\S+)", text)
+            if m and not printed.is_set():
+                at_print.update(url=m.group(1), running=ctl.running)
+                printed.set()
+
+        def flush(self):
+            pass
+
+    th = threading.Thread(target=serve, args=(ctl,), kwargs={"port": 0, "out": Out(),
+                                                            "autostart": True}, daemon=True)
+    th.start()
+    try:
+        assert printed.wait(120), "no address printed"
+        assert at_print["running"]  # the loop had started when the address appeared
+        with urllib.request.urlopen(at_print["url"] + "api/status", timeout=30) as resp:
+            assert resp.status == 200 and json.loads(resp.read())["running"]
+    finally:
+        req = urllib.request.Request(at_print.get("url", "http://127.0.0.1:1/") + "api/exit",
+                                     data=b"{}", method="POST",
+                                     headers={"Content-Type": "application/json"})
+        with contextlib.suppress(OSError):
+            urllib.request.urlopen(req, timeout=30).read()
+        th.join(60)
+        ctl.close()
+    assert not th.is_alive()
 
 
 # --- first-call work before the loop starts -------------------------------------------------
@@ -1108,6 +1213,67 @@ def test_swing_up_button_starts_a_swing_up_and_the_phase_is_shown(tmp_path):
     ctl.close()
 
 
+@pytest.mark.slow
+def test_swing_up_from_a_stopped_default_console_starts_hanging(tmp_path):
+    """The default console (its pendulum upright): Stop, then Swing up.  The run's log
+    starts with the pendulum hanging (first |theta| > 2.5 rad), the catch comes after at
+    least 0.3 s, then it balances."""
+    from frictionlab.io.logs import read_log
+
+    cfg = build_config("fast", "classical")
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05, autostart=True)
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        while client.get("/api/status").json()["t"] < 0.5:
+            assert ctl.running
+        assert client.post("/api/stop", json={}).status_code == 200
+        r = client.post("/api/swingup", json={})
+        assert r.status_code == 200, r.json()
+        while (st := client.get("/api/status").json())["t"] < 6.0:
+            assert st["running"], (st["stop_reason"], st["stop_detail"])
+        assert st["swing_up"]["phase"] == "balancing"
+        assert st["swing_up"]["swing_up_time"] >= 0.3
+        assert client.post("/api/stop", json={}).status_code == 200
+        log = read_log(st["log"], cfg.design.h)
+    ctl.close()
+    assert abs(log["theta_m"][0]) > 2.5
+    # balancing at the end (the last row, the stop, has no reading)
+    assert np.nanmax(np.abs(np.angle(np.exp(1j * log["theta_m"][-200:])))) < 0.35
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("emulated", [True, False])
+def test_swing_up_on_a_framed_rig_hangs_an_emulated_pendulum_and_leaves_a_real_one(
+        tmp_path, emulated):
+    """Swing up on ``rig-sim`` (its session starts upright): the emulator's hand lets the
+    pendulum hang before the first command.  A rig that plays no hand (a real one) is left
+    where it is: the swing-up starts from there."""
+    from frictionlab.io.logs import read_log
+    from frictionlab.realtime.rigs import FramedRig
+    from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
+
+    class HandRig(FramedRig):  # rig-sim over UDP, its CONTROL frames handed over directly
+        def hand(self, action):
+            assert emu.control({"cmd": "hand", **action})["ok"]
+
+    cfg = build_config("fast", "classical")
+    clock = FakeClock()
+    emu = RigEmulator(cfg, clock)
+    rig = (HandRig if emulated else FramedRig)(DirectTransport(emu, clock), "direct",
+                                               clock=clock)
+    ctl = RealtimeController(cfg, rig, log_dir=tmp_path, clock=clock, realtime=False,
+                             manage_gc=False, duration=0.5)
+    ctl.start(swing_up=True, hanging=True)
+    assert ctl.wait(60)
+    theta0 = read_log(ctl.last_stats["log"], cfg.design.h)["theta_m"][0]
+    ctl.close()
+    if emulated:
+        assert abs(theta0) > 3.0 and any(a["fault"] == "hand_hang" for a in emu.applied)
+    else:
+        assert abs(theta0) < 0.2 and not emu.applied
+
+
 def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
     """The Experiments panel: refused without confirm (the motor moves), bad options and
     limits refused at their field, a confirmed run goes through the loop on the connected
@@ -1124,10 +1290,10 @@ def test_experiments_panel_runs_an_experiment_after_confirmation(tmp_path):
         assert not ctl.running and client.get("/api/status").json()["ticks"] == 0
         r = client.post("/api/experiment", json={**body, "options": {"bogus": 1},
                                                   "confirm": True})
-        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "options"
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "options.bogus"
         r = client.post("/api/experiment", json={**body, "limits": {"max_u_da": 2},
                                                   "confirm": True})
-        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "limits"
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "limits.max_u_da"
         r = client.post("/api/experiment", json={"name": "nonsense", "confirm": True})
         assert r.status_code == 422
         r = client.post("/api/experiment", json={**body, "confirm": True})

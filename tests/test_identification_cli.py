@@ -205,7 +205,11 @@ def test_free_oscillation_dat_log_round_trip_and_missed_ticks(capsys, tmp_path):
     for key in ("omega0", "zeta", "omega0_peaks", "zeta_peaks"):
         assert logged[key] == pytest.approx(sim[key], rel=1e-5), key
     assert logged["warnings"] == []
-    (tmp_path / "swing.json").write_text(json.dumps({"stats": {"missed": 4}}))
+    # the sidecar --save wrote (the experiment's marks), now with a run's missed ticks
+    sidecar = tmp_path / "swing.json"
+    meta = json.loads(sidecar.read_text())
+    assert meta["experiment"]["marks"]["free"] > 0
+    sidecar.write_text(json.dumps({**meta, "stats": {"missed": 4}}))
     rc, out, err = _run(capsys, ["identify", "experiment", "free-oscillation", "--log",
                                  str(dat), "--json"])
     assert rc == 0

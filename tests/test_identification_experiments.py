@@ -47,6 +47,16 @@ def oscillation_log():
 
 
 @pytest.fixture(scope="module")
+def free_decay(oscillation_log):
+    """The free decay of the simulated free-oscillation run (from its mark ``free``:
+    before it, the arm's square wave sets the pendulum swinging)."""
+    log = oscillation_log
+    free = log["t"] >= log.meta["marks"]["free"]
+    assert 0.5 < free.mean() < 1.0  # excitation first, then the decay
+    return {"t": log["t"][free], "theta_m": log["theta_m"][free]}
+
+
+@pytest.fixture(scope="module")
 def scaling_log():
     return ex.simulate_control_scaling(_cfg("classical"))
 
@@ -109,8 +119,8 @@ def test_stribeck_without_rise_reports_unidentifiable_stribeck_part():
     assert any("not identifiable" in w for w in r["warnings"])
 
 
-def test_free_oscillation_recovered(oscillation_log):
-    r = ex.analyse_free_oscillation(oscillation_log)
+def test_free_oscillation_recovered(free_decay):
+    r = ex.analyse_free_oscillation(free_decay)
     assert _close(r["omega0"], TRUE["plant.omega0"], 0.02), r
     assert _close(r["zeta"], TRUE["plant.zeta"], 0.20), r
     # the thesis's peak method alone is also within the acceptance bounds
@@ -142,6 +152,19 @@ def test_free_oscillation_analysis_on_eq22(omega0, zeta, amp, phase):
     assert _close(r["omega0"], omega0, 0.01)
     assert _close(r["zeta"], zeta, 0.05)
     assert r["rest_angle"] == pytest.approx(3.18, abs=1e-3)
+
+
+def test_free_oscillation_ignores_a_lone_noise_peak_after_the_decay():
+    """A peak of the noise seconds after the swing died away is not a period: the
+    consecutive peaks alone give omega_d (with it, the mean spacing was 1.5 periods)."""
+    h = 0.005
+    t = np.arange(0, 12.0, h)
+    theta = 3.14 + 0.1 * np.exp(-0.43 * t) * np.cos(7.05 * t)
+    theta[(t > 10.5) & (t < 10.6)] += 0.009 * np.sin(np.pi * (t[(t > 10.5) & (t < 10.6)] - 10.5)
+                                                     / 0.1)
+    r = ex.analyse_free_oscillation({"t": t, "theta_m": theta})
+    assert _close(r["omega0_peaks"], math.hypot(7.05, 0.43), 0.01)
+    assert all(pt < 10.0 for pt, _ in r["peaks"])
 
 
 def test_free_oscillation_that_grows_warns_instead_of_clipping_silently():
@@ -217,13 +240,12 @@ def test_read_log_rejects(tmp_path, text, match):
 
 
 @pytest.mark.slow
-def test_plots(tmp_path, stiction_log, stribeck_log, oscillation_log, scaling_log):
+def test_plots(tmp_path, stiction_log, stribeck_log, free_decay, scaling_log):
     from frictionlab.studies.identification import plots
 
     cases = [
         (plots.plot_stiction, stiction_log, ex.analyse_stiction(stiction_log)),
-        (plots.plot_free_oscillation, oscillation_log,
-         ex.analyse_free_oscillation(oscillation_log)),
+        (plots.plot_free_oscillation, free_decay, ex.analyse_free_oscillation(free_decay)),
         (plots.plot_control_scaling, scaling_log, ex.analyse_control_scaling(scaling_log)),
     ]
     for i, (fn, log, res) in enumerate(cases):

@@ -38,7 +38,10 @@ from frictionlab.model.plants.thesis import PlantParams
         (DesignSpec, "observer_zeta1", 1.01, "design.observer_zeta1"),
         (DesignSpec, "omega2", math.nan, "NaN"),
         (FrictionParams, "sigma0", -1.0, "friction.sigma0"),
-        (FrictionParams, "sigma0", 0.0, "(0, 1e+07]"),
+        (FrictionParams, "sigma0", 0.0, "[1, 1e+07]"),
+        (FrictionParams, "sigma0", 1e-300, "friction.sigma0"),
+        (DesignSpec, "omega1", 5e-324, "[0.01, 1000]"),
+        (DesignSpec, "observer_omega2", 1e-300, "design.observer_omega2"),
         (FrictionParams, "coulomb", -0.1, "friction.coulomb"),
         (FrictionParams, "stribeck_velocity", 0.0, "friction.stribeck_velocity"),
         (FrictionParams, "hysteresis", -0.01, "friction.hysteresis"),
@@ -155,7 +158,7 @@ def test_out_of_range_value_is_a_structured_error():
         build_config(sets=["compensation.sigma0=-3"])
     err = info.value
     assert isinstance(err, ParamError) and isinstance(err, ConfigError)
-    assert (err.field, err.value, err.allowed) == ("compensation.sigma0", -3, "(0, 1e+07]")
+    assert (err.field, err.value, err.allowed) == ("compensation.sigma0", -3, "[1, 1e+07]")
     with pytest.raises(ParamError) as info:
         PlantParams(omega0=10**400)  # beyond float: out of range, not OverflowError
     assert info.value.field == "plant.omega0"

@@ -105,6 +105,45 @@ def shell_commands(path: Path):
     return cmds
 
 
+def documented_output(path: Path, block_start: int) -> list[str]:
+    """The output the document shows for the fenced block starting at ``block_start``: the
+    lines of the markdown table or fenced ``text`` block after a paragraph that starts
+    with "prints" right after the block (empty when it shows none)."""
+    lines = path.read_text().splitlines()
+    end = block_start - 1  # 0-based index of the block's first line
+    while end < len(lines) and not lines[end].startswith("```"):
+        end += 1
+    i = end + 1
+    while i < len(lines) and not lines[i].strip():
+        i += 1
+    if i >= len(lines) or not lines[i].startswith("prints"):
+        return []
+    while i < len(lines) and not (lines[i].startswith("|") or lines[i].startswith("```")):
+        i += 1
+    out = []
+    if i < len(lines) and lines[i].startswith("```"):
+        if lines[i].strip() != "```text":
+            return []
+        i += 1
+        while i < len(lines) and not lines[i].startswith("```"):
+            out.append(lines[i])
+            i += 1
+    else:
+        while i < len(lines) and lines[i].startswith("|"):
+            out.append(lines[i])
+            i += 1
+    return [ln.strip() for ln in out if ln.strip()]
+
+
+def check_documented_output(doc: Path, line: int, stdout: str) -> None:
+    """The numbers a document shows come from the program: every line it shows as the
+    output of the block holding ``line`` is a line of what the block printed."""
+    got = {ln.strip() for ln in stdout.splitlines()}
+    for want in documented_output(doc, _block_start(doc, line)):
+        assert want in got, (f"{doc.name}:{line}: the document shows\n  {want}\nbut the "
+                             f"program printed:\n{stdout[-3000:]}")
+
+
 def skip_reason(command: str) -> str | None:
     return next((why for pat, why in SKIPPED if re.search(pat, command)), None)
 
@@ -189,6 +228,8 @@ def _run_command(cwd: Path, doc: Path, line: int, command: str) -> None:
                           f"{res.stderr.strip().splitlines()[-1][:200]}", stacklevel=1)
     where = f"{doc.name}:{line}: {command}"
     assert res.returncode == 0, f"{where}\nexit {res.returncode}\n{res.stderr[-3000:]}"
+    if _last_in_block(doc, line):
+        check_documented_output(doc, line, res.stdout)
     if "--json" in command.split():
         lines = res.stdout.strip().splitlines()
         assert len(lines) == 1, f"{where}: stdout is not one JSON line:\n{res.stdout[:2000]}"
@@ -218,6 +259,12 @@ def _block_starts(doc: Path) -> tuple[int, ...]:
 def _block_start(doc: Path, line: int) -> int:
     """The first line of the fenced block holding ``line``."""
     return max(start for start in _block_starts(doc) if start <= line)
+
+
+def _last_in_block(doc: Path, line: int) -> bool:
+    """``line`` is the last command of its fenced block (whose output a document shows)."""
+    block = _block_start(doc, line)
+    return max(n for d, n, _c in COMMANDS if d == doc and _block_start(d, n) == block) == line
 
 
 def _real_time(doc: Path, line: int, command: str) -> bool:
@@ -254,6 +301,7 @@ def _run_document(tmp_path: Path, doc: Path, work: dict) -> None:
         res = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=_env(),
                              capture_output=True, text=True, timeout=TIMEOUT)
         assert res.returncode == 0, f"{doc.name}:{line}\n{res.stderr[-3000:]}"
+        check_documented_output(doc, line, res.stdout)
 
 
 # one test per document: its lines depend on each other (a file one writes, the next
@@ -309,3 +357,16 @@ def test_documented_toml_is_a_valid_config(tmp_path, doc, line, text):
     path.write_text(text)
     cfg = build_config(config_file=path)  # unknown keys and bad values raise
     assert cfg != build_config()
+
+
+def test_documented_outputs_are_found_and_compared():
+    """The outputs documents show are read (a table after "prints", a ``text`` block), and
+    a line the program did not print fails the check."""
+    doc = ROOT / "docs" / "sweep.md"
+    start = next(n for d, n, c in COMMANDS if d == doc and "--table" in c)
+    shown = documented_output(doc, _block_start(doc, start))
+    assert shown[0].startswith("| friction.coulomb |") and len(shown) == 7
+    check_documented_output(doc, start, "\n".join(shown) + "\nsomething else\n")
+    with pytest.raises(AssertionError, match="the document shows"):
+        check_documented_output(doc, start, "\n".join(shown[:-1]))
+

@@ -5,7 +5,7 @@
 (:class:`~frictionlab.realtime.rigs.SimRig`, one plant step per executed
 tick) with the LuGre plant friction of eq. (21).  The loop runs the
 simulator's compiled controller step, compensator included, so without noise
-its log must be :func:`frictionlab.model.simulation.simulate_config`'s run tick by
+its log must be :func:`frictionlab.runs.simulate_config`'s run tick by
 tick; with noise (the rig backend draws its own) it must show the same
 reduction of the limit cycle.  No test sleeps: :class:`FakeClock` jumps to
 each deadline.

@@ -19,7 +19,7 @@ from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
 from frictionlab.runs import make_controller
 
 RIG_KEYS = ["rig.theta_scale", "rig.theta_bias", "rig.arm_scale", "rig.velocity_scale",
-            "rig.velocity_bias", "rig.u_scale"]
+            "rig.velocity_bias", "rig.u_scale", "rig.arm_sign", "rig.pendulum_sign"]
 
 
 def test_rig_keys_exist_with_appendix_b_defaults():
@@ -28,6 +28,7 @@ def test_rig_keys_exist_with_appendix_b_defaults():
     assert r == RigScaling()
     assert (r.theta_scale, r.theta_bias, r.arm_scale, r.velocity_scale, r.velocity_bias,
             r.u_scale) == (math.pi, 0.503, 25.8, 28.7, 0.02, -0.022)
+    assert (r.arm_sign, r.pendulum_sign) == (1, 1)  # encoder rigs as their maker wires them
     # the controller saturates at the DAC limit the factors give
     assert make_controller(build_config()).u_max == 1.0 / 0.022
     assert make_controller(build_config(sets=["rig.u_scale=0.05"])).u_max == pytest.approx(20.0)

@@ -73,7 +73,7 @@ def test_a_kernel_compiles_on_first_use_and_calls_its_callees():
     function's."""
     import numpy as np
 
-    from frictionlab.model import plant
+    from frictionlab.model.plants import thesis as plant
 
     args = (0.1, 0.2, 0.3, 1.0, 6.8, 0.04, 9.82, 0.21)
     compiled = plant.accelerations(*args)  # calls accelerations_sc inside nopython code

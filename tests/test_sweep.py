@@ -33,15 +33,17 @@ from frictionlab.studies.sweep import (
     MIN_TAIL_CHUNK,
     OutputMismatch,
     SweepFile,
-    _get_dask,
-    _guided_chunks,
     columns,
     evaluate,
+    get_dask,
+    guided_chunks,
     make_points,
     parse_vary,
     reduce_features,
     shutdown,
 )
+from frictionlab.studies.sweep import engine as sweep_engine
+from frictionlab.studies.sweep import work as sweep_work
 
 BAND = "friction.zero_velocity_band=0.03"
 TABLE2_FC = tuple(TABLE2)  # 1.1, 1.3, 1.5, 1.7, 1.9
@@ -141,7 +143,7 @@ def test_grid_is_the_cartesian_product_and_oat_varies_one_key_at_a_time():
 @settings(max_examples=80, deadline=None)
 @given(n=st.integers(1, 5000), workers=st.integers(1, 64))
 def test_default_chunks_cover_every_point_once_and_shrink_at_the_end(n, workers):
-    chunks = _guided_chunks(n, workers)
+    chunks = guided_chunks(n, workers)
     assert [i for c in chunks for i in c] == list(range(n))  # in order, each once
     sizes = [len(c) for c in chunks]
     # at most 50 points and at most a quarter of a worker's share per chunk
@@ -200,7 +202,7 @@ def test_pool_and_dask_localcluster_give_identical_rows_for_table2(tmp_path):
     assert dask == pool
     assert per_run == pool
     # the cluster's workers run without Dask's malloc trim threshold (see _local_dask_config)
-    client = _get_dask("local", 2)
+    client = get_dask("local", 2)
     trim = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
     assert len(trim) == 2 and set(trim.values()) == {None}
     # joining a running scheduler by address (here the LocalCluster's own)
@@ -290,7 +292,7 @@ def test_a_reduce_that_raises_gives_an_error_row(workers):
 
 def test_a_reduce_the_workers_cannot_receive_is_refused_before_any_run(monkeypatch):
     ran = []
-    monkeypatch.setattr(sweep_module, "_run_chunk", lambda *a: ran.append(a))
+    monkeypatch.setattr(sweep_engine, "run_chunk", lambda *a: ran.append(a))
     base = build_config("fast", "classical")
     for bad in (lambda cfg, d, w: {}, "reduce_features"):
         with pytest.raises(TypeError, match="reduce must be"):
@@ -299,7 +301,7 @@ def test_a_reduce_the_workers_cannot_receive_is_refused_before_any_run(monkeypat
 
 
 #: The engine's own chunk function (also in a worker process that imports this module).
-_RUN_CHUNK = sweep_module._run_chunk
+_RUN_CHUNK = sweep_work.run_chunk
 
 
 def _chunk_that_kills_its_worker(base, points, duration, window, reduce):
@@ -317,7 +319,7 @@ def _chunk_that_kills_its_worker(base, points, duration, window, reduce):
 def test_a_worker_process_that_dies_gives_error_rows_not_a_crash(monkeypatch):
     base = build_config("fast", "classical")
     points = [{"friction.coulomb": v} for v in (1.3, 1.5, 1.7, 1.9)]
-    monkeypatch.setattr(sweep_module, "_run_chunk", _chunk_that_kills_its_worker)
+    monkeypatch.setattr(sweep_engine, "run_chunk", _chunk_that_kills_its_worker)
     # a custom reduce runs in the process pool (the default reduction runs on threads)
     rows = evaluate(base, points, duration=3, workers=2, chunk_size=1, reduce=reduce_features)
     monkeypatch.undo()
@@ -666,15 +668,16 @@ def test_engine_imports_no_cli_plotting_or_terminal_code():
     rich anywhere in its source (also inside functions), and none at run time."""
     import ast
 
-    tree = ast.parse(Path(sweep_module.__file__).read_text(encoding="utf-8"))
     imported = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            imported.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = ".".join(filter(None, ["frictionlab" if node.level else "", node.module]))
-            imported.add(base)
-            imported.update(f"{base}.{a.name}" for a in node.names)
+    for path in Path(sweep_module.__file__).parent.glob("*.py"):  # the package's modules
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                imported.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = ".".join(filter(None, ["frictionlab" if node.level else "",
+                                              node.module]))
+                imported.add(base)
+                imported.update(f"{base}.{a.name}" for a in node.names)
     bad = {m for m in imported for edge in EDGE_MODULES
            if m == edge or m.startswith(edge + ".")}
     assert not bad, bad

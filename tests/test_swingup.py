@@ -343,11 +343,12 @@ def test_loop_without_swing_up_still_refuses_a_hanging_start(tmp_path):
 
 def test_swingup_step_is_the_same_function_in_both_runners():
     import frictionlab.realtime.loop as loop
+    from frictionlab.model import closedloop
     from frictionlab.model.swingup import swingup_step_rows
-    from frictionlab.studies import swingup_sim as sim
 
-    # the loop calls it through its float-row form, which calls the very same step
-    assert sim.swingup_step is swingup_step
+    # the simulator's closed-loop tick calls the step itself; the loop calls it
+    # through its float-row form, which calls the very same step
+    assert closedloop.swingup_step is swingup_step
     assert loop.swingup_step_rows is swingup_step_rows
     assert "swingup_step" in swingup_step_rows.py_func.__code__.co_names
 

@@ -115,7 +115,7 @@ from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
 from .model.friction import KINDS, NP, friction_row, friction_view
 from .model.plants import plant_step
-from .model.sensor import reading
+from .model.sensor import reading, wrap_angle
 from .model.simulation import plant_tick_rows
 from .runs import make_sensor
 
@@ -169,7 +169,7 @@ _INFO = ("theta", "theta_dot", "arm", "arm_dot", "z")
 
 
 @jit
-def _step_plants(mask, xs, us, mems, friction, pcode, substeps, ratios, h, pps, fkinds, fps):
+def _step_plants(mask, pcode, xs, us, mems, friction, substeps, ratios, h, pps, fkinds, fps):
     """Advance plant i (row i of ``xs``) over one sample with ``us[i]`` held,
     for every i with ``mask[i]``: the simulator's plant step (plant code ``pcode``)."""
     for i in range(xs.shape[0]):
@@ -199,8 +199,8 @@ class _Plants:
         self.noise = cfg.sim.noise
         self.sensor = make_sensor(cfg)._replace(noise=0.0)  # the draws come from the env
         self.fall = cfg.sim.fall_angle
+        self.pcode = cfg.plant_model.code  # the plant's code (model.plants.plant_step)
         self.xs = np.zeros((n, 5))
-        self.pcode = cfg.plant_model.code
         self.mems = np.zeros(n)
         self.friction = np.zeros(n)
         self.us = np.zeros(n)
@@ -236,15 +236,15 @@ class _Plants:
 
     def step(self, mask: np.ndarray, u: np.ndarray) -> None:
         self.us[mask] = u[mask]
-        _step_plants(mask, self.xs, self.us, self.mems, self.friction, self.pcode,
-                     self.substeps, self.ratios, self.h, self.pps, self.fkinds, self.fps)
+        _step_plants(mask, self.pcode, self.xs, self.us, self.mems, self.friction, self.substeps,
+                     self.ratios, self.h, self.pps, self.fkinds, self.fps)
         self.steps[mask] += 1
 
     def step_first(self, u: float) -> None:
         """:meth:`step` of plant 0 alone, without the batch's array work."""
         self.us[0] = u
-        self.friction[0], self.mems[0] = plant_tick_rows(self.pcode, self._x0, u,
-                                                         self.mems[0], *self._first)
+        self.friction[0], self.mems[0] = plant_tick_rows(self.pcode, self._x0, u, self.mems[0],
+                                                            *self._first)
         self.steps[0] += 1
 
     def measure(self, rng: np.random.Generator) -> np.ndarray:
@@ -368,7 +368,7 @@ class _Settings:
             return np.column_stack([s.raw_theta(measured[:, 0]), s.raw_arm(measured[:, 1]),
                                     s.raw_arm_velocity(measured[:, 2])])
         if self.swing:
-            measured[:, 0] = (measured[:, 0] + math.pi) % (2.0 * math.pi) - math.pi
+            measured[:, 0] = wrap_angle.py_func(measured[:, 0])
         return measured
 
     def ended(self, plants: _Plants, x):

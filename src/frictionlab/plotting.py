@@ -28,6 +28,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from .config import COMPENSATOR_FIELDS, PLANT_FIELDS, ConfigError, key_metadata
+from .model.design import PRESETS
+from .model.plants.thesis import PlantParams
+
 __all__ = [
     "FEATURE_UNITS",
     "TRACES",
@@ -89,8 +93,6 @@ def feature_label(name: str) -> str:
 
 def key_label(key: str) -> str:
     """Axis label of a parameter key with its unit, e.g. ``friction.coulomb [m/s^2]``."""
-    from .config import ConfigError, key_metadata
-
     try:
         unit = key_metadata(key).get("unit", "")
     except ConfigError:
@@ -113,10 +115,6 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
     noise settings that differ from the thesis's defaults; ``exclude``: keys
     not to list (e.g. swept ones).
     """
-    from .config import COMPENSATOR_FIELDS, PLANT_FIELDS
-    from .model.design import PRESETS
-    from .model.plants.thesis import PlantParams
-
     exclude = set(exclude)
     parts = []
 
@@ -152,8 +150,6 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
 def _design_base(cfg) -> tuple[str, str]:
     """(name, preset): ``fast``/``slow`` for a preset, else ``modified P`` where
     P is the preset the spec differs least from."""
-    from .model.design import PRESETS
-
     def ndiff(p):
         return sum(getattr(cfg.design, f.name) != getattr(p, f.name)
                    for f in dataclasses.fields(p))

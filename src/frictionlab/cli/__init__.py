@@ -30,14 +30,15 @@ from ..config import (
 )
 from . import compensate, identify, predict, reproduce, run, sweep
 from .common import (
+    Parser,
     UsageError,
-    _Parser,
     add_config_args,
     add_plant_arg,
     check_output_path,
     config_from_args,
     emit_json,
     error_message,
+    feature_lines,
     finite,
     flush_notes,
     hanging_start,
@@ -154,8 +155,8 @@ def cmd_simulate(args) -> int:
                     else f"at {swing.swing_up_time:.2f} s")
             print(f"  swing-up: caught {when}, {swing.catches} catch(es)"
                   + (f", stopped: {swing.stop_reason}" if swing.stop_reason else ""))
-        for k, v in feats.interface_dict().items():
-            print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+        for line in feature_lines(feats.interface_dict()):
+            print(line)
     return 0
 
 
@@ -188,7 +189,7 @@ def cmd_keys(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = Parser(
         prog="frictionlab",
         description="Rotary inverted pendulum with arm friction: design, simulate, sweep, "
                     "identify, compensate, and run the real-time controller.",

@@ -45,7 +45,7 @@ class _Formatter(argparse.HelpFormatter):
                                           longest + self._current_indent + 2)
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line on stderr (exit status 2)."""
 
     def __init__(self, *args, **kwargs):
@@ -177,6 +177,17 @@ def safety_from_args(args, **limits):
         raise UsageError(str(exc).replace(exc.field, option, 1)) from None
 
 
+#: Units of the limit-cycle features a plain-text output prints (as in ``--json``: SI).
+FEATURE_UNITS = {"peak1": "rad", "peak2": "rad", "valley": "rad", "period": "s",
+                 "max_u": "m/s^2", "max_arm_velocity": "rad/s", "peak_to_peak": "rad"}
+
+
+def feature_lines(features: dict) -> list[str]:
+    """The plain-text lines of limit-cycle ``features``: name, value, unit."""
+    return [f"  {k:18s} {'-' if v is None else f'{v:.4g}'} {FEATURE_UNITS.get(k, '')}".rstrip()
+            for k, v in features.items()]
+
+
 def emit_json(obj) -> None:
     sys.stdout.write(json.dumps(_clean(obj)) + "\n")
     sys.stdout.flush()
@@ -232,7 +243,8 @@ def config_from_args(args) -> Config:
     from ..config import inert_keys, load_toml
 
     plant = getattr(args, "plant", "thesis")
-    items = [*(load_toml(args.config, plant) if args.config else []), *parse_sets(args.sets)]
+    items = [*backend_rig_items(args), *(load_toml(args.config, plant) if args.config else []),
+             *parse_sets(args.sets)]
     cfg = build_config(
         design=args.design,
         friction=getattr(args, "friction", "classical"),
@@ -249,6 +261,18 @@ def config_from_args(args) -> Config:
                 why = f"with the {cfg.compensation_kind!r} compensator"
             note(args, f"frictionlab: note: {key} has no effect {why}")
     return cfg
+
+
+def backend_rig_items(args) -> list[tuple[str, float]]:
+    """The ``rig.*`` values ``--backend`` implies, applied before ``--config`` and
+    ``--set`` (a QUBE-Servo's: u in volts, its encoders' channels; none for the others)."""
+    spec = getattr(args, "backend", None)
+    if not isinstance(spec, str) or not spec.startswith(("qube2:", "qube3:")):
+        return []
+    # start-up time: the real-time package is imported only when a QUBE is named
+    from ..realtime.qube import QUBE_RIG
+
+    return list(QUBE_RIG.items())
 
 
 def hanging_start(args, cfg: Config) -> Config:
@@ -297,9 +321,9 @@ def check_engine_args(args) -> None:
     """Refuse, before any work, a worker count or a Dask address that cannot be used."""
     check_workers(args.workers)
     if args.dask is not None:
-        from ..studies.sweep import _check_dask_address
+        from ..studies.sweep import check_dask_address
 
-        _check_dask_address(args.dask)
+        check_dask_address(args.dask)
 
 
 def check_workers(value: int | None, option: str = "--workers") -> None:

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
 
-from ..config import PLANT_FRICTION_KINDS, build_config
+from ..config import PLANT_FRICTION_KINDS, build_config, load_toml
 from ..model.limit_cycles import FEATURES
 from ..model.params import ParamError
 from ..studies.identification.experiments import EXPERIMENTS, IdentificationError
@@ -18,11 +19,13 @@ from .common import (
     add_key_args,
     add_plant_arg,
     add_stall_args,
+    backend_rig_items,
     check_engine_args,
     check_output_dir,
     check_output_path,
     emit_json,
     error_message,
+    feature_lines,
     finite,
     note_text,
     parse_sets,
@@ -107,13 +110,19 @@ def _log_experiment(path: str, h: float | None, window: float | None = None,
                     design: str | None = None, what: str = "--measured") -> dict:
     from ..io.runlog import run_log_features
 
+    # `frictionlab features: error: ...` names the command already; --measured is an option
+    label = "" if what == "features:" else f"{what} "
+    if not os.path.isfile(path):  # the missing file, before any sidecar or design
+        raise UsageError(f"{label}{path}: no such file")
     try:
         return run_log_features(path, window=window, h=h, design=design)
     except ParamError as exc:
         hint = _LOG_HINTS[what].get(exc.field)
-        raise UsageError(f"{what} {exc}" + (f" ({hint})" if hint else "")) from None
+        raise UsageError(f"{label}{exc}" + (f" ({hint})" if hint else "")) from None
     except ValueError as exc:
-        raise UsageError(f"{what} {path}: {exc}") from None
+        text = str(exc)
+        raise UsageError(f"{label}{text if text.startswith(path) else f'{path}: {text}'}"
+                         ) from None
 
 
 def load_measured(paths, sets=()) -> list:
@@ -391,13 +400,25 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
     return read_log(st["log"], cfg.design.h), summary
 
 
+def _save_sidecar(log_path: str, name: str, marks: dict) -> None:
+    """Beside a saved simulated log, the sidecar a rig run writes for the analysis
+    (``<log>.json``: the experiment's name and marks), so that ``--log`` on the file
+    cuts the free oscillation where its free decay starts."""
+    from pathlib import Path
+
+    Path(log_path).with_suffix(".json").write_text(
+        json.dumps({"experiment": {"name": name, "marks": marks}}) + "\n")
+
+
 def cmd_experiment(args) -> int:
     from ..studies.identification import experiments as ex
 
     name = args.experiment
     friction = args.friction or _DEFAULT_FRICTION[name]
-    cfg = build_config(design=args.design, friction=friction, config_file=args.config,
-                       sets=parse_sets(args.sets))
+    cfg = build_config(design=args.design, friction=friction,
+                       sets=[*backend_rig_items(args),
+                             *(load_toml(args.config) if args.config else []),
+                             *parse_sets(args.sets)])
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     if args.plot and name in ("velocity-scale", "angle-scales"):
@@ -459,22 +480,13 @@ def cmd_experiment(args) -> int:
             source = args.backend
         marks = dict(exp.marks)
     else:
-        if name == "stiction":
-            log = ex.simulate_stiction(cfg, step=args.step, hold=args.hold)
-        elif name == "stribeck":
-            refs = (_float_list(args.references, "--references") if args.references
-                    else ex.STRIBECK_REFERENCES)
-            log = ex.simulate_stribeck(cfg, references=refs, gain=args.gain, hold=args.hold)
-        elif name == "free-oscillation":
-            log = ex.simulate_free_oscillation(cfg, amplitude=args.amplitude,
-                                               duration=args.duration or 12.0)
-        else:
-            levels = (_float_list(args.levels, "--levels") if args.levels
-                      else ex.SCALING_LEVELS)
-            log = ex.simulate_control_scaling(cfg, levels=levels)
+        # the rig's schedule (its options and limits) on the simulated rig, in-process
+        log = ex.simulate_experiment(name, cfg, _limits(args), **_rig_options(args))
+        marks = dict(log.meta["marks"])
         source = "simulated"
         if args.save:
             log.save(args.save)
+            _save_sidecar(args.save, name, marks)
     from ..studies.identification.onrig import analyse_log
 
     try:
@@ -538,8 +550,8 @@ def cmd_features(args) -> int:
         print(f"frictionlab features: note: {note}", file=sys.stderr)
     print(f"{out['name']}: {out['design']} design, {out['status']} "
           f"(last {out['window']:.3g} s)")
-    for k, v in out["features"].items():
-        print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+    for line in feature_lines(out["features"]):
+        print(line)
     return 0
 
 
@@ -635,7 +647,8 @@ def register_cli(sub) -> None:
     src.add_argument("--log", metavar="FILE", help="analyse a recorded log (.csv or .dat)")
     src.add_argument("--simulate", action="store_true",
                      help="run the experiment on the simulated rig (default)")
-    src.add_argument("--backend", metavar="sim|udp://HOST:PORT|serial://DEVICE", default=None,
+    src.add_argument("--backend", default=None,
+                     metavar="sim|udp://HOST:PORT|serial://DEVICE|qube2://ID|qube3://ID",
                      help="run the experiment on a rig through the real-time loop (the loop "
                           "of `frictionlab run`: same timing, safety and logging), then "
                           "analyse its log")
@@ -655,24 +668,24 @@ def register_cli(sub) -> None:
     e.add_argument("--gain", type=float, default=20.0,
                    help="stribeck, velocity-scale: P gain of the velocity loop (default 20)")
     e.add_argument("--amplitude", type=float, default=None,
-                   help="free-oscillation: initial deflection in rad (default 0.25; on a "
-                        "rig the swing the excitation reaches, default 0.12)")
+                   help="free-oscillation: the swing in rad the excitation reaches before "
+                        "the free decay (default 0.12)")
     e.add_argument("--max-amplitude", type=float, default=0.15,
                    help="free-oscillation: peaks above this are not used (default 0.15)")
     e.add_argument("--duration", type=float, default=None,
                    help="free-oscillation: recorded seconds of free decay (default 12)")
     e.add_argument("--levels", metavar="U1,U2,...",
-                   help="control-scaling: constant u values (default 3,4,5,7,9; on a rig "
-                        "their signs alternate)")
+                   help="control-scaling: constant u values (default 3,4,5,7,9; their "
+                        "signs alternate)")
     e.add_argument("--coulomb-levels", metavar="F1,F2,...",
-                   help="stiction on a rig: fractions of the breakaway u held while the arm "
+                   help="stiction: fractions of the breakaway u held while the arm "
                         "slides (default 0.3,0.4,...,0.9)")
     e.add_argument("--slide", type=float, default=0.8,
-                   help="stiction on a rig: seconds each Coulomb level is held (default 0.8)")
+                   help="stiction: seconds each Coulomb level is held (default 0.8)")
     e.add_argument("--push", type=float, default=1.5,
-                   help="stiction on a rig: arm speed in rad/s of the motor's push before a "
+                   help="stiction: arm speed in rad/s of the motor's push before a "
                         "slide (default 1.5)")
-    g = e.add_argument_group("on a rig (--backend)")
+    g = e.add_argument_group("limits (every run) and the rig (--backend)")
     g.add_argument("--log-dir", default="runs",
                    help="where the run is logged (default ./runs)")
     g.add_argument("--max-speed", type=float, default=15.0, metavar="RAD/S",
@@ -707,8 +720,6 @@ def _experiment_entry(args) -> int:
     if args.hold is None:
         args.hold = 2.0 if args.experiment in ("stribeck", "velocity-scale") else 0.25
     args.amplitude_given = args.amplitude is not None
-    if args.amplitude is None:
-        args.amplitude = 0.25
     finite("--slide", args.slide, 0.0)
     finite("--push", args.push, 0.0)
     finite("--step", args.step, 0.0)

@@ -19,7 +19,7 @@ __all__ = ["register_cli"]
 def cmd_reproduce(args) -> int:
     """``frictionlab reproduce``."""
     from ..studies.reproduce import count_runs, interface_json, run, write_report
-    from ..studies.sweep import _get_dask
+    from ..studies.sweep import get_dask
 
     t0 = time.perf_counter()
     out = args.out
@@ -30,7 +30,7 @@ def cmd_reproduce(args) -> int:
         raise UsageError(f"--out {out}: folder {parent} does not exist")
     check_engine_args(args)
     if args.dask is not None:
-        _get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any work
+        get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any work
     os.makedirs(out, exist_ok=True)
     runs = count_runs()
     n_figures = 10

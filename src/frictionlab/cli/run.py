@@ -79,8 +79,10 @@ _CPU_HELP = ("pin the real-time thread to this CPU: auto (the last CPU; run and 
 
 def register_cli(sub) -> None:
     p = sub.add_parser("run", help="the 200 Hz real-time controller with the operator console")
-    p.add_argument("--backend", default="sim", metavar="sim|udp://HOST:PORT|serial://DEVICE",
-                   help="rig backend (default: sim, the simulated plant in-process)")
+    p.add_argument("--backend", default="sim",
+                   metavar="sim|udp://HOST:PORT|serial://DEVICE|qube2://ID|qube3://ID",
+                   help="rig backend (default: sim, the simulated plant in-process; "
+                        "qube2://0: a Quanser QUBE-Servo 2, docs/qube.md)")
     p.add_argument("--host", default="127.0.0.1", help="console address (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8000, help="console port (default 8000)")
     p.add_argument("--token", default=None,

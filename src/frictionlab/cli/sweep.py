@@ -26,11 +26,11 @@ from ..studies.sweep import (
     SWINGUP_COLUMNS,
     OutputMismatch,
     SweepFile,
-    _get_dask,
-    _ident,
+    get_dask,
     iter_evaluate,
     make_points,
     parse_vary,
+    point_ident,
     reduce_swingup,
     validate_points,
 )
@@ -95,12 +95,12 @@ def _groups(rows: Sequence[Mapping[str, Any]], varies: Sequence[tuple[str, Seque
     if mode == "grid" or len(varies) == 1:
         return [(varies[0][0], list(rows))]
     keys = [k for k, _ in varies]
-    by_ident = {_ident(r, keys): r for r in rows}
+    by_ident = {point_ident(r, keys): r for r in rows}
     out = []
     for k, values in varies:
         grp = []
         for v in values:
-            r = by_ident.get(_ident({**base_vals, k: v}, keys))
+            r = by_ident.get(point_ident({**base_vals, k: v}, keys))
             if r is not None:
                 grp.append(r)
         out.append((k, grp))
@@ -344,7 +344,7 @@ def _plan(args):
         raise UsageError(f"--resume: {exc} (use another --out, or --force to overwrite)"
                          ) from None
     if args.dask is not None and points:
-        _get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any output
+        get_dask(args.dask, args.workers)  # an unreachable scheduler exits 2 before any output
     flush_notes(args)
     return base, varies, points, duration, out, old
 
@@ -358,9 +358,9 @@ def cmd_sweep(args) -> int:
         out.remove()
     have: dict[tuple, dict] = {}
     for r in old:
-        have[_ident(r, keys)] = r  # a later row for the same point wins
+        have[point_ident(r, keys)] = r  # a later row for the same point wins
     todo = [i for i, p in enumerate(points)
-            if have.get(_ident(p, keys), {}).get("status", "error") == "error"]
+            if have.get(point_ident(p, keys), {}).get("status", "error") == "error"]
     results: dict[int, dict] = {}
 
     def on_term(signum, frame):
@@ -390,9 +390,9 @@ def cmd_sweep(args) -> int:
         raise
     finally:
         signal.signal(signal.SIGTERM, previous)
-    ordered = [results[i] if i in results else have[_ident(p, keys)]
+    ordered = [results[i] if i in results else have[point_ident(p, keys)]
                for i, p in enumerate(points)]
-    wanted = {_ident(p, keys) for p in points}
+    wanted = {point_ident(p, keys) for p in points}
     extra = [r for ident, r in have.items() if ident not in wanted]
     out.finish(ordered + extra)
     base_vals = {k: base.get(k) for k in keys}

@@ -9,9 +9,13 @@ Kalman Filter panels with Fast/Slow, Compensation with Friction Type and
 Friction Model, Exit, plus a push button for simulated rigs and a status
 line with timing statistics and the running limit-cycle figures.
 
-Modules: :mod:`.app` (routes, the stream hub), :mod:`.models` (request
-validation), :mod:`.security` (token, origin, size limits), :mod:`.stream`
-(reading samples off the tick thread), :mod:`.server` (uvicorn).
+Modules: :mod:`.app` (the application), :mod:`.routes` (one ``APIRouter``
+module per concept: page and status, run, parameters, experiments,
+recordings, the WebSocket), :mod:`.hub` (the plot stream's fan-out),
+:mod:`.state` (what the routes share), :mod:`.errors` (error answers),
+:mod:`.models` (request validation), :mod:`.security` (token, origin, size
+and time limits), :mod:`.stream` (reading samples off the tick thread),
+:mod:`.server` (uvicorn).
 User's guide: ``docs/console.md``.
 """
 

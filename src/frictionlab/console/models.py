@@ -252,8 +252,10 @@ class RecordNameRequest(_Request):
     @field_validator("name")
     @classmethod
     def _clean_name(cls, v: str):
-        v = re.sub(r"\.(dat|csv)$", "", v.strip())
-        if not re.match(NAME_PATTERN, v):
+        # spaces around the name are the prompt's; a newline or any other character is
+        # refused (a full match: ``$`` alone would match before a final newline)
+        v = re.sub(r"\.(dat|csv)\Z", "", v.strip(" "))
+        if not re.fullmatch(NAME_PATTERN, v):
             raise ValueError("use 1-64 letters, digits, '_' or '-' (no extension: .dat and "
                              ".csv are added)")
         return v

@@ -14,8 +14,10 @@ The console moves a motor, so it is closed by default:
   (403, also for a WebSocket handshake): no CORS, and no other site's page can
   drive the console through the operator's browser.  On a loopback bind the
   ``Host`` header must name a loopback address (DNS rebinding).
-* ``POST`` bodies must be ``application/json`` (415) and at most
-  ``max_body`` bytes (413), counted as they arrive.
+* ``POST`` bodies must be ``application/json`` (415), at most
+  ``max_body`` bytes (413), counted as they arrive, and complete within
+  ``body_timeout`` seconds of the request head (408, and the connection is
+  closed): a client that sends a head and then stalls holds no connection.
 * A refused request's connection is closed after the answer
   (``Connection: close``), so a client without the token holds no
   connection; connections that send no complete request are closed by the
@@ -24,6 +26,7 @@ The console moves a motor, so it is closed by default:
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import ipaddress
 import json
@@ -34,6 +37,7 @@ from urllib.parse import parse_qs, urlsplit
 from ..model.params import ParamError
 
 __all__ = [
+    "BODY_TIMEOUT",
     "COOKIE",
     "MAX_BODY",
     "MIN_TOKEN_LENGTH",
@@ -50,6 +54,9 @@ TOKEN_ENV = "FRICTIONLAB_TOKEN"
 COOKIE = "frictionlab_token"
 #: Largest request body accepted (bytes).
 MAX_BODY = 64 * 1024
+#: Seconds a request body has to arrive in full after its head (as the head has, in
+#: :data:`frictionlab.console.server.HEAD_TIMEOUT`).
+BODY_TIMEOUT = 3.0
 MIN_TOKEN_LENGTH = 8
 _LOOPBACK_NAMES = ("localhost",)
 
@@ -125,14 +132,17 @@ class Guard:
         Check that ``Host`` names a loopback address (use on loopback binds).
     max_body : int
         Largest request body (bytes).
+    body_timeout : float
+        Seconds the whole body has to arrive after the request head.
     """
 
     def __init__(self, app, token: str | None = None, *, loopback_only: bool = True,
-                 max_body: int = MAX_BODY):
+                 max_body: int = MAX_BODY, body_timeout: float = BODY_TIMEOUT):
         self.app = app
         self.token = token
         self.loopback_only = loopback_only
         self.max_body = max_body
+        self.body_timeout = body_timeout
 
     def _token_ok(self, scope, headers) -> bool:
         if self.token is None:
@@ -202,10 +212,17 @@ class Guard:
         if scope["method"] in ("GET", "HEAD"):
             await self.app(scope, receive, send)
             return
-        # read the whole (small) body first, refusing it as soon as it is too large
+        # read the whole (small) body first, refusing it as soon as it is too large or late
         chunks, size, more = [], 0, True
+        deadline = asyncio.get_running_loop().time() + self.body_timeout
         while more:
-            message = await receive()
+            try:
+                message = await asyncio.wait_for(
+                    receive(), deadline - asyncio.get_running_loop().time())
+            except TimeoutError:
+                await _send_error(send, 408, f"request body not received within "
+                                  f"{self.body_timeout:g} s")
+                return
             if message["type"] != "http.request":
                 return  # the client went away
             chunk = message.get("body", b"")

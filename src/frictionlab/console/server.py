@@ -2,7 +2,8 @@
 
 :func:`serve` checks the bind address against the token rule
 (:mod:`.security`), binds the socket itself (so a busy port is a clear
-error), prints the console's address, serves until Exit, Ctrl-C or SIGTERM,
+error), prints the console's address once it answers (after the start-up's
+one-time work), serves until Exit, Ctrl-C or SIGTERM,
 and leaves the loop stopped (u = 0 written) whichever way the server ended.
 
 Connections cannot lock the operator out: there is no limit on concurrent
@@ -29,7 +30,7 @@ import uvicorn
 import uvicorn.config
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from ..realtime.osrt import STOP_SIGNALS
+from ..realtime.osrt import STOP_SIGNALS, try_realtime_priority
 from .app import create_app
 from .security import MAX_BODY, check_bind, is_loopback, resolve_token
 
@@ -97,6 +98,13 @@ class _Server(uvicorn.Server):
     than after the server's own shutdown."""
 
     controller = None
+    #: Called once the server accepts connections (prints the address: it answers now).
+    on_started = None
+
+    async def startup(self, sockets=None) -> None:
+        await super().startup(sockets=sockets)
+        if self.started and self.on_started is not None:
+            self.on_started()
 
     @contextlib.contextmanager
     def capture_signals(self):
@@ -159,8 +167,6 @@ def _server_thread_priority() -> None:
     (SCHED_FIFO 50) still preempts it.  Where it is not permitted nothing
     changes (the loop has already said so).
     """
-    from ..realtime.osrt import try_realtime_priority
-
     try_realtime_priority(SERVER_PRIORITY)
 
 
@@ -218,8 +224,11 @@ def serve(controller, host: str = "127.0.0.1", port: int = 8000, token: str | No
     out = sys.stdout if out is None else out
     if getattr(controller, "realtime", False):
         _server_thread_priority()
-    print(f"frictionlab console: {console_url(host, actual_port, token)}  "
-          f"(Exit button or Ctrl-C to stop)", file=out, flush=True)
+    # the address is printed when it answers: after the start-up's one-time work (the
+    # warm-up, the loop's start), once the server accepts connections
+    server.on_started = lambda: print(
+        f"frictionlab console: {console_url(host, actual_port, token)}  "
+        f"(Exit button or Ctrl-C to stop)", file=out, flush=True)
     try:
         server.run(sockets=[sock])
     finally:

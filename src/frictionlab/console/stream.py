@@ -22,7 +22,8 @@ import numpy as np
 
 from ..model.limit_cycles import features
 
-__all__ = ["PLOT_SIGNALS", "RingBuffer", "SampleStream", "decimate", "frame_json"]
+__all__ = ["FIGURE_KEYS", "HANGING_BAND", "PLOT_SIGNALS", "RingBuffer", "SampleStream",
+           "decimate", "frame_json", "honest_figures", "pendulum_state"]
 
 #: Signals sent to the page: the ten logged signals less z_hat, in SI units.
 PLOT_SIGNALS = ("theta_m", "arm_m", "arm_dot_m", "u", "theta_hat", "theta_dot_hat", "arm_hat",
@@ -196,12 +197,18 @@ class SampleStream:
         """Running limit-cycle figures of the measured angle over the last ``window`` s.
 
         Returns ``{"window", "span", "status", "peak_to_peak", "period", "peak1",
-        "max_u", "max_arm_velocity"}`` (None where not defined yet).
+        "max_u", "max_arm_velocity", "max_angle", "last_angle",
+        "min_angle_last_second"}`` (None where not defined yet; the angles are
+        |theta| from upright, wrapped: over the window, at its end, the least in its
+        last second).  Whether the figures mean anything is
+        :func:`pendulum_state`'s to say.
         """
         n = round(window / self.h) + 1
         data = self.buffer.last(n)
         out = {"window": window, "span": 0.0, "status": None, "peak_to_peak": None,
-               "period": None, "peak1": None, "max_u": None, "max_arm_velocity": None}
+               "period": None, "peak1": None, "max_u": None, "max_arm_velocity": None,
+               "max_angle": None, "last_angle": None, "min_angle_last_second": None,
+               "max_angle_last_second": None}
         if data.shape[1] < 3:
             return out
         t, theta, arm_dot, u = data[0], data[1], data[3], data[4]
@@ -213,7 +220,64 @@ class SampleStream:
         if span <= 0.0:
             return out
         f = features(t, theta, u, arm_dot, window=span)
+        wrapped = np.abs(np.mod(theta + np.pi, 2.0 * np.pi) - np.pi)  # |theta| from upright
         out.update({"span": span, "status": f.status, "peak_to_peak": f.peak_to_peak,
                     "period": f.period, "peak1": f.peak1, "max_u": f.max_u,
-                    "max_arm_velocity": f.max_arm_velocity})
+                    "max_arm_velocity": f.max_arm_velocity,
+                    "max_angle": float(wrapped.max()), "last_angle": float(wrapped[-1]),
+                    "min_angle_last_second": float(wrapped[t >= t[-1] - 1.0].min()),
+                    "max_angle_last_second": float(wrapped[t >= t[-1] - 1.0].max())})
         return out
+
+
+#: Angles (rad from upright) of a pendulum that hangs: within this of pi for a second.
+HANGING_BAND = 0.6
+#: What the limit-cycle figures hold that is measured (hidden unless balancing).
+FIGURE_KEYS = ("peak_to_peak", "period", "peak1", "max_u", "max_arm_velocity")
+
+
+def pendulum_state(fig: dict, *, running: bool, upright: float, phase: str | None = None,
+                   experiment: bool = False) -> str:
+    """What the pendulum is doing, from the last figures' angles and the run.
+
+    ``"balancing"`` (running the balancing controller, and the angle stayed within
+    ``upright`` rad of upright over the whole window), ``"catching"`` (upright over
+    the last second, not yet over the whole window: a swing-up caught it, the
+    figures would still measure the swing), ``"hanging"`` (within
+    :data:`HANGING_BAND` of pi over the last second), ``"swinging"`` (running, none of
+    these), ``"fallen"`` (stopped, neither upright nor hanging), ``"stopped"``
+    (stopped upright), or ``"unknown"`` (no samples).
+
+    Parameters
+    ----------
+    fig : dict
+        :meth:`SampleStream.figures`.
+    running : bool
+        The loop runs.
+    upright : float
+        Largest angle from upright that counts as balanced (rad; the loop's angle limit).
+    phase : str, optional
+        The swing-up's phase (``swinging``, ``caught``, ``balancing``) if it is one.
+    experiment : bool
+        The run is an identification experiment (the pendulum is not balanced).
+    """
+    if fig.get("max_angle") is None:
+        return "unknown" if running else "stopped"
+    if fig["min_angle_last_second"] >= math.pi - HANGING_BAND:
+        return "hanging"
+    if not running:
+        return "stopped" if fig["last_angle"] <= upright else "fallen"
+    if experiment or phase == "swinging" or fig["max_angle_last_second"] > upright:
+        return "swinging"
+    if phase == "caught" or fig["max_angle"] > upright:
+        return "catching"
+    return "balancing"
+
+
+def honest_figures(fig: dict, state: str) -> dict:
+    """``fig`` as the status shows it: the figures only while ``state`` is balancing,
+    else the pendulum's state as the status (never a limit cycle of a hanging pendulum)."""
+    out = {**fig, "pendulum": state}
+    if state != "balancing":
+        out.update({k: None for k in FIGURE_KEYS}, status=state)
+    return out

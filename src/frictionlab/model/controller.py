@@ -77,6 +77,7 @@ from .friction import (
 from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
 from .plants.furuta_dc_design import DCDesign, dc_observer_update, observer_row
+from .plants.thesis import PlantParams
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 
 __all__ = [
@@ -646,7 +647,8 @@ def check_compensator(kind: str, params: FrictionParams, *, h: float | None = No
         allowed; the message of a vanishing level names both levels.
     """
     if kind == "adaptive":
-        check_gains(params, 0.005 if h is None else h, 0.21 if arm_length is None else arm_length)
+        check_gains(params, 0.005 if h is None else h,
+                    PlantParams().arm_length if arm_length is None else arm_length)
     if kind not in ("lugre", "adaptive"):
         return
     fs_neg = params.stiction if params.stiction_negative is None else params.stiction_negative

@@ -50,7 +50,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ._jit import jit
-from .plants.thesis import accelerations
+from .plants.thesis import PlantParams, accelerations
 
 __all__ = [
     "ArmObserver",
@@ -140,7 +140,7 @@ class ArmObserver:
     k3: float
     k4: float
     h: float = 0.005
-    arm_length: float = 0.21
+    arm_length: float = PlantParams().arm_length
 
     def init(self, arm0: float = 0.0, arm_dot0: float = 0.0) -> tuple[float, float]:
         return (float(arm0), float(arm_dot0))

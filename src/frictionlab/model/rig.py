@@ -80,6 +80,14 @@ class RigScaling(Validated):
     u_scale: float = param(-0.022, "k_u: signed DAC value per m/s^2 of u, u_DA = u_scale*u "
                            "(App. B.4; negative on the thesis's rig; not 0)", "1/(m/s^2)",
                            lo=-1.0, hi=1.0)
+    arm_sign: int = param(1, "direction of the arm encoder against the arm angle Omega "
+                          "(encoder rigs, e.g. the QUBE-Servo: +1 as the maker wires it, "
+                          "-1 for an encoder counting the other way)", "1", lo=-1, hi=1,
+                          integer=True)
+    pendulum_sign: int = param(1, "direction of the pendulum encoder against theta (encoder "
+                               "rigs, e.g. the QUBE-Servo: +1 as the maker wires it, -1 for "
+                               "an encoder counting the other way)", "1", lo=-1, hi=1,
+                               integer=True)
     arm_bias: float = 0.0  # x_0 (not a key): arm reading at Omega = 0
 
     def __post_init__(self) -> None:
@@ -88,6 +96,10 @@ class RigScaling(Validated):
             raise ParamError("rig.u_scale", 0.0, "[-1, 1] without 0",
                              "rig.u_scale = 0 would give the motor no control signal; "
                              "allowed [-1, 1] without 0")
+        for key in ("arm_sign", "pendulum_sign"):
+            if getattr(self, key) == 0:
+                raise ParamError(f"rig.{key}", 0, "+1 or -1",
+                                 f"rig.{key} = 0: the sign must be +1 or -1")
         b = check_range("arm_bias", self.arm_bias, -1.0, 1.0)
         object.__setattr__(self, "arm_bias", b)
 
@@ -108,8 +120,9 @@ class RigScaling(Validated):
                                             self.velocity_bias)
 
     def u_da(self, u):
-        """DAC value for the control signal u (m/s^2), saturated at [-1, 1]."""
-        return np.clip(self.u_scale * np.asarray(u, dtype=float), -1.0, 1.0)
+        """DAC value for the control signal u (m/s^2), saturated at [-1, 1]
+        (:func:`frictionlab.model.sensor.dac`, element-wise)."""
+        return _elementwise(_S.dac.py_func, u, self.u_scale)
 
     # --- SI -> raw (the emulated rig) -------------------------------------
     def raw_theta(self, theta):
@@ -129,8 +142,9 @@ class RigScaling(Validated):
                        -1.0, 1.0)
 
     def u_from_da(self, u_da):
-        """Control signal (m/s^2) the DAC value corresponds to."""
-        return np.clip(np.asarray(u_da, dtype=float), -1.0, 1.0) / self.u_scale
+        """Control signal (m/s^2) the DAC value corresponds to
+        (:func:`frictionlab.model.sensor.u_from_dac`, element-wise)."""
+        return _elementwise(_S.u_from_dac.py_func, u_da, self.u_scale)
 
     @property
     def u_max(self) -> float:
@@ -141,6 +155,16 @@ class RigScaling(Validated):
         """SI size of one ADC step for (theta, Omega, Omega_dot)."""
         q = ADC_STEP
         return self.theta_scale * q, self.arm_scale * q, self.velocity_scale * q
+
+
+def _elementwise(law, values, u_scale):
+    """``law(value, u_scale)`` for each of ``values`` (a scalar gives a numpy scalar)."""
+    a = np.asarray(values, dtype=float)
+    out = np.empty_like(a)
+    flat = out.reshape(-1)
+    for i, v in enumerate(a.reshape(-1).tolist()):
+        flat[i] = law(v, u_scale)
+    return out[()] if out.ndim == 0 else out
 
 
 def wrap_raw(r):

@@ -27,6 +27,16 @@ For a true state :math:`(\theta, \Omega, \dot\Omega)` and sample number
    arm reading and the arm channel unwrapped sample to sample
    (:func:`unwrap`), :math:`\dot\Omega = s_v(v + b_v)`.
 
+The actuator's side is one law too: the DAC value of a control signal u is
+:math:`u_{DA} = \mathrm{sat}(k_u u)`, saturated to [-1, 1] (App. B.4,
+:func:`dac`), and a rig applies the control signal
+:math:`\mathrm{sat}(u_{DA})/k_u` (:func:`u_from_dac`; a value that is not a
+number counts as 0).  The real-time loop writes :func:`dac`, the emulated
+rigs apply :func:`u_from_dac`, :class:`~frictionlab.model.rig.RigScaling`
+converts arrays with both.  An angle is wrapped into
+:math:`[-\pi, \pi)` by :func:`wrap_angle` (the swing-up's angles, a
+pendulum's deflection from its rest).
+
 The rig emulators do 1-3 (:func:`adc`), the real-time loop 4; the simulator
 does 1-4 in one call (:func:`measure`) and so reads, for the same true state,
 sample number and seed, exactly what the loop reads from an emulated rig
@@ -66,6 +76,7 @@ __all__ = [
     "arm_from_raw",
     "arm_to_raw",
     "arm_zero",
+    "dac",
     "from_raw",
     "ideal_reading",
     "measure",
@@ -77,10 +88,12 @@ __all__ = [
     "theta_from_raw",
     "theta_to_raw",
     "to_raw",
+    "u_from_dac",
     "unwrap",
     "velocity_from_raw",
     "velocity_to_raw",
     "wrap",
+    "wrap_angle",
 ]
 
 #: Bits of the rig's converters.
@@ -192,6 +205,36 @@ def unwrap(previous, current, wraps):
     if d < -1.0:
         return wraps + 1
     return wraps
+
+
+@jit
+def wrap_angle(a):
+    """The angle ``a`` (rad) wrapped into [-pi, pi) (element-wise on arrays as
+    ``wrap_angle.py_func``)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@jit
+def dac(u, u_scale):
+    """The DAC value :math:`u_{DA} = \\mathrm{sat}(k_u u)` of the control signal ``u``
+    (m/s^2), ``u_scale`` the signed :math:`k_u` (``rig.u_scale``; App. B.4):
+    saturated to [-1, 1]; a value that is not a number gives 0 (the motor off).
+    ``dac(u_da, 1.0)`` is what the DAC makes of a value it is sent."""
+    d = u_scale * u
+    if d > 1.0:
+        return 1.0
+    if d < -1.0:
+        return -1.0
+    if d == d:
+        return d
+    return 0.0
+
+
+@jit
+def u_from_dac(u_da, u_scale):
+    """The control signal (m/s^2) a rig applies for the DAC value ``u_da``: the
+    inverse of :func:`dac` on the DAC's range (saturated first)."""
+    return dac(u_da, 1.0) / u_scale
 
 
 @jit

@@ -136,6 +136,7 @@ from .controller import (
 from .friction import friction_view
 from .params import Validated, param
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
+from .sensor import wrap_angle
 
 __all__ = [
     "PHASES",
@@ -319,12 +320,6 @@ class SwingUpParams(Validated):
             arm_speed_limit=float(self.arm_speed_limit),
             decay=0.0 if self.recentre_time == 0 else math.exp(-h / self.recentre_time),
         )
-
-
-@jit
-def wrap_angle(a):
-    """``a`` wrapped into [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @jit

@@ -1,7 +1,9 @@
 """The real-time controller (Sec. 7): 200 Hz loop, rig I/O, safety, lossless logging.
 
 Modules: :mod:`.loop` (the periodic tick, safety, timing statistics),
-:mod:`.rigs` (backends ``sim``/``udp://``/``serial://``), :mod:`.protocol`
+:mod:`.rigs` (backends ``sim``/``udp://``/``serial://``; the interface in
+:mod:`.rigbase`), :mod:`.qube` (``qube2://``/``qube3://``: a Quanser QUBE-Servo
+through the HIL API), :mod:`.protocol`
 (framing, ``docs/protocol.md``), :mod:`.rigsim` (the emulated rig,
 ``frictionlab rig-sim``), :mod:`.datalog` (writer thread, ``.dat``/``.csv``/
 JSON sidecar), :mod:`.params` (validated parameter snapshots for the

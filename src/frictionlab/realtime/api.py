@@ -5,6 +5,7 @@ See the package docstring (:mod:`frictionlab.realtime`) for the API summary.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -22,7 +23,7 @@ from .datalog import LogWriter, link_no_clobber, writer_identity
 from .loop import STOP_REASONS, Loop, Safety
 from .osrt import single_thread_blas, try_realtime_priority
 from .params import ControlParams
-from .rigs import Rig, open_rig, parse_backend
+from .rigs import Rig, RigError, open_rig, parse_backend
 from .samples import Subscription
 
 __all__ = ["GC_POLICY", "ControllerStateError", "RealtimeController"]
@@ -139,7 +140,8 @@ class RealtimeController:
 
     # --- life cycle ---------------------------------------------------------------
 
-    def start(self, experiment=None, swing_up: bool | None = None) -> None:
+    def start(self, experiment=None, swing_up: bool | None = None, *,
+              hanging: bool = False) -> None:
         """Start a run in the loop thread (open the rig, the log, go).
 
         ``experiment`` (a :class:`~.experiment.RigExperiment`, one run per
@@ -147,9 +149,12 @@ class RealtimeController:
         (the console's Experiments panel); on the ``sim`` backend its
         pendulum then starts hanging.  ``swing_up`` True/False starts this run
         with/without the swing-up (None: :attr:`swing_up`, the controller's
-        setting).
+        setting).  ``hanging``: on an emulated rig (``sim``; ``rig-sim`` over
+        UDP, whose operator's hand lets it hang) the pendulum starts hanging
+        at rest (the console's Swing up); a real rig starts from where the
+        pendulum is.
         """
-        loop = self._prepare(experiment, swing_up)
+        loop = self._prepare(experiment, swing_up, hanging)
         self._thread = threading.Thread(target=self._execute, args=(loop,),
                                         name="frictionlab-rt", daemon=True)
         self._thread.start()
@@ -198,7 +203,8 @@ class RealtimeController:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _prepare(self, experiment=None, swing_up: bool | None = None) -> Loop:
+    def _prepare(self, experiment=None, swing_up: bool | None = None,
+                 hanging: bool = False) -> Loop:
         swing_up = self.swing_up if swing_up is None else bool(swing_up)
         with self._lock:
             if self._closed:
@@ -209,7 +215,7 @@ class RealtimeController:
             experiment = experiment if experiment is not None else self.experiment
             self.run_experiment = experiment
             rig_cfg = self.cfg
-            if experiment is not None and self.backend == "sim":
+            if (experiment is not None or hanging) and self.backend == "sim":
                 # the simulated rig's pendulum hangs at rest, as a rig's does before an
                 # experiment
                 rig_cfg = rig_cfg.with_values({"sim.initial_angle": math.pi})
@@ -218,6 +224,10 @@ class RealtimeController:
                    if isinstance(self.backend, str)
                    else self.backend)
             rig.open(h=self.cfg.design.h, cancel=lambda: self._stop_asked is not None)
+            if hanging and self.backend != "sim" and getattr(rig, "emulated", False):
+                # rig-sim's operator lets the pendulum hang; another rig: where it is
+                with contextlib.suppress(RigError, OSError):
+                    rig.hand({"hang": True})
             try:
                 loop = Loop(rig, self.clock, self._params, safety=self.safety,
                             scaling=self.scaling, duration=self.duration,
@@ -536,6 +546,12 @@ class RealtimeController:
         if self.backend_name == "sim":
             return self.cfg.friction_kind
         return None
+
+    def sidecar(self) -> dict:
+        """The run's sidecar (``<run_id>.json``) as of now: configuration, ``h``, the
+        initial and current design and compensation, events, statistics.  A Save Data
+        recording gets one beside it, so that ``frictionlab features`` reads it alone."""
+        return self._meta()
 
     def _meta(self) -> dict:
         loop = self._loop

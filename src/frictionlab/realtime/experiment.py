@@ -13,10 +13,11 @@ loops) are the thesis's experiments:
 
 ==================  ===========================================================
 ``stiction``        App. E.1: a staircase of constant u in each direction until
-                    the arm breaks away; then, per Coulomb level, a short motor
-                    push to ``push`` rad/s and a constant u below the breakaway
-                    level while the arm slides (it decelerates below the Coulomb
-                    level and keeps going above it)
+                    the arm breaks away; then, per Coulomb level and in each
+                    direction in turn, a short motor push to ``push`` rad/s and
+                    a constant u below the breakaway level while the arm slides
+                    (it decelerates below the Coulomb level and keeps going
+                    above it)
 ``stribeck``        App. E.2: a P velocity loop
                     :math:`u = K(v_{ref} - \dot\Omega_m)` at each reference,
                     alternately positive and negative
@@ -69,6 +70,8 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 from ..model.params import ParamError, Validated, check_range, param
+from ..model.rig import RigScaling
+from ..model.sensor import unwrap, wrap_angle
 from .loop import ExperimentEnd
 
 __all__ = [
@@ -93,6 +96,10 @@ VELOCITY_REFERENCES = (1.5, 3.0, 4.5, 6.0)
 #: Most levels or references of one experiment.
 MAX_LEVELS = 100
 
+# the sensor model's laws as plain Python (called per tick; no dispatch)
+_wrap_angle = wrap_angle.py_func
+_unwrap = unwrap.py_func
+
 
 @dataclass(frozen=True)
 class Limits(Validated):
@@ -115,18 +122,24 @@ class RigExperiment(ABC):
     ----------
     h : float
         Sampling period (s).
-    u_scale : float
-        k_u of App. B (``rig.u_scale``): u_DA per m/s^2, for the u_DA limit.
+    u_scale : float, optional
+        k_u of App. B (``rig.u_scale``): u_DA per m/s^2, for the u_DA limit
+        (default :class:`~frictionlab.model.rig.RigScaling`'s).
     limits : Limits, optional
     """
 
     name = "experiment"
     #: Signals the analysis needs (log columns).
     signals: tuple[str, ...] = ("t", "u", "arm_dot_m")
+    #: Whether the schedule reads the raw ``y, x, v`` (a runner that has only the SI
+    #: signals at hand may pass NaN for them otherwise).
+    reads_raw = False
 
-    def __init__(self, h: float, u_scale: float = -0.022, limits: Limits | None = None):
+    def __init__(self, h: float, u_scale: float | None = None, limits: Limits | None = None):
         self.h = float(h)
         self.limits = limits or Limits()
+        if u_scale is None:
+            u_scale = RigScaling().u_scale
         self.u_max = self.limits.max_u_da / abs(u_scale)
         self.progress = 0.0
         self.phase = "waiting for the first reading"
@@ -239,7 +252,7 @@ class Stiction(RigExperiment):
 
     name = "stiction"
 
-    def __init__(self, h, u_scale=-0.022, limits=None, *, step: float = 0.02,
+    def __init__(self, h, u_scale=None, limits=None, *, step: float = 0.02,
                  hold: float = 0.25,
                  coulomb_levels: Sequence[float] = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9),
                  push: float = 1.5, slide: float = 0.8, v_detect: float = 0.1):
@@ -282,8 +295,10 @@ class Stiction(RigExperiment):
             yield from self.coast()
             done += 1
             self.progress = done / n_trials
-        for d in (1.0, -1.0):
-            for c in self.coulomb_levels:
+        # each level in both directions before the next: the arm's travel stays
+        # within a slide or two of its start
+        for c in self.coulomb_levels:
+            for d in (1.0, -1.0):
                 self.phase = (f"Coulomb slide, {'positive' if d > 0 else 'negative'} "
                               f"direction, {c:g} x breakaway")
                 # the push: the motor accelerates the arm to the push speed
@@ -303,7 +318,7 @@ class Stribeck(RigExperiment):
 
     name = "stribeck"
 
-    def __init__(self, h, u_scale=-0.022, limits=None, *,
+    def __init__(self, h, u_scale=None, limits=None, *,
                  references: Sequence[float] = STRIBECK_REFERENCES, gain: float = 20.0,
                  hold: float = 2.0):
         super().__init__(h, u_scale, limits)
@@ -348,7 +363,7 @@ class FreeOscillation(RigExperiment):
     name = "free-oscillation"
     signals = ("t", "theta_m")
 
-    def __init__(self, h, u_scale=-0.022, limits=None, *, omega0: float = 6.8,
+    def __init__(self, h, u_scale=None, limits=None, *, omega0: float = 6.8,
                  amplitude: float = 0.12, excite: float = 0.05, duration: float = 12.0,
                  kp: float = 60.0, kd: float = 4.0, max_cycles: int = 20):
         super().__init__(h, u_scale, limits)
@@ -363,8 +378,7 @@ class FreeOscillation(RigExperiment):
         self.max_cycles = int(max_cycles)
 
     def _deflection(self) -> float:
-        d = self.theta - self.theta0
-        return (d + math.pi) % (2.0 * math.pi) - math.pi
+        return _wrap_angle(self.theta - self.theta0)
 
     def _pd(self, ref: float) -> float:
         return self.kp * (ref - (self.arm - self.arm0)) - self.kd * self.arm_dot
@@ -402,7 +416,7 @@ class ControlScaling(RigExperiment):
 
     name = "control-scaling"
 
-    def __init__(self, h, u_scale=-0.022, limits=None, *,
+    def __init__(self, h, u_scale=None, limits=None, *,
                  levels: Sequence[float] = SCALING_LEVELS, v_stop: float = 4.0,
                  limit: float = 3.0):
         super().__init__(h, u_scale, limits)
@@ -433,7 +447,7 @@ class VelocityScale(Stribeck):
     name = "velocity-scale"
     signals = ("t", "arm_m", "v")
 
-    def __init__(self, h, u_scale=-0.022, limits=None, *,
+    def __init__(self, h, u_scale=None, limits=None, *,
                  references: Sequence[float] = VELOCITY_REFERENCES, gain: float = 20.0,
                  hold: float = 2.0):
         super().__init__(h, u_scale, limits, references=references, gain=gain, hold=hold)
@@ -460,8 +474,9 @@ class AngleScales(RigExperiment):
 
     name = "angle-scales"
     signals = ("t", "y", "x")
+    reads_raw = True
 
-    def __init__(self, h, u_scale=-0.022, limits=None, *, wait: float = 120.0,
+    def __init__(self, h, u_scale=None, limits=None, *, wait: float = 120.0,
                  settle: float = 1.0, lap_seconds: float = 2.0):
         super().__init__(h, u_scale, limits)
         check_range("wait", wait, 1.0, 3600.0)
@@ -482,11 +497,7 @@ class AngleScales(RigExperiment):
         limit = self._ticks(self.wait)
         while True:
             cur = getattr(self, raw)
-            d = cur - prev
-            if d > 1.0:
-                wraps -= 1
-            elif d < -1.0:
-                wraps += 1
+            wraps = _unwrap(prev, cur, wraps)
             prev = cur
             val = cur + 2.0 * wraps
             window.append(val)
@@ -533,7 +544,7 @@ EXPERIMENT_CLASSES = {c.name: c for c in (Stiction, Stribeck, FreeOscillation, C
                                           VelocityScale, AngleScales)}
 
 
-def make_experiment(name: str, h: float, u_scale: float = -0.022,
+def make_experiment(name: str, h: float, u_scale: float | None = None,
                     limits: Limits | None = None, **options) -> RigExperiment:
     """The experiment ``name`` with its options (None values take the defaults)."""
     try:

@@ -69,10 +69,10 @@ process was suspended, e.g. SIGSTOP, or the host stalled - so the
 controller's state is stale; the tick zeroes the motor instead of acting on
 it; not with a rig whose plant waits for the loop, ``Rig.realtime_plant``
 False), ``exception``, an identification experiment's ``finished`` (its
-schedule is done) and ``experiment_limit`` (arm speed, travel or waiting
-time exceeded, :mod:`.experiment`), and the requested stops ``duration``, ``user``,
-``signal``, ``exit`` and ``log_failed`` (the log writer could not write,
-:mod:`.datalog`).
+schedule is done) and ``experiment_limit`` (arm speed, travel or waiting time
+exceeded, :mod:`.experiment`), a board's ``watchdog_expired``, ``amplifier_fault``,
+``motor_stall`` (:mod:`.qube`), and the requested stops ``duration``, ``user``,
+``signal``, ``exit`` and ``log_failed`` (the log writer: :mod:`.datalog`).
 
 Garbage collection: the cyclic collector is frozen (``gc.freeze()``: every
 object alive at the start is exempt) and disabled while the loop runs, so it
@@ -141,7 +141,7 @@ __all__ = ["STOP_REASONS", "ExperimentEnd", "Loop", "Safety"]
 STOP_REASONS = ("duration", "user", "signal", "exit", "angle_limit", "bad_reading",
                 "rig_silent", "not_upright", "rig_fault", "nonfinite_u", "paused",
                 "log_failed", "exception", "finished", "experiment_limit", "not_caught",
-                "arm_travel", "arm_speed")
+                "arm_travel", "arm_speed", "watchdog_expired", "amplifier_fault", "motor_stall")
 _NAN = math.nan
 #: The controller state's estimates in its float vector (the tick reads the vector:
 #: a state record's field costs microseconds to read from Python).
@@ -432,6 +432,7 @@ class Loop:
         arm_si = sensor.arm_from_raw.py_func
         velocity_si = sensor.velocity_from_raw.py_func
         unwrap = sensor.unwrap.py_func
+        dac = sensor.dac.py_func
         ts, tb = sc.theta_scale, sc.theta_bias
         as_ = sc.arm_scale
         vs, vb = sc.velocity_scale, sc.velocity_bias
@@ -522,8 +523,8 @@ class Loop:
             t_r = now()
             try:
                 r = sample_rig(k, reply_by)
-            except BadReading as exc:
-                raise _Stop("bad_reading", str(exc)) from None
+            except BadReading as exc:  # its reason: bad_reading, or a board's (.qube)
+                raise _Stop(exc.reason, str(exc)) from None
             t_rd = now()
             rig_ns = t_rd - t_r
             if t_rd - deadline > pause_ns:
@@ -656,11 +657,7 @@ class Loop:
                                     "from the estimates theta, theta', arm, arm', z = "
                                     f"{th_hat:.4g}, {thd_hat:.4g}, {arm_hat:.4g}, "
                                     f"{armd_hat:.4g}, {z_hat:.4g}", r)
-                u_da = us * u
-                if u_da > 1.0:
-                    u_da = 1.0
-                elif u_da < -1.0:
-                    u_da = -1.0
+                u_da = dac(u, us)
                 if now() - deadline > pause_ns:
                     # suspended (or stalled) inside the tick: the reading is stale
                     raise _Stop("paused", f"the tick's output was due "

@@ -53,10 +53,21 @@ from ..config import Config, ConfigError
 from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller, Gains
 from ..model.design import PRESETS, Design, DesignSpec, design, preset
 from ..model.friction import FrictionParams, friction_row
-from ..model.loopcheck import DEFAULT_NOISE, LoopCheck, check_loop
+from ..model.loopcheck import DEFAULT_DISTURBANCE, DEFAULT_NOISE, LoopCheck, check_loop
 from ..model.params import ParamError
+from ..runs import simulate_config
 
-__all__ = ["CHANGE_KEYS", "COMPENSATOR_MODELS", "ChangeError", "ControlParams", "UnsafeChange"]
+__all__ = [
+    "CHANGE_KEYS",
+    "COMPENSATOR_MODELS",
+    "FALL_CHECK_ANGLE",
+    "FALL_CHECK_SECONDS",
+    "MIN_DECAY_RATE",
+    "ChangeError",
+    "ControlParams",
+    "UncheckableChange",
+    "UnsafeChange",
+]
 
 #: Friction models the compensator can use (the thesis's "Friction Type").
 COMPENSATOR_MODELS = COMPENSATORS
@@ -67,6 +78,17 @@ _FRICTION_FIELDS = tuple(f.name for f in dataclasses.fields(FrictionParams)
 _DESIGN_FIELDS = tuple(f.name for f in dataclasses.fields(DesignSpec) if "doc" in f.metadata)
 #: Bisection steps of the search for the largest safe part of a refused change.
 _SAFE_STEPS = 12
+#: Slowest decay (1/s) the loop at rest must have to pass the check: its slowest mode
+#: must shrink by e within 1 / MIN_DECAY_RATE = 10 s, i.e. a spectral radius of at most
+#: exp(-MIN_DECAY_RATE h) (0.9995 at h = 5 ms; the presets decay at 2.1-2.6 1/s).  An
+#: eigenvalue modulus of 1 - 1e-9 is stable on paper and holds nothing up: pole pairs at
+#: omega = 1e-300 rad/s give exactly that, and the pendulum falls.
+MIN_DECAY_RATE = 0.1
+#: Seconds the settings that pass the linear check are simulated (the run's plant model
+#: and friction, from DEFAULT_DISTURBANCE rad), and the angle (rad) counted as a fall
+#: there: the loop's default angle limit (``Safety.angle_limit``).
+FALL_CHECK_SECONDS = 10.0
+FALL_CHECK_ANGLE = 0.35
 
 
 class ChangeError(ConfigError):
@@ -84,6 +106,12 @@ class ChangeError(ConfigError):
     def __init__(self, message: str, keys=()):
         super().__init__(message)
         self.keys = tuple(keys)
+
+
+class UncheckableChange(ChangeError):
+    """A change the model's check cannot be computed for (its numbers overflow or the
+    linear algebra fails): refused whatever ``confirm`` says, since nothing would say
+    whether the loop holds the pendulum."""
 
 
 class UnsafeChange(ChangeError):
@@ -247,17 +275,65 @@ class ControlParams:
         if spec.h != self.cfg.design.h:
             raise ChangeError(f"design.h cannot change while the controller exists "
                               f"(it is {self.cfg.design.h} s)", ["design.h"])
+        keys = self._keys(spec, enabled, kind, params, error_signal)
         try:
-            return self._build(self.cfg, spec, enabled, kind, params, error_signal)
-        except ValueError as exc:
-            # a combination the controller refuses (a singular LuGre compensator): the
-            # compensation values this change touched, else the model it selected
-            touched = [f"compensation.{f.name}" for f in dataclasses.fields(FrictionParams)
-                       if getattr(params[kind], f.name) != getattr(self.comp_params[kind],
-                                                                   f.name)]
+            new = self._build(self.cfg, spec, enabled, kind, params, error_signal)
+        except (ValueError, ArithmeticError) as exc:
+            # a combination the design or the controller refuses (a singular LuGre
+            # compensator): the values this change touched, else the model it selected
             field = exc.field if isinstance(exc, ParamError) else ""
-            own = [field] if field.startswith("compensation.") else []
-            raise ChangeError(str(exc), touched or own or ["compensation"]) from None
+            touched = [k for k in keys if k.startswith(("design.", "compensation."))]
+            own = [field] if field.startswith(("compensation.", "design.")) else []
+            named = touched or own or keys or ["compensation"]
+            message = str(exc)
+            if not isinstance(exc, ParamError):  # numpy's words: say what was refused
+                message = (f"{', '.join(_describe_raw(spec, params[kind], k) for k in named)}"
+                           f" refused: the design or the compensator cannot be computed "
+                           f"({exc})")
+            raise ChangeError(message, named) from None
+        new.check_computable(keys)
+        return new
+
+    def check_computable(self, keys=()) -> None:
+        """Raise :class:`UncheckableChange` (naming ``keys``) unless these settings have
+        finite gains and the model's check can be computed with finite numbers."""
+        problem = None
+        if not (np.all(np.isfinite(self.design.L)) and np.all(np.isfinite(self.design.K))):
+            problem = "the design's gains are not finite numbers"
+        else:
+            try:
+                chk = self.loop_check
+            except (ValueError, ArithmeticError) as exc:  # numpy's LinAlgError included
+                problem = f"the model's check fails ({exc})"
+            else:
+                # the radii must be numbers; a peak of u is inf for an unstable loop
+                radii = (chk.spectral_radius, *(() if chk.compensator_radius is None
+                                                 else (chk.compensator_radius,)))
+                peaks = (chk.peak_u, chk.peak_u_disturbance, chk.u_noise_std)
+                if (not all(math.isfinite(x) for x in radii)
+                        or any(math.isnan(x) for x in peaks)):
+                    problem = "the model's check gives numbers that are not finite"
+        if problem is not None:
+            changed = ", ".join(_describe(self, k) for k in keys) or "these settings"
+            raise UncheckableChange(
+                f"{changed} refused: {problem}, so nothing says whether the loop would hold "
+                "the pendulum (the values are outside what the model can compute; "
+                "confirm does not apply it)", keys or ["design"])
+
+    def _keys(self, spec, enabled, kind, params, error_signal) -> list[str]:
+        """The change keys whose values differ from ``self``'s."""
+        keys = [f"design.{n}" for n in _DESIGN_FIELDS
+                if getattr(spec, n) != getattr(self.cfg.design, n)]
+        if enabled != self.comp_enabled:
+            keys.append("compensation_enabled")
+        if kind != self.comp_kind:
+            keys.append("compensation")
+        old_p, new_p = self.comp_params[kind], params[kind]
+        keys += [f"compensation.{n}" for n in _FRICTION_FIELDS
+                 if getattr(new_p, n) != getattr(old_p, n)]
+        if error_signal != self.error_signal:
+            keys.append("error_signal")
+        return keys
 
     @functools.cached_property
     def loop_check(self) -> LoopCheck:
@@ -267,23 +343,47 @@ class ControlParams:
         ``sim.noise``, or :data:`~frictionlab.model.loopcheck.DEFAULT_NOISE` when
         that is 0 (a real rig's noise is not configured).
         """
-        return check_loop(self.controller, self.cfg.plant,
-                          noise=self.cfg.sim.noise or DEFAULT_NOISE)
+        chk = check_loop(self.controller, self.cfg.plant,
+                         noise=self.cfg.sim.noise or DEFAULT_NOISE)
+        limit = math.exp(-MIN_DECAY_RATE * self.cfg.design.h)
+        if chk.verdict != "unstable" and not chk.spectral_radius <= limit:
+            # stable on paper, but its slowest mode hardly decays (see MIN_DECAY_RATE)
+            r = chk.spectral_radius
+            tau = self.cfg.design.h / -math.log(r) if 0 < r < 1 else math.inf
+            reason = (f"the loop is not stable with a margin: its slowest mode (eigenvalue "
+                      f"modulus {r:.9g}) takes {tau:.3g} s to decay by e, more than "
+                      f"{1 / MIN_DECAY_RATE:g} s")
+            chk = dataclasses.replace(chk, verdict="unstable", reasons=(reason, *chk.reasons))
+        if chk.ok and (t := self.fall_time) is not None:
+            # the linear check cannot see friction's limit cycle grow: the simulator can
+            chk = dataclasses.replace(chk, verdict="falls", reasons=(
+                f"simulated with the run's plant model and friction from a "
+                f"{DEFAULT_DISTURBANCE:g} rad start, the pendulum falls (|theta| > "
+                f"{self._fall_angle:g} rad) after {t:.2g} s",))
+        return chk
+
+    @property
+    def _fall_angle(self) -> float:
+        return min(self.cfg.sim.fall_angle, FALL_CHECK_ANGLE)
+
+    @functools.cached_property
+    def fall_time(self) -> float | None:
+        """When the pendulum falls (s) in a :data:`FALL_CHECK_SECONDS` s simulation of
+        these settings on the run's plant model and friction (``cfg``: ``plant.*``,
+        ``friction.*``, ``sim.noise``), starting :data:`~frictionlab.model.loopcheck.
+        DEFAULT_DISTURBANCE` rad from upright; None if it stays within
+        :data:`FALL_CHECK_ANGLE` rad.  A design ``omega0`` of 7.5 against the plant's
+        6.8 passes the linear check, yet its friction limit cycle grows and the
+        pendulum falls after about 3 s: this finds it."""
+        cfg = self.cfg.with_values({"sim.initial_angle": DEFAULT_DISTURBANCE,
+                                    "sim.fall_angle": self._fall_angle})
+        traj = simulate_config(cfg, FALL_CHECK_SECONDS, controller=self.controller)
+        return len(traj) * traj.h if traj.status == "fell" else None
 
     def changed_keys(self, new: ControlParams) -> tuple[str, ...]:
         """The keys whose values differ from ``self`` in ``new`` (see the module docstring)."""
-        keys = [f"design.{n}" for n in _DESIGN_FIELDS
-                if getattr(new.cfg.design, n) != getattr(self.cfg.design, n)]
-        if new.comp_enabled != self.comp_enabled:
-            keys.append("compensation_enabled")
-        if new.comp_kind != self.comp_kind:
-            keys.append("compensation")
-        old_p, new_p = self.comp_params[new.comp_kind], new.comp_params[new.comp_kind]
-        keys += [f"compensation.{n}" for n in _FRICTION_FIELDS
-                 if getattr(new_p, n) != getattr(old_p, n)]
-        if new.error_signal != self.error_signal:
-            keys.append("error_signal")
-        return tuple(keys)
+        return tuple(self._keys(new.cfg.design, new.comp_enabled, new.comp_kind,
+                                new.comp_params, new.error_signal))
 
     def refusal(self, new: ControlParams) -> UnsafeChange:
         """The :class:`UnsafeChange` for going from ``self`` to ``new`` (whose check fails).
@@ -301,15 +401,15 @@ class ControlParams:
         base = self._build(self.cfg, self.cfg.design, new.comp_enabled, new.comp_kind,
                            self.comp_params, new.error_signal)
         if numeric:
-            values = base._largest_safe(new, numeric) if base.loop_check.ok else {}
+            values = base._largest_safe(new, numeric) if _passes(lambda: base) else {}
             if values:
                 safe["values"] = values
         if new.comp_enabled and new.comp_kind == "lugre" and (
                 "error_signal" in keys or not numeric):
             safe["error_signals"] = [
                 e for e in ERROR_SIGNALS
-                if self._build(self.cfg, new.cfg.design, True, "lugre", new.comp_params,
-                               e).loop_check.ok]
+                if _passes(lambda e=e: self._build(self.cfg, new.cfg.design, True, "lugre",
+                                                   new.comp_params, e))]
         changed = ", ".join(_describe(new, k) for k in keys) or "the change"
         msg = f"{changed} refused: " + "; ".join(check.reasons)
         if safe.get("values"):
@@ -342,11 +442,7 @@ class ControlParams:
         lo, hi = 0.0, 1.0
         for _ in range(_SAFE_STEPS):
             mid = 0.5 * (lo + hi)
-            try:
-                good = at(mid).loop_check.ok
-            except ValueError:
-                good = False
-            if good:
+            if _passes(lambda mid=mid: at(mid)):
                 lo = mid
             else:
                 hi = mid
@@ -394,6 +490,16 @@ class ControlParams:
         }
 
 
+def _passes(make) -> bool:
+    """True if ``make()`` builds settings whose check is computable and passes."""
+    try:
+        p = make()
+        p.check_computable()
+        return p.loop_check.ok
+    except (ValueError, ArithmeticError):  # a ChangeError or numpy's LinAlgError included
+        return False
+
+
 def _value(p: ControlParams, key: str):
     """The value of ``design.<f>`` / ``compensation.<f>`` (the selected model's) in ``p``."""
     section, name = key.split(".", 1)
@@ -410,6 +516,16 @@ def _describe(p: ControlParams, key: str) -> str:
     if key == "error_signal":
         return f"error signal {p.error_signal}"
     return f"{key} = {_value(p, key):g}"
+
+
+def _describe_raw(spec: DesignSpec, comp: FrictionParams, key: str) -> str:
+    """``key = value`` from a spec and compensator parameters (before they are built)."""
+    section, _, name = key.partition(".")
+    if section == "design" and name:
+        return f"{key} = {getattr(spec, name):g}"
+    if section == "compensation" and name:
+        return f"{key} = {getattr(comp, name):g}"
+    return key
 
 
 def _round_toward(value: float, toward: float) -> float:

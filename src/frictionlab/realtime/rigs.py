@@ -1,4 +1,4 @@
-"""Rig backends: one small interface, three implementations.
+"""Rig backends: one small interface, four implementations.
 
 A rig is what the loop reads the raw signals (y, x, v of App. B) from and
 writes the DAC value u_DA to.  The interface (:class:`Rig`):
@@ -42,6 +42,11 @@ Backends (:func:`open_rig` parses the ``--backend`` string):
 ``serial://DEVICE[?baud=N]``
     :class:`FramedRig` over :class:`SerialTransport` (pyserial; DEVICE may
     also be a pyserial URL such as ``loop://``).
+``qube2://ID``, ``qube3://ID``
+    :class:`.qube.QubeRig`: a Quanser QUBE-Servo 2 or 3 through Quanser's HIL
+    API (the SDK's ``quanser.hardware``; docs/qube.md).
+
+The interface and its errors live in :mod:`.rigbase` (re-exported here).
 """
 
 from __future__ import annotations
@@ -50,7 +55,6 @@ import math
 import select
 import socket
 import time
-from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Callable
 from urllib.parse import parse_qs, urlsplit
@@ -58,16 +62,19 @@ from urllib.parse import parse_qs, urlsplit
 from ..config import Config
 from ..model.params import ParamError
 from ..model.rig import RigScaling
-from ..model.sensor import ARM_START, adc, sensor_params
+from ..model.sensor import ARM_START, adc, dac, sensor_params, u_from_dac
 from ..runs import simulated_plant
 from . import protocol as P
 from .protocol import Frame, FrameError, SensorReading
+from .qube import QubeRig, parse_qube
+from .rigbase import BadReading, Rig, RigError
 
 __all__ = [
     "ARM_START",
     "AdcModel",
     "BadReading",
     "FramedRig",
+    "QubeRig",
     "Rig",
     "RigError",
     "SerialTransport",
@@ -82,14 +89,6 @@ __all__ = [
 #: How often :meth:`FramedRig.open` looks at its ``cancel`` callable while waiting (ns).
 CANCEL_POLL_NS = 10_000_000
 _MASK = 0xFFFFFFFF
-
-
-class RigError(RuntimeError):
-    """The rig cannot be opened or does not support an operation."""
-
-
-class BadReading(Exception):
-    """A reading that must stop the loop (corrupted frame, bad sequence number)."""
 
 
 class AdcModel:
@@ -138,65 +137,6 @@ class AdcModel:
         return adc(self.sensor, theta, arm, arm_dot, n)
 
 
-class Rig(ABC):
-    """Interface of a rig backend (see the module docstring)."""
-
-    name = "rig"
-    #: An emulator (push and plant friction available).
-    emulated = False
-    #: Friction model of the emulated plant (None if unknown, e.g. a real rig).
-    plant_friction: str | None = None
-    #: Valid frames received from the rig so far (the loop's sign of life).
-    rx_frames = 0
-    #: The plant moves on in real time whether the loop runs or not (a physical rig;
-    #: the in-process simulation unless in lockstep): a gap in the loop makes its state
-    #: stale (stop reason ``paused``).
-    realtime_plant = True
-
-    #: What the rig said about itself when the session started (protocol ``HELLO_ACK``;
-    #: None for the in-process simulation).
-    info: P.HelloInfo | None = None
-
-    @abstractmethod
-    def open(self, h: float | None = None, cancel: Callable[[], bool] | None = None) -> None:
-        """Connect and start a session with the motor off.
-
-        ``h`` is the controller's period (a rig stating another one is
-        refused); ``cancel()`` returning True ends the attempt early (see
-        :meth:`FramedRig.open`).
-        """
-
-    @abstractmethod
-    def sample(self, k: int, deadline_ns: int) -> SensorReading | None:
-        """The raw reading of tick k, or None if none arrived by ``deadline_ns``."""
-
-    @abstractmethod
-    def write(self, k: int, u_da: float) -> None:
-        """Output the DAC value of tick k."""
-
-    @abstractmethod
-    def stop_motor(self) -> None:
-        """Best-effort u_DA = 0; never raises."""
-
-    def close(self) -> None:
-        self.stop_motor()
-
-    def warm(self) -> None:  # noqa: B027 - optional hook, a no-op by default
-        """Run the code of :meth:`sample` on scratch data, without I/O (cache warming)."""
-
-    def push(self, kick: float) -> None:
-        raise RigError(f"push needs an emulated rig; {self.name} is not one")
-
-    def hand(self, action: dict) -> None:
-        """The emulated operator's hand (``rig-sim``'s CONTROL ``hand``)."""
-        raise RigError(f"the operator's hand can be played by rig-sim over UDP only; "
-                       f"{self.name} is not one: do it by hand")
-
-    def counters(self) -> dict:
-        """Backend-specific counters for the run's statistics."""
-        return {}
-
-
 class SimRig(Rig):
     """The simulated plant in-process, stepped once per tick (``--backend sim``).
 
@@ -238,6 +178,7 @@ class SimRig(Rig):
                             cfg.sim.noise, cfg.sim.seed)
         self.state = self.plant.init()
         self.plant.step(self.state, 0.0)  # compile before the loop starts
+        u_from_dac.py_func(0.0, 1.0)  # and the DAC law (it calls the compiled dac)
         self._k: int | None = None
         self.u_da = 0.0
         self._u = 0.0
@@ -268,9 +209,9 @@ class SimRig(Rig):
             self.adc.read(x[0], x[2], x[3], count=False)
 
     def write(self, k: int, u_da: float) -> None:
-        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
+        u_da = dac.py_func(u_da, 1.0)
         self.u_da = u_da
-        self._u = u_da / self.scaling.u_scale
+        self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
 
     def stop_motor(self) -> None:
         self.u_da = 0.0
@@ -669,19 +610,24 @@ def open_rig(spec: str, cfg: Config, *, lockstep: bool = False,
     scheme, where, arg = parse_backend(spec)
     if scheme == "sim":
         return SimRig(cfg, lockstep=lockstep, duration=duration)
+    if scheme in ("qube2", "qube3"):
+        return QubeRig(spec, cfg)
     if scheme == "udp":
         return FramedRig(UdpTransport(where, arg), spec)
     return FramedRig(SerialTransport(where, arg), spec)
 
 
 #: The backends a rig string may name (the ``allowed`` of a refused one, field ``backend``).
-BACKEND_FORMS = "sim, udp://HOST:PORT or serial://DEVICE[?baud=N]"
+BACKEND_FORMS = ("sim, udp://HOST:PORT, serial://DEVICE[?baud=N], qube2://ID or "
+                 "qube3://ID")
 
 
 def parse_backend(spec: str) -> tuple[str, str | None, int | None]:
     """``(scheme, host or device, port or baud)`` of a backend string, checked
     without connecting: ``("sim", None, None)``, ``("udp", HOST, PORT)``,
-    ``("serial", DEVICE, BAUD)`` (baud 1 000 000 unless ``?baud=N``).
+    ``("serial", DEVICE, BAUD)`` (baud 1 000 000 unless ``?baud=N``),
+    ``("qube2", ID, None)`` and ``("qube3", ID, None)`` (options checked by
+    :func:`.qube.parse_qube`).
 
     Raises
     ------
@@ -715,8 +661,12 @@ def parse_backend(spec: str) -> tuple[str, str | None, int | None]:
                 raise ParamError("backend", spec, BACKEND_FORMS,
                                  f"{spec!r}: baud must be an integer") from None
         return "serial", device, baud
+    if parts.scheme in ("qube2", "qube3"):
+        scheme, ident, _options = parse_qube(spec)
+        return scheme, ident, None
     raise ParamError("backend", spec, BACKEND_FORMS,
-                     f"{spec!r}: expected sim, udp://HOST:PORT or serial://DEVICE")
+                     f"{spec!r}: expected sim, udp://HOST:PORT, serial://DEVICE, qube2://ID "
+                     "or qube3://ID")
 
 
 def send_control(host: str, port: int, message: dict, timeout: float = 1.0) -> dict:

@@ -64,6 +64,7 @@ from collections import deque
 
 from ..config import Config
 from ..model.rig import ADC_BITS, RigScaling
+from ..model.sensor import dac, u_from_dac
 from ..model.simulation import SimulatedPlant
 from ..runs import simulated_plant
 from . import protocol as P
@@ -97,6 +98,8 @@ HAND = {
     "direction": "+1 or -1: the lap's direction (default +1)",
     "push": "add this many rad/s to the pendulum's velocity",
     "push_arm": "add this many rad/s to the arm's velocity",
+    "hang": "true: let the pendulum hang at rest (the arm stays where it is), as a session "
+            "of rig-sim --hanging starts; the console's Swing up sends it",
 }
 
 
@@ -108,6 +111,8 @@ def hand_error(msg: dict) -> str | None:
         return f"unknown hand key {unknown[0]!r}; known: {', '.join(HAND)}"
     if not keys:
         return f"hand: say what to do ({', '.join(HAND)})"
+    if "hang" in keys and keys["hang"] is not True:
+        return f"hand hang: true, got {keys['hang']!r}"
     if "lap" in keys and keys["lap"] not in ("pendulum", "arm"):
         return f"hand lap: 'pendulum' or 'arm', got {keys['lap']!r}"
     for k in ("seconds", "direction", "push", "push_arm"):
@@ -167,6 +172,7 @@ class RigEmulator:
         self.state = self._plant(1).init()
         for n in range(1, 2 * cfg.substeps + 1):  # compile and cache the usual chunks
             self._plant(n).step(self.state, 0.0)
+        u_from_dac.py_func(0.0, 1.0)  # and the DAC law (it calls the compiled dac)
         self.t_state = self._t0
         self.u_da = 0.0
         self._u = 0.0
@@ -246,6 +252,12 @@ class RigEmulator:
 
     def _apply_hand(self, msg: dict, t: int) -> None:
         self._advance(t)
+        if msg.get("hang"):
+            x = self.state.x.copy()
+            x[0], x[1], x[3] = math.pi, 0.0, 0.0
+            self.state = dataclasses.replace(self.state, x=x, memory=0.0)
+            self._hand = None
+            self._applied("hand_hang", -1, math.pi)
         if "push" in msg:
             self.state = self._plant(1).push(self.state, float(msg["push"]))
             self._applied("hand_push", -1, float(msg["push"]))
@@ -337,14 +349,14 @@ class RigEmulator:
         self.last_command_seq = frame.seq
         self.counts["commands"] += 1
         self.saturated = not (-1.0 <= u_da <= 1.0)
-        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
+        u_da = dac.py_func(u_da, 1.0)
         if self.held:
             self.held = False
             self.t_state = t
         else:
             self._advance(t)
         self.u_da = u_da
-        self._u = u_da / self.scaling.u_scale
+        self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
         self._t_cmd = t
         self.tripped = False
 

@@ -7,12 +7,12 @@ from Python, each costs the compiled simulation plus the Python around it
 whole batch of parameter sets - a sweep's chunk, one generation of the
 identification's global search - is packed into arrays once and handed to one
 compiled driver, which for every set runs the same compiled closed loop as
-:func:`frictionlab.model.simulation.simulate_config`
+:func:`frictionlab.runs.simulate_config`
 (:func:`~frictionlab.model.closedloop.run_loop`:
 sensor model, controller step, plant tick) and the same compiled feature
 extraction as :func:`frictionlab.model.limit_cycles.features`
 (:func:`~frictionlab.model.limit_cycles._features_kernel`), with no Python per run.
-The features are those of :func:`frictionlab.model.simulation.run_features`, bit
+The features are those of :func:`frictionlab.runs.run_features`, bit
 for bit (noise included: :func:`frictionlab.model.sensor.measure`'s noise is a
 function of the seed and the sample number, with no generator state to share
 between threads).
@@ -68,10 +68,10 @@ def _one(i, x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
          buf, sig, codes, vals, cycles):
     """Run set ``i`` and store its status code, feature values and cycle count.
 
-    As :func:`frictionlab.model.simulation.run_features`: the closed loop for
+    As :func:`frictionlab.runs.run_features`: the closed loop for
     ``nt[i]`` ticks (recorded into ``buf``, :data:`CHUNK_TICKS` rows at a time:
     the loop continued chunk by chunk is the single run bit for bit, as
-    :func:`~frictionlab.model.simulation.simulate_config` with ``progress``; the
+    :func:`~frictionlab.runs.simulate_config` with ``progress``; the
     measured angle, u and the measured arm velocity copied into ``sig``), then the
     features of the measured angle over the window (``win[i]`` s, nan: the last
     half) by :func:`frictionlab.model.limit_cycles.trajectory_features`'s rules.
@@ -300,7 +300,7 @@ def evaluate_rows(base: Config, points: Sequence[Mapping[str, Any]], duration: f
         Configuration every point modifies.
     points : sequence of mappings ``{key: value}``
     duration, window : float or None
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
 
     Returns
     -------

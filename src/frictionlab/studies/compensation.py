@@ -81,6 +81,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from .. import runs
 from ..config import COMPENSATOR_FIELDS, Config, ConfigError, check_compensator
 from ..model.controller import (
     COMPENSATOR_CODES,
@@ -93,7 +94,11 @@ from ..model.controller import (
     new_state,
 )
 from ..model.friction import LUGRE, FrictionParams, copy_friction, with_levels
+from ..model.limit_cycles import trajectory_features
+from ..model.plants.thesis import PlantParams
 from ..model.rig import RigScaling
+from . import sweep
+from .sweep import make_points, validate_points
 
 #: The smallest peak-to-peak a reduction ratio divides by: one quantum of the rig's
 #: pendulum-angle ADC (12 bits, App. B), about 1.5 mrad.  A compensated run whose
@@ -274,8 +279,8 @@ class AdaptiveCompensator(LuGreCompensator):
     """
 
     kind: ClassVar[str] = "adaptive"
-    arm_length: float = 0.21
-    u_max: float = 1.0 / 0.022
+    arm_length: float = PlantParams().arm_length
+    u_max: float = RigScaling().u_max
 
     def step(self, state: CompensatorState, v: float, *, u_fb: float = 0.0, e: float = 0.0,
              u_prev: float = 0.0) -> tuple[float, CompensatorState]:
@@ -444,10 +449,7 @@ class Comparison:
 
 
 def _run(cfg: Config, duration: float | None, window: float | None, controller=None):
-    from ..model.limit_cycles import trajectory_features
-    from ..runs import simulate_config
-
-    traj = simulate_config(cfg, duration, controller=controller)
+    traj = runs.simulate_config(cfg, duration, controller=controller)
     feats = trajectory_features(traj, window)
     status = "fell" if traj.status == "fell" else feats.status
     return traj, status, feats.interface_dict(), chatter(traj, window)
@@ -465,7 +467,7 @@ def features_and_chatter(cfg: Config, duration: float | None,
     cfg : Config
         The run's configuration.
     duration, window : float or None
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
 
     Returns
     -------
@@ -487,7 +489,7 @@ def compare(cfg: Config, duration: float | None = None, window: float | None = N
     cfg : Config
         The compensated configuration (``cfg.compensation_kind`` != none).
     duration, window : float, optional
-        As for :func:`frictionlab.model.simulation.run_features`.
+        As for :func:`frictionlab.runs.run_features`.
     controller : Controller, optional
         A controller for the compensated run (e.g. another error signal).
     return_trajectories : bool
@@ -595,8 +597,6 @@ def check_grid(cfg: Config, grid: Sequence[tuple[str, Sequence[float]]]) -> list
     """The grid's points, every one validated (raises :class:`ConfigError` before
     anything runs): only ``compensation.*`` keys the compensator reads, values in
     range, and a model :func:`check_compensator` accepts."""
-    from .sweep import make_points, validate_points
-
     if cfg.compensation_kind == "none":
         raise ConfigError("tuning needs a compensator: coulomb, classical or lugre")
     used = COMPENSATOR_FIELDS[cfg.compensation_kind]
@@ -679,8 +679,6 @@ def tune(
         No grid point kept the pendulum up, or the run without compensation
         failed (an engine error row).
     """
-    from .sweep import evaluate
-
     if not (isinstance(chatter_weight, int | float) and math.isfinite(chatter_weight)
             and chatter_weight >= 0):
         raise ConfigError(f"chatter weight must be >= 0, got {chatter_weight!r}")
@@ -694,9 +692,9 @@ def tune(
 
     run = {"duration": duration, "window": window, "workers": workers, "dask": dask,
            "reduce": features_and_chatter}
-    rows = evaluate(cfg, points, progress=report, **run)
+    rows = sweep.evaluate(cfg, points, progress=report, **run)
     base_cfg = dataclasses.replace(cfg, compensation_kind="none")
-    (brow,) = evaluate(base_cfg, [{}], progress=lambda d, n: report(total, total), **run)
+    (brow,) = sweep.evaluate(base_cfg, [{}], progress=lambda d, n: report(total, total), **run)
     if brow["status"] == "error":
         raise RuntimeError(f"the run without compensation failed: {brow['error']}")
     cands = []
@@ -721,10 +719,8 @@ def tune(
         failed=len(rows) - len(cands))
     if not return_trajectories:
         return res
-    from ..runs import simulate_config
-
-    return (res, simulate_config(cfg.with_values(res.best), duration),
-            simulate_config(base_cfg, duration))
+    return (res, runs.simulate_config(cfg.with_values(res.best), duration),
+            runs.simulate_config(base_cfg, duration))
 
 
 def _row_chatter(row: dict[str, Any]) -> ChatterMetrics:

@@ -65,7 +65,14 @@ import scipy.optimize
 
 from ..config import Config
 from ..model.friction import stribeck_classical_force, stribeck_curve
-from ..model.periodic import LinearLoop, PeriodicOrbit, linear_loop, periodic_orbit
+from ..model.periodic import (
+    LinearLoop,
+    PeriodicOrbit,
+    linear_loop,
+    orbit_trajectory,
+    periodic_orbit,
+)
+from ..plotting import TRACES, axis_label, config_title, plt, save_figure
 from ..runs import loop_spec
 
 __all__ = [
@@ -387,9 +394,6 @@ def plot_prediction(cfg: Config, result: Prediction, path: str) -> str:
     period (solid) and the describing function's sinusoid of the predicted
     pendulum amplitude and period (dash-dot).  The path is printed on stderr.
     """
-    from ..model.periodic import orbit_trajectory
-    from ..plotting import TRACES, axis_label, config_title, plt, save_figure
-
     loop = linear_loop(loop_spec(cfg))
     nl, _ = friction_nonlinearity(cfg)
     df, po = result.describing_function, result.periodic_orbit

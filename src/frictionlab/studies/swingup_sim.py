@@ -3,7 +3,7 @@ r"""Closed-loop simulation of a swing-up (:mod:`frictionlab.model.swingup`).
 The closed loop of :func:`frictionlab.model.closedloop.run_loop` with its
 swing-up supervisor (:func:`frictionlab.model.swingup.swingup_step`) on: the
 same compiled tick, plant, sensor and friction drift as
-:func:`frictionlab.model.simulation.simulate_config`.  The pendulum's angle is
+:func:`frictionlab.runs.simulate_config`.  The pendulum's angle is
 unbounded in the plant (it may go over the top); the recorded ``theta`` and
 ``theta_m`` columns are wrapped into [-pi, pi).
 
@@ -24,6 +24,7 @@ from ..config import Config
 from ..model.closedloop import FELL, NC, SWING_STOPPED, run_loop
 from ..model.controller import Controller
 from ..model.friction import KINDS, resolve_drift
+from ..model.limit_cycles import LimitCycleFeatures, trajectory_features
 from ..model.plants import THESIS
 from ..model.simulation import Trajectory
 from ..model.swingup import (
@@ -130,8 +131,6 @@ def swingup_outcome(res: SwingUpResult, window: float | None = None):
     run) after balancing, and
     ``not_caught`` otherwise.
     """
-    from ..model.limit_cycles import LimitCycleFeatures, trajectory_features
-
     traj = res.trajectory
     if not res.balanced:
         return "not_caught", LimitCycleFeatures("not_caught", *([None] * 7))

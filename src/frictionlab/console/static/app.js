@@ -13,18 +13,23 @@
     { id: "control", unit: "m/s²", height: 150 },
   ];
   // Estimates are dashed, measured signals and u solid: told apart by line style as well
-  // as by colour (an estimate shares its measured signal's hue).
+  // as by colour (an estimate of a measured signal shares its hue).  Every trace has its
+  // own colour and dash pattern pair, and every toggle shows it: the pendulum-rate
+  // estimate (no measured twin) is orange dash-dot, not a second dashed blue, and the
+  // friction estimate F-hat a dark dotted line, not a brown dashed one beside u.
   const DASH = [6, 4];
+  const DASH_DOT = [8, 3, 2, 3];
+  const DOTTED = [2, 3];
   const SIGNALS = [
     { key: "theta_m", label: "θ measured", group: "angles", color: "#1f6feb", on: true },
     { key: "arm_m", label: "arm Ω measured", group: "angles", color: "#2e7d32", on: true },
-    { key: "theta_hat", label: "θ̂ estimate", group: "angles", color: "#1f6feb", on: false, est: true },
-    { key: "arm_hat", label: "Ω̂ estimate", group: "angles", color: "#2e7d32", on: false, est: true },
+    { key: "theta_hat", label: "θ̂ angle estimate", group: "angles", color: "#1f6feb", on: false, est: true, dash: DASH },
+    { key: "arm_hat", label: "Ω̂ arm estimate", group: "angles", color: "#2e7d32", on: false, est: true, dash: DASH },
     { key: "arm_dot_m", label: "arm velocity measured", group: "velocities", color: "#8e24aa", on: true },
-    { key: "arm_dot_hat", label: "arm velocity estimate", group: "velocities", color: "#8e24aa", on: false, est: true },
-    { key: "theta_dot_hat", label: "θ̇ estimate", group: "velocities", color: "#00838f", on: false, est: true },
+    { key: "arm_dot_hat", label: "arm velocity estimate", group: "velocities", color: "#8e24aa", on: false, est: true, dash: DASH },
+    { key: "theta_dot_hat", label: "θ̇ pendulum rate estimate", group: "velocities", color: "#e69f00", on: false, est: true, dash: DASH_DOT },
     { key: "u", label: "control u", group: "control", color: "#d84315", on: true },
-    { key: "friction_hat", label: "friction estimate F̂", group: "control", color: "#6d4c41", on: false, est: true },
+    { key: "friction_hat", label: "friction estimate F̂", group: "control", color: "#263238", on: false, est: true, dash: DOTTED, width: 2 },
   ];
   // Time axis: ticks at whole multiples of one of these steps (s), at least 80 px apart.
   const X_STEPS = [0.5, 1, 2, 5, 10];
@@ -256,7 +261,13 @@
     $("lc-ptp").dataset.value = lc.peak_to_peak ?? "";
     $("lc-period").textContent = fmt(lc.period);
     $("lc-period").dataset.value = lc.period ?? "";
-    $("lc-status").textContent = lc.status ? lc.status.replace("_", " ") : "-";
+    // the figures only while balancing: a hanging, swinging or fallen pendulum is said as such
+    const pend = lc.pendulum || "unknown";
+    $("limit-cycle").dataset.pendulum = pend;
+    $("lc-figures").hidden = pend !== "balancing";
+    $("lc-status").textContent = pend === "balancing"
+      ? (lc.status ? lc.status.replace("_", " ") : "-")
+      : (PENDULUM_TEXT[pend] || pend);
 
     const comp = st.compensation || {};
     const friction = st.friction ? `${st.friction} friction` : "real rig";
@@ -319,6 +330,15 @@
     showExperiment(st, running);
   }
 
+  const PENDULUM_TEXT = {
+    hanging: "pendulum hanging (limit-cycle figures are measured while balancing)",
+    swinging: "pendulum swinging (limit-cycle figures are measured while balancing)",
+    catching: "pendulum caught, settling (limit-cycle figures once the window holds only balancing)",
+    fallen: "pendulum fallen",
+    stopped: "stopped",
+    unknown: "-",
+  };
+
   // --- Experiments panel: progress while it runs, the estimate when done ----------------------
   function showExperiment(st, running) {
     $("experiment-run").disabled = running;
@@ -326,14 +346,22 @@
     if (!e) return;
     const live = st.experiment;
     if (e.state === "running") {
+      // from the first phase on: what it does now, how long it has run, the share done
       const pct = live ? Math.round(100 * (live.progress || 0)) : 0;
-      setMsg("experiment-msg", `${e.name}: ${pct} % - ${live ? live.phase : ""}`);
+      const secs = e.elapsed != null ? `, ${Math.round(e.elapsed)} s` : "";
+      setMsg("experiment-msg", `${e.name} running (${pct} % done${secs}): ` +
+        `${live && live.phase ? live.phase : "starting"}`);
+      $("experiment-progress").hidden = false;
+      $("experiment-progress").value = live ? (live.progress || 0) : 0;
       $("experiment-result").textContent = "";
     } else {
+      $("experiment-progress").hidden = true;
       setMsg("experiment-msg", `${e.name}: ${e.message || e.state}`, e.state !== "done");
       const lines = [];
+      const units = e.units || {};
       for (const [k, v] of Object.entries(e.estimates || {})) {
-        lines.push(`${k} = ${v === null ? "-" : Number(v).toPrecision(5)}`);
+        const unit = units[k] && units[k] !== "1" ? ` ${units[k]}` : "";
+        lines.push(`${k} = ${v === null ? "-" : Number(v).toPrecision(5) + unit}`);
       }
       for (const w of e.warnings || []) lines.push(`warning: ${w}`);
       if (e.log) lines.push(`log: ${e.log}`);
@@ -359,7 +387,7 @@
     }
     if (!r.ok) {
       const e = (r.data && r.data.errors && r.data.errors[0]) || {};
-      if (e.field === "options") setError($("experiment-options"), e.message);
+      if (e.field && e.field.startsWith("options")) setError($("experiment-options"), e.message);
       setMsg("experiment-msg", "refused: " + ((r.data && r.data.detail) || "invalid input"), true);
       return;
     }
@@ -407,8 +435,8 @@
         legend: { show: false },
         cursor: { drag: { x: false, y: false } },
         scales: { x: { time: false } },
-        series: [{}, ...sigs.map((s) => ({ label: s.label, stroke: s.color, width: 1.5, show: s.on,
-          dash: s.est ? DASH : undefined, points: { show: false } }))],
+        series: [{}, ...sigs.map((s) => ({ label: s.label, stroke: s.color, width: s.width || 1.5,
+          show: s.on, dash: s.dash, points: { show: false } }))],
         axes: [
           { label: "t (s)", labelSize: 18, size: 32, splits: (u, i, min, max) => (xTicks[g.id] = timeTicks(u, min, max)),
             values: (u, ticks) => ticks.map((v) => v.toFixed(tickStep(ticks) < 1 ? 1 : 0)) },
@@ -452,7 +480,10 @@
       b.type = "button";
       b.dataset.signal = s.key;
       b.setAttribute("aria-pressed", s.on ? "true" : "false");
-      b.innerHTML = `<span class="swatch${s.est ? " dashed" : ""}" style="color:${s.color}"></span>`;
+      // the curve's own colour, width and dash pattern, drawn
+      b.innerHTML = `<svg class="swatch${s.est ? " dashed" : ""}" width="24" height="6" aria-hidden="true">` +
+        `<line x1="0" y1="3" x2="24" y2="3" stroke="${s.color}" stroke-width="${s.width || 2}"` +
+        `${s.dash ? ` stroke-dasharray="${s.dash.join(" ")}"` : ""}/></svg>`;
       b.appendChild(document.createTextNode(s.label));
       b.addEventListener("click", () => {
         s.on = !s.on;

@@ -22,7 +22,10 @@ from typing import Any
 import numpy as np
 
 from ...config import Config
+from ...io.logs import read_log
 from ...model.rig import RigScaling
+from ...realtime import RealtimeController
+from ...realtime.experiment import RigExperiment, make_experiment
 from . import experiments as ex
 
 __all__ = ["analyse_log", "analyse_run", "experiment_marks", "make_rig_experiment",
@@ -38,8 +41,6 @@ def rig_scaling(cfg: Config) -> RigScaling:
 def make_rig_experiment(name: str, cfg: Config, limits=None, *,
                         scaling: RigScaling | None = None, **options):
     """The experiment ``name`` for the loop, with ``cfg``'s period, k_u and omega_0."""
-    from ...realtime.experiment import make_experiment
-
     if name == "free-oscillation":
         options.setdefault("omega0", cfg.design.omega0)
     sc = scaling or rig_scaling(cfg)
@@ -94,9 +95,6 @@ def run_on_rig(experiment, cfg: Config, backend="sim", *, log_dir="runs", clock=
     RigError, OSError
         The rig cannot be opened.
     """
-    from ...realtime import RealtimeController
-    from ...realtime.experiment import RigExperiment
-
     if not isinstance(experiment, RigExperiment):
         raise TypeError("experiment must be a RigExperiment")
     fake = clock is not None
@@ -193,8 +191,6 @@ def analyse_log(name: str, log: Any, cfg: Config, *, marks: dict | None = None,
 
 def analyse_run(name: str, log_path, cfg: Config, *, max_amplitude: float = 0.15) -> dict:
     """Read a run's ``.csv`` and analyse it (marks from its sidecar)."""
-    from ...io.logs import read_log
-
     log = read_log(log_path, cfg.design.h)
     return analyse_log(name, log, cfg, marks=experiment_marks(log_path),
                        max_amplitude=max_amplitude)

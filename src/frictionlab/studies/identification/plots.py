@@ -21,6 +21,7 @@ from ...plotting import (
     save_figure,
     series_style,
 )
+from .friction_tests import stribeck_model
 
 __all__ = [
     "experiment_title",
@@ -140,8 +141,6 @@ def plot_stiction(log, result: dict, path: str, title: str | None = None) -> str
 
 def plot_stribeck(result: dict, path: str, title: str | None = None) -> str:
     """App. E.2 / Figure 38: steady friction vs arm velocity with the fitted curve."""
-    from .experiments import stribeck_model
-
     pts = np.array(result["points"])
     fig, ax = plt.subplots(figsize=(8, 5.4))
     ax.plot(pts[:, 0], pts[:, 1], ls="none", marker="o", ms=5, color="C0",
