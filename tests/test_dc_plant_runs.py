@@ -364,3 +364,13 @@ def test_a_swing_up_of_a_motor_plant_is_refused_not_run_on_the_wrong_plant(cli):
         simulate_swingup(build_config(plant="qube2"), 1.0)
     res = cli("simulate", "--plant", "qube2", "--swing-up")
     assert res.returncode == 2 and "not implemented" in res.stderr
+
+
+def test_a_motor_plants_figure_title_names_the_plant_and_its_own_design_preset():
+    from frictionlab.plotting import config_title
+
+    title = config_title(build_config(plant="qube2"), "simulate")
+    assert "plant qube2 (u in V)" in title and "fast design" in title
+    assert "modified" not in title and "resistance" not in title
+    changed = config_title(build_config(plant="qube2", sets=[("plant.resistance", "7")]))
+    assert "resistance=7" in changed
