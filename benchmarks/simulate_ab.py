@@ -39,7 +39,10 @@ CASES = {
 _WORKER = r"""
 import json, sys, time
 from frictionlab.config import build_config
-from frictionlab.runs import simulate_config
+try:
+    from frictionlab.runs import simulate_config
+except ImportError:  # a tree from before frictionlab.runs (the model's own simulate_config)
+    from frictionlab.model.simulation import simulate_config
 cases, runs = json.loads(sys.argv[1]), int(sys.argv[2])
 out = {}
 for name, (design, friction, sets) in cases.items():

@@ -184,3 +184,53 @@ def test_the_checker_reads_function_level_and_relative_imports(tmp_path):
 @pytest.mark.parametrize("name", sorted(_modules()))
 def test_every_module_parses(name):
     ast.parse(_modules()[name].read_text())
+
+
+def _own_imports(path: Path):
+    """``(node, in_function)`` for every import of a frictionlab module in ``path``."""
+    tree = ast.parse(path.read_text(), str(path))
+    parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+    for node in ast.walk(tree):
+        own = (isinstance(node, ast.ImportFrom)
+               and (node.level > 0 or (node.module or "").startswith("frictionlab"))) or (
+            isinstance(node, ast.Import)
+            and any(a.name.startswith("frictionlab") for a in node.names))
+        if not own:
+            continue
+        up, in_function = parents.get(node), False
+        while up is not None and not in_function:
+            in_function = isinstance(up, ast.FunctionDef | ast.AsyncFunctionDef)
+            up = parents.get(up)
+        yield node, in_function
+
+
+def test_no_source_file_is_over_800_lines():
+    long = {str(p.relative_to(SRC)): n for p in SRC.rglob("*.py")
+            if (n := p.read_text().count("\n")) > 800}
+    assert long == {}
+
+
+def test_no_private_name_is_imported_across_modules():
+    private = [f"{p.relative_to(SRC)}:{node.lineno} {a.name}"
+               for p in SRC.rglob("*.py") for node, _ in _own_imports(p)
+               if isinstance(node, ast.ImportFrom)
+               for a in node.names if a.name.startswith("_") and not a.name.startswith("__")]
+    assert private == []
+
+
+def test_function_level_imports_of_own_modules_are_few_and_say_why():
+    # outside cli/ (whose subcommands load what they run on first use), an own
+    # module is imported inside a function only where start-up time needs it,
+    # with a comment saying so just above it
+    lazy = []
+    for p in SRC.rglob("*.py"):
+        if p.relative_to(SRC).parts[0] == "cli":
+            continue
+        lines = p.read_text().splitlines()
+        for node, in_function in _own_imports(p):
+            if in_function:
+                above = lines[max(0, node.lineno - 4):node.lineno]
+                lazy.append((f"{p.relative_to(SRC)}:{node.lineno}",
+                             any("#" in line for line in above)))
+    assert len(lazy) <= 10, lazy
+    assert [where for where, commented in lazy if not commented] == []

@@ -70,10 +70,10 @@ def _reach(*args, **kwargs):
 def _fake_controller(cfg, backend="sim", *args, **kwargs):
     """``frictionlab run``: the backend's syntax is checked where the controller
     checks it, then the loop would start."""
-    from frictionlab.realtime.api import _check_backend
+    from frictionlab.realtime.api import check_backend
 
     if isinstance(backend, str) and backend != "sim":
-        _check_backend(backend)
+        check_backend(backend)
     raise Reached
 
 

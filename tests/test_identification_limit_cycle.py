@@ -16,11 +16,11 @@ from frictionlab.studies import sweep
 from frictionlab.studies.identification.limit_cycle import (
     DEFAULT_BOUNDS,
     LimitCycleProblem,
-    _covariance,
     fit_limit_cycle,
     identifiability,
     parse_experiments,
 )
+from frictionlab.studies.identification.uncertainty import covariance
 
 TRUTH = {"friction.coulomb": 1.35, "friction.stiction": 2.1, "plant.omega0": 7.1}
 # the command's defaults: 30 s runs, features over the last 20 s, default
@@ -122,14 +122,14 @@ def test_covariance_is_the_student_t_one_with_the_jitter_added():
     rng = np.random.default_rng(4)
     J = rng.standard_normal((12, 3))
     cost, jitter = 0.018, 1e-4
-    cov, why = _covariance(J, cost, 12, 3, jitter)
+    cov, why = covariance(J, cost, 12, 3, jitter)
     assert why is None
     nu = 12 - 3
     expect = nu / (nu - 2) * (cost / nu + jitter) * np.linalg.inv(J.T @ J)
     assert cov == pytest.approx(expect, rel=1e-10)
     # a Student t with nu <= 2 has no finite variance: no standard errors
     for m in (3, 4, 5):
-        cov, why = _covariance(J[:m], cost, m, 3)
+        cov, why = covariance(J[:m], cost, m, 3)
         assert cov is None and "degree" in why
 
 

@@ -11,7 +11,7 @@ from scipy.optimize import brentq
 from frictionlab.cli import main
 from frictionlab.config import build_config
 from frictionlab.model.design import design as make_design
-from frictionlab.model.limit_cycles import FEATURES, _crossings
+from frictionlab.model.limit_cycles import FEATURES, crossings
 from frictionlab.model.periodic import (
     I_S,
     LinearLoop,
@@ -272,7 +272,7 @@ def test_fixed_point_is_the_state_a_long_run_crosses_the_section_with():
     X = np.column_stack([traj["theta"], traj["theta_dot"], traj["arm"], traj["arm_dot"],
                          traj["theta_hat"], traj["theta_dot_hat"] / w0, traj["arm_hat"],
                          traj["arm_dot_hat"]])
-    _t, up, _dt, _di = _crossings(traj.t, traj["theta"], 0.05)
+    _t, up, _dt, _di = crossings(traj.t, traj["theta"], 0.05)
     k = int(up[-1])
     a = -X[k - 1, 0] / (X[k, 0] - X[k - 1, 0])
     crossing = X[k - 1] + a * (X[k] - X[k - 1])
@@ -308,7 +308,7 @@ def test_a_perturbation_dies_out_as_the_multipliers_say(kind, sets):
     idx = [1, 2, 3, I_S, I_S + 1, I_S + 2, I_S + 3]
 
     def section_states(run):
-        _t, up, _dt, _di = _crossings(run.t, run["theta"], 0.05)
+        _t, up, _dt, _di = crossings(run.t, run["theta"], 0.05)
         out = []
         for k in up:
             a = run["theta"][k - 1] / (run["theta"][k - 1] - run["theta"][k])

@@ -214,13 +214,13 @@ def test_sigstop_the_board_watchdog_zeroes_the_motor(tmp_path):
 
 @pytest.mark.slow
 def test_an_amplifier_fault_while_balancing_stops_the_run(tmp_path, monkeypatch):
-    """In-process on a fake clock (the board's time too): the fault at 3.0 s, when the
+    """In-process on a fake clock (the board's time too): the fault at 10.0 s, when the
     stand-in controller balances; nothing but 0 V from the tick that reads it."""
     from frictionlab.config import build_config
     from frictionlab.realtime import FakeClock, RealtimeController
     from frictionlab.realtime.qube import QUBE_RIG
 
-    monkeypatch.setenv("FAKE_QUANSER_FAULTS", '{"amplifier_fault_at": 3.0}')
+    monkeypatch.setenv("FAKE_QUANSER_FAULTS", '{"amplifier_fault_at": 10.0}')
     monkeypatch.delenv("FAKE_QUANSER_LOG", raising=False)
     monkeypatch.delenv("FAKE_QUANSER_STATE", raising=False)
     clock = FakeClock()
@@ -228,7 +228,7 @@ def test_an_amplifier_fault_while_balancing_stops_the_run(tmp_path, monkeypatch)
     try:
         sets = [*QUBE_RIG.items(), *(tuple(s.split("=")) for s in STAND_IN[1::2])]
         ctl = RealtimeController(build_config(sets=sets), "qube2://0", log_dir=tmp_path,
-                                 clock=clock, realtime=False, duration=3.2, swing_up=True)
+                                 clock=clock, realtime=False, duration=10.2, swing_up=True)
         st = ctl.run()
         board = hw.BOARDS[-1]
     finally:

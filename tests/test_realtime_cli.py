@@ -21,8 +21,9 @@ import pytest
 
 from frictionlab.cli import main
 from frictionlab.config import build_config
+from frictionlab.io.logs import read_log
 from frictionlab.model.limit_cycles import FEATURES, features
-from frictionlab.realtime.datalog import read_csv_log, read_sidecar
+from frictionlab.realtime.datalog import read_sidecar
 from frictionlab.realtime.rigsim import send_control
 from frictionlab.realtime.samples import MISSED, STOP
 
@@ -111,7 +112,7 @@ def test_headless_sim_run_balances_in_the_limit_cycle_simulate_predicts(tmp_path
         "p50", "p99"}
     # lockstep: the ticks cover the 10 s of simulated time, stalls only count as missed
     assert st["stop_reason"] == "duration" and st["ticks"] == 2000 and st["missed"] >= 0
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"], partial=True)
     assert int(log["flags"][-1]) & STOP
     rows = slice(0, -1)
     t, theta = log["t"][rows], log["theta_m"][rows]
@@ -149,7 +150,7 @@ def test_sigkill_loses_at_most_the_last_100_ms(tmp_path, rig_sim):
     rig = send_control(host, port, {"cmd": "status"})
     last = rig["last_command_seq"]
     assert last >= 200  # it was running
-    log = read_csv_log(csv)
+    log = read_log(csv, partial=True)
     ticks = log["tick"].astype(int)
     flags = log["flags"].astype(int)
     assert ticks[0] == 0 and np.all(np.diff(ticks) >= 1)
@@ -187,7 +188,7 @@ def test_sigint_and_sigterm_stop_the_motor_and_report(tmp_path, rig_sim, sig):
     assert proc.returncode == 0, stderr
     st = json.loads(stdout)
     assert set(st) == RUN_JSON_KEYS and st["stop_reason"] == "signal"
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"], partial=True)
     assert int(log["flags"][-1]) & STOP and log["u_da"][-1] == 0.0
     meta = json.loads(Path(st["log"]).with_suffix(".json").read_text())
     assert meta["stop_reason"] == "signal" and not meta["running"]
@@ -227,7 +228,7 @@ def test_console_mode_stops_on_a_signal(tmp_path, sig):
     assert f"log {csv}" in closing
     meta = json.loads(csv.with_suffix(".json").read_text())
     assert meta["stop_reason"] == "signal" and not meta["running"]
-    log = read_csv_log(csv)
+    log = read_log(csv, partial=True)
     assert int(log["flags"][-1]) & STOP and log["u_da"][-1] == 0.0
     assert int(log["tick"][-1]) == meta["stop_tick"] >= 100
     assert not np.any(log["flags"][:-1].astype(int) & STOP)
@@ -418,7 +419,7 @@ def test_a_suspended_controller_stops_on_resume_without_acting(tmp_path, rig_sim
     assert proc.returncode == 1, stderr
     st = json.loads(stdout)
     assert st["stop_reason"] == "paused" and "paused" in stderr
-    log = read_csv_log(csv)
+    log = read_log(csv, partial=True)
     t0, h = meta["t0_monotonic_ns"], 5_000_000
     # every tick that acted came before the suspension; the first one after it stopped
     assert t0 + int(log["tick"][-2]) * h < t_stopped
@@ -455,7 +456,7 @@ def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
     csv = Path(st["log"])
     dat = csv.with_suffix(".dat").read_text()
     assert csv.read_text().endswith("\n") and dat.endswith("\n")
-    rows = read_csv_log(csv)
+    rows = read_log(csv, partial=True)
     assert len(rows["tick"]) == len(dat.splitlines()) > 100
     meta = read_sidecar(csv.with_suffix(".json"))
     assert meta["state"] == "finished" and meta["stop_reason"] == "log_failed"
@@ -464,12 +465,12 @@ def test_a_log_that_cannot_be_written_stops_the_run(tmp_path, rig_sim):
 
 
 def test_run_s_signal_handling_before_and_after_the_run(tmp_path):
-    from frictionlab.cli.run import _RunSignals
+    from frictionlab.cli.run import RunSignals
     from frictionlab.realtime import FakeClock, RealtimeController
     from frictionlab.realtime.osrt import STOP_SIGNALS
 
     before = {sig: signal.getsignal(sig) for sig in (*STOP_SIGNALS, signal.SIGXFSZ)}
-    with _RunSignals() as sigs:
+    with RunSignals() as sigs:
         assert signal.getsignal(signal.SIGXFSZ) == signal.SIG_IGN
         assert all(signal.getsignal(sig) == sigs._stop for sig in STOP_SIGNALS)
         signal.raise_signal(signal.SIGHUP)  # no controller yet: remembered

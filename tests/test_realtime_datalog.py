@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
+from frictionlab.io.logs import read_log
 from frictionlab.model.simulation import LOGGED
-from frictionlab.realtime.datalog import CSV_HEADER, LogWriter, read_csv_log
+from frictionlab.realtime.datalog import CSV_HEADER, LogWriter
 from frictionlab.realtime.samples import NO_READING, SAMPLE_FIELDS, Sample
 
 
@@ -29,7 +30,7 @@ def test_dat_csv_and_sidecar(tmp_path):
     np.testing.assert_allclose(dat[5], [0.005 + i for i in range(10)])
     with open(tmp_path / "run1.csv") as fh:
         assert fh.readline() == CSV_HEADER
-    log = read_csv_log(tmp_path / "run1.csv")
+    log = read_log(tmp_path / "run1.csv", partial=True)
     assert list(log) == ["t", "tick", *SAMPLE_FIELDS[2:3], *LOGGED, *SAMPLE_FIELDS[13:]]
     np.testing.assert_array_equal(log["tick"], np.arange(300))
     assert log["flags"][7] == NO_READING and log["u_da"][0] == pytest.approx(-0.0123)
@@ -57,7 +58,7 @@ def test_close_writes_a_row_queued_while_the_thread_was_finishing_a_drain(tmp_pa
     w.put(sample(0))
     w.start()
     w.close({"stop_reason": "duration"})
-    log = read_csv_log(tmp_path / "runc.csv")
+    log = read_log(tmp_path / "runc.csv", partial=True)
     assert list(log["tick"]) == [0, 1] and int(log["flags"][-1]) & STOP
 
 
@@ -69,7 +70,7 @@ def test_queue_is_bounded_and_drops_are_counted(tmp_path):
     w.start()
     w.close()
     assert w.written == 50
-    assert len(read_csv_log(tmp_path / "run2.csv")["tick"]) == 50
+    assert len(read_log(tmp_path / "run2.csv", partial=True)["tick"]) == 50
 
 
 def test_recording_saves_a_stretch_under_a_name(tmp_path):
@@ -86,8 +87,8 @@ def test_recording_saves_a_stretch_under_a_name(tmp_path):
     w.close()
     assert out["rows"] == 15 and out["dat"].endswith("balance1.dat")
     assert np.loadtxt(out["dat"]).shape == (15, 10)
-    np.testing.assert_array_equal(read_csv_log(out["csv"])["tick"], np.arange(10, 25))
-    assert len(read_csv_log(tmp_path / "run3.csv")["tick"]) == 30
+    np.testing.assert_array_equal(read_log(out["csv"], partial=True)["tick"], np.arange(10, 25))
+    assert len(read_log(tmp_path / "run3.csv", partial=True)["tick"]) == 30
     with pytest.raises(RuntimeError):
         w.record_stop()
 
@@ -95,7 +96,15 @@ def test_recording_saves_a_stretch_under_a_name(tmp_path):
 def test_truncated_last_line_is_ignored_when_reading(tmp_path):
     p = tmp_path / "x.csv"
     p.write_text(CSV_HEADER + ",".join(["1"] * 20) + "\n" + "2,3,4")
-    assert len(read_csv_log(p)["t"]) == 1
+    assert len(read_log(p, partial=True)["t"]) == 1
+
+
+def test_a_finished_log_without_its_last_newline_is_read_whole(tmp_path):
+    # a log written by hand (or an editor) may end without a newline: every row counts
+    p = tmp_path / "y.csv"
+    p.write_text(CSV_HEADER + ",".join(["1"] * 20) + "\n" + ",".join(["2"] * 20))
+    assert list(read_log(p)["t"]) == [1.0, 2.0]
+    assert list(read_log(p, partial=True)["t"]) == [1.0]
 
 
 def test_flush_interval_is_at_most_100_ms(tmp_path):
@@ -116,7 +125,7 @@ def test_parquet_log_holds_the_csv_columns_and_the_sidecar(tmp_path):
     rec = w.record_stop("stretch")
     w.close({"stop_reason": "duration", "gains": [1.0, 2.0]})
     table = pq.read_table(tmp_path / "runp.parquet")
-    csv = read_csv_log(tmp_path / "runp.csv")
+    csv = read_log(tmp_path / "runp.csv", partial=True)
     assert table.column_names == list(csv)
     for name, values in csv.items():
         np.testing.assert_array_equal(table.column(name).to_numpy(), values)
@@ -140,7 +149,7 @@ def test_parquet_never_overwrites_and_a_failure_is_reported_not_fatal(tmp_path):
     assert (tmp_path / "runq.parquet").read_text() == "someone else's file"
     meta = json.loads((tmp_path / "runq.json").read_text())
     assert meta["stop_reason"] == "duration" and "exists" in meta["parquet_error"]
-    assert len(read_csv_log(tmp_path / "runq.csv")["tick"]) == 10  # the CSV is intact
+    assert len(read_log(tmp_path / "runq.csv", partial=True)["tick"]) == 10  # the CSV is intact
 
 
 def test_unknown_log_format_is_refused(tmp_path):

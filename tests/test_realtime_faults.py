@@ -10,6 +10,7 @@ and that the reason is recorded.
 import dataclasses
 import errno
 import json
+import math
 import os
 import subprocess
 import sys
@@ -19,10 +20,11 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
+from frictionlab.io.logs import read_log
 from frictionlab.realtime import FakeClock, RealtimeController, RigError, Safety, datalog
 from frictionlab.realtime import loop as loop_mod
 from frictionlab.realtime import protocol as P
-from frictionlab.realtime.datalog import LogWriter, read_csv_log, read_sidecar
+from frictionlab.realtime.datalog import LogWriter, read_sidecar
 from frictionlab.realtime.rigs import FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
 from frictionlab.realtime.samples import STOP, Sample
@@ -315,7 +317,7 @@ def test_a_pause_longer_than_max_pause_stops_before_acting(cfg, tmp_path, pause_
     cmds = commands(tx)
     assert [c for c in cmds if c[0] < k][-1][0] == 299
     assert {c for c in cmds if c[0] >= k} == {(k, 0.0)}
-    log = read_csv_log(stats["log_files"]["csv"])
+    log = read_log(stats["log_files"]["csv"], partial=True)
     assert int(log["tick"][-2]) == 299 and int(log["flags"][-1]) & STOP
 
 
@@ -465,7 +467,7 @@ def test_a_failing_write_cuts_the_files_to_complete_rows_and_reports_once(tmp_pa
     csv = (tmp_path / "run1.csv").read_bytes()
     assert dat.endswith(b"\n") and csv.endswith(b"\n")  # never cut mid-line
     assert dat.count(b"\n") == w.written == csv.count(b"\n") - 1  # the same rows in both
-    np.testing.assert_array_equal(read_csv_log(tmp_path / "run1.csv")["tick"],
+    np.testing.assert_array_equal(read_log(tmp_path / "run1.csv", partial=True)["tick"],
                                   np.arange(w.written))
     # the disk is full, yet the final sidecar was written, from the space set aside
     assert json.loads((tmp_path / "run1.json").read_text())["stop_reason"] == "log_failed"
@@ -484,7 +486,7 @@ def test_a_full_disk_stops_the_run_with_the_motor_at_zero(cfg, tmp_path, monkeyp
     assert "No space left on device" in stats["stop_detail"]
     assert stats["stop_tick"] < 12_000
     assert_zero_at_stop(tx, stats, emu)
-    log = read_csv_log(stats["log_files"]["csv"])
+    log = read_log(stats["log_files"]["csv"], partial=True)
     assert 0 < len(log["tick"]) == stats["log_written"] <= stats["stop_tick"]
     meta = read_sidecar(stats["log_files"]["json"])
     assert meta["state"] == "finished" and meta["stop_reason"] == "log_failed"
@@ -531,7 +533,7 @@ def test_nothing_existing_is_overwritten_by_a_run_or_a_recording(cfg, tmp_path):
     second = w.record_stop()
     w.close()
     assert second["csv"].endswith("run3-save3.csv") and second["rows"] == 3
-    np.testing.assert_array_equal(read_csv_log(tmp_path / "run3-save2.csv")["tick"],
+    np.testing.assert_array_equal(read_log(tmp_path / "run3-save2.csv", partial=True)["tick"],
                                   np.arange(5))
     # and a rename onto an existing name is refused
     with pytest.raises(FileExistsError):
@@ -567,3 +569,163 @@ def test_new_safety_limits_are_validated():
     with pytest.raises(ValueError, match=r"safety\.echo_ticks"):
         Safety(echo_ticks=0)
     assert dataclasses.asdict(Safety())["max_pause"] == 0.05
+
+
+# --- the stop branches that had no fault of their own (docs/realtime.md, "Safety guarantees")
+
+
+class FailingSends(DirectTransport):
+    """A link whose ``send`` raises (ENOBUFS) for the COMMAND frames ``fail(seq, u_DA)``
+    picks; every attempt is recorded in ``attempts`` as (seq, u_DA, delivered)."""
+
+    fail = staticmethod(lambda seq, u: False)
+
+    def send(self, data):
+        frame = P.decode(data)
+        if frame.type == P.MSG_COMMAND:
+            u = P.parse_command(frame)
+            if self.fail(frame.seq, u):
+                self.attempts.append((frame.seq, u, False))
+                raise OSError(errno.ENOBUFS, "No buffer space available")
+            self.attempts.append((frame.seq, u, True))
+        super().send(data)
+
+
+def test_a_failing_zero_write_at_the_stop_falls_back_to_stop_motor(cfg, tmp_path):
+    """The stop's own u_DA = 0 write fails (a full socket buffer, once): the loop's
+    fallback, the rig's best-effort ``stop_motor``, sends the zero, and the motor stops."""
+
+    def transport(emu, clock):
+        tx = FailingSends(emu, clock)
+        tx.attempts = []
+        tx.fail = lambda seq, u: seq == 200 and u == 0.0 and not any(
+            not ok for _s, _u, ok in tx.attempts)
+        return tx
+
+    emu, tx, stats = run(cfg, tmp_path, transport=transport, duration=1.0)
+    assert stats["stop_reason"] == "duration" and stats["stop_tick"] == 200
+    failed = [(s, u) for s, u, ok in tx.attempts if not ok]
+    assert failed == [(200, 0.0)]  # the stop's write, and only it, failed ...
+    # ... and the next command the rig got is stop_motor's zero, for the same tick
+    after = tx.attempts[tx.attempts.index((200, 0.0, False)) + 1:]
+    assert after and after[0] == (200, 0.0, True) and all(u == 0.0 for _s, u, _ok in after)
+    assert emu.u_da == 0.0
+    assert any(u != 0.0 for _s, u in commands(tx))  # the motor was driven before
+
+
+def test_a_link_that_fails_in_the_tick_stops_and_still_tries_the_zero(cfg, tmp_path):
+    """The tick's own write fails (the link is gone): the run stops (``exception``) and the
+    loop tries the zero, then ``stop_motor``, both of which must not raise again."""
+
+    def transport(emu, clock):
+        tx = FailingSends(emu, clock)
+        tx.attempts = []
+        tx.fail = lambda seq, u: seq >= 150
+        return tx
+
+    _emu, tx, stats = run(cfg, tmp_path, transport=transport, duration=1.0)
+    assert stats["stop_reason"] == "exception" and "No buffer space" in stats["stop_detail"]
+    assert stats["stop_tick"] == 150
+    tried = [(s, u) for s, u, ok in tx.attempts if not ok]
+    # the tick's u, then the stop's zero, then stop_motor's zero (halt's fallback) and the
+    # run's last stop_motor: nothing but zeros after the failed command
+    assert tried[0][0] == 150 and tried[1:] and all(u == 0.0 for _s, u in tried[1:])
+    assert len(tried) >= 3
+
+
+def test_a_stall_after_the_controller_step_does_not_write_its_u(cfg, tmp_path, monkeypatch):
+    """The process is suspended between the controller step and the write (the third
+    ``paused`` check, on the tick's output): the u computed before the stall is stale and
+    is not written; the stop's zero is."""
+    real_step = loop_mod.controller_step_rows
+    clock = FakeClock()
+    calls = []
+
+    def step(*args):
+        out = real_step(*args)
+        calls.append(out[0])
+        if len(calls) == 301:  # tick 299 (the first call compiles, before the run)
+            clock.advance(200_000_000)  # SIGSTOP ... SIGCONT
+        return out
+
+    monkeypatch.setattr(loop_mod, "controller_step_rows", step)
+    _emu, tx, stats = run(cfg, tmp_path, clock=clock)
+    assert stats["stop_reason"] == "paused" and stats["stop_tick"] == 299
+    assert "output was due" in stats["stop_detail"]
+    cmds = commands(tx)
+    assert [c for c in cmds if c[0] < 299][-1][0] == 298
+    assert {c for c in cmds if c[0] >= 299} == {(299, 0.0)}
+    assert calls[-1] != 0.0  # a u was computed, and it was not the one written
+    assert_zero_at_stop(tx, stats)
+
+
+class BadExperiment:
+    """An identification experiment (``step`` -> u, m/s^2) that drives the arm for 1 s and
+    then computes ``bad``."""
+
+    phase = "running"
+    progress = 0.5
+
+    def __init__(self, bad):
+        self.bad = bad
+        self.steps = 0
+
+    def describe(self):
+        return {"name": "bad-experiment"}
+
+    def step(self, t, theta, arm, arm_dot, y, x, v):
+        self.steps += 1
+        return self.bad if t >= 1.0 else 2.0
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+def test_an_experiment_computing_a_non_finite_u_stops_with_the_motor_at_zero(cfg, tmp_path,
+                                                                            bad):
+    exp = BadExperiment(bad)
+    clock = FakeClock()
+    emu = RigEmulator(cfg.with_values({"sim.initial_angle": math.pi}), clock)
+    tx = DirectTransport(emu, clock)
+    ctl = RealtimeController(cfg, FramedRig(tx, "direct", clock=clock), log_dir=tmp_path,
+                             clock=clock, duration=3.0, realtime=False, manage_gc=False,
+                             experiment=exp)
+    stats = ctl.run()
+    assert stats["stop_reason"] == "nonfinite_u" and stats["stop_tick"] == 200
+    assert f"the experiment computed u = {bad!r}" in stats["stop_detail"]
+    cmds = commands(tx)
+    assert all(math.isfinite(u) for _s, u in cmds)
+    driven = [u for s, u in cmds if s < 200]  # u_DA = k_u u, as float32
+    assert len(driven) == 200 and driven == pytest.approx([2.0 * cfg.rig.u_scale] * 200)
+    assert_zero_at_stop(tx, stats, emu)
+
+
+def _tampered(seq_bad, frame):
+    """A transport that replaces the rig's SENSOR reply to SAMPLE ``seq_bad`` by ``frame``."""
+
+    class Tampered(DirectTransport):
+        def send(self, data):
+            super().send(data)
+            f = P.decode(data)
+            if f.type == P.MSG_SAMPLE and f.seq == seq_bad:
+                self._replies.pop()
+                self._replies.append(frame)
+
+    return Tampered
+
+
+@pytest.mark.parametrize("frame, detail", [
+    (P.encode(P.MSG_SAMPLE, 300), "unexpected SAMPLE frame"),
+    (P.command_frame(300, 0.5), "unexpected COMMAND frame"),
+    (P.encode(P.MSG_SENSOR, 300, b"\x00" * 7), "corrupted frame: wrong length"),
+    (P.encode(P.MSG_SENSOR, 300, b""), "corrupted frame: wrong length"),
+], ids=["sample_frame", "command_frame", "short_sensor_payload", "empty_sensor_payload"])
+def test_an_unexpected_frame_type_or_bad_payload_from_the_rig_stops_it(cfg, tmp_path, frame,
+                                                                       detail):
+    """The rig's backend (``FramedRig.sample``): a frame of a type the rig must not send,
+    or a SENSOR reply whose payload is not one (a well-formed frame: the CRC holds), is a
+    ``bad_reading``; the tick writes the zero and nothing else follows."""
+    emu, tx, stats = run(cfg, tmp_path, transport=_tampered(300, frame))
+    assert stats["stop_reason"] == "bad_reading" and stats["stop_tick"] == 300
+    assert detail in stats["stop_detail"]
+    cmds = commands(tx)
+    assert [c for c in cmds if c[0] < 300][-1][0] == 299
+    assert_zero_at_stop(tx, stats, emu)

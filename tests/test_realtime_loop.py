@@ -18,7 +18,9 @@ import pytest
 
 from frictionlab.config import ConfigError, build_config
 from frictionlab.model.controller import controller_step
+from frictionlab.model.design import PRESETS, design
 from frictionlab.model.friction import friction_record
+from frictionlab.model.switching import start_compensator
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime import loop as loop_mod
 from frictionlab.realtime.loop import Loop
@@ -168,28 +170,31 @@ def test_realtime_refusal_is_reported_once(cfg, monkeypatch, capsys):
 
 
 def _replay_u(samples, params_at):
-    """Replay the controller on the logged measurements; params_at(k) -> ControlParams."""
+    """Replay the controller on the logged measurements; params_at(k) -> ControlParams.
+    A new compensator starts as the loop starts it: at its steady value for the arm
+    velocity measured in the tick before (here at once: no compensation transition)."""
     first = samples[0]
     p = params_at(first.k)
     s = p.controller.init(first.theta_m)
     out = []
+    v_prev = 0.0
     for smp in samples:
         q = params_at(smp.k)
-        if q.gp != p.gp and q.comp_kind != p.comp_kind:
-            s.relay = 0.0
-            s.z_hat = 0.0
+        if q.gp.compensator != p.gp.compensator and q.gp.compensator:
+            start_compensator(s, q.gp.compensator, q.cp, v_prev)
         p = q
         u, _, _ = controller_step(s, p.gp, friction_record(p.cp), smp.theta_m, smp.arm_m,
                                   smp.arm_dot_m)
         out.append(u)
+        v_prev = smp.arm_dot_m
     return np.array(out)
 
 
 def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
     clock = FakeClock()
     ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=clock, duration=1.0,
-                             safety=Safety(gain_transition=0.0), realtime=False,
-                             manage_gc=False)
+                             safety=Safety(gain_transition=0.0, compensation_transition=0.0),
+                             realtime=False, manage_gc=False)
     sub = ctl.subscribe(maxlen=1000)
     before = ControlParams.from_config(cfg)
     futures = []
@@ -218,7 +223,7 @@ def test_mailbox_applies_a_change_atomically_between_ticks(cfg, tmp_path):
 
 
 @pytest.mark.slow
-def test_new_gains_replace_the_running_ones_linearly_over_the_transition(cfg):
+def test_new_gains_move_along_the_design_path_over_the_transition(cfg):
     clock = FakeClock()
     ctl = RealtimeController(cfg, SimRig(cfg), log_dir=None, clock=clock, duration=1.5,
                              safety=Safety(gain_transition=0.5), realtime=False,
@@ -233,20 +238,35 @@ def test_new_gains_replace_the_running_ones_linearly_over_the_transition(cfg):
     samples = [s for s in sub.drain() if not s.flags & STOP]
     k_new = futures[0].result(timeout=0)
     n = 100  # 0.5 s of ticks
-    l_old, l_new = before.gp.feedback, after.gp.feedback
+    # L and K of the designs 0, 1/10, ..., 1 of the way from fast to slow (App. C each)
+    nodes = np.array([np.concatenate([d.L, d.K]) for d in (
+        design(dataclasses.replace(PRESETS["fast"], **{
+            f: (1 - r) * getattr(PRESETS["fast"], f) + r * getattr(PRESETS["slow"], f)
+            for f in ("omega0", "omega1", "zeta1", "omega2", "zeta2", "observer_omega1",
+                      "observer_zeta1", "observer_omega2", "observer_zeta2")}))
+        for r in np.linspace(0.0, 1.0, 11))])
 
     def params_at(k):
         if k < k_new:
             return before
-        a = min(1.0, (k - k_new + 1) / n)
-        return dataclasses.replace(after, gp=after.gp.with_feedback(l_old + a * (l_new - l_old)))
+        r = min(1.0, (k - k_new + 1) / n)
+        g = [np.interp(r, np.linspace(0.0, 1.0, 11), nodes[:, i]) for i in range(8)]
+        return dataclasses.replace(after, gp=after.gp.with_gains8(g))
 
     u_log = np.array([s.u for s in samples])
-    np.testing.assert_allclose(u_log, _replay_u(samples, params_at), rtol=0, atol=1e-9)
-    # at once would have been different during the transition, the same after it
-    u_at_once = _replay_u(samples, lambda k: before if k < k_new else after)
-    assert np.max(np.abs(u_at_once[k_new:k_new + n] - u_log[k_new:k_new + n])) > 1e-2
-    assert ctl.status()["design"]["L"] == pytest.approx(list(l_new))
+    np.testing.assert_allclose(u_log, _replay_u(samples, params_at), rtol=0, atol=1e-8)
+    # a straight line in L (K at once) would have been different, at once too
+    def straight(k):
+        if k < k_new:
+            return before
+        a = min(1.0, (k - k_new + 1) / n)
+        l_old, l_new = before.gp.feedback, after.gp.feedback
+        return dataclasses.replace(after, gp=after.gp.with_feedback(l_old + a * (l_new - l_old)))
+
+    for other in (straight, lambda k: before if k < k_new else after):
+        u_other = _replay_u(samples, other)
+        assert np.max(np.abs(u_other[k_new:k_new + n] - u_log[k_new:k_new + n])) > 1e-3
+    assert ctl.status()["design"]["L"] == pytest.approx(list(after.gp.feedback))
 
 
 @pytest.mark.slow

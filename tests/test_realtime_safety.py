@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from frictionlab.config import build_config
+from frictionlab.io.logs import read_log
 from frictionlab.realtime import FakeClock, RealtimeController, Safety
 from frictionlab.realtime import protocol as P
-from frictionlab.realtime.datalog import read_csv_log
 from frictionlab.realtime.rigs import FramedRig, SimRig
 from frictionlab.realtime.rigsim import DirectTransport, RigEmulator
 from frictionlab.realtime.samples import NO_READING, STOP
@@ -42,7 +42,7 @@ def run_with_emulator(cfg, tmp_path, faults=None, *, after=T_FAULT, transport=No
     if on_clock:
         on_clock(clock, ctl)
     stats = ctl.run()
-    log = read_csv_log(stats["log_files"]["csv"])
+    log = read_log(stats["log_files"]["csv"], partial=True)
     with open(stats["log_files"]["json"]) as fh:
         meta = json.load(fh)
     return ctl, emu, tx, stats, log, meta
@@ -167,7 +167,7 @@ def test_exception_in_the_tick_stops_the_motor(cfg, tmp_path):
     with open(stats["log_files"]["json"]) as fh:
         meta = json.load(fh)
     assert "RuntimeError" in meta["traceback"]
-    log = read_csv_log(stats["log_files"]["csv"])
+    log = read_log(stats["log_files"]["csv"], partial=True)
     assert int(log["flags"][-1]) & STOP and int(log["tick"][-1]) == 150
 
 

@@ -50,7 +50,7 @@ def _varied(row):
 @pytest.mark.slow
 def test_json_is_the_documented_object(report):
     result, out = report
-    assert set(result) == {"out", "seconds", "figures", "tables"}
+    assert set(result) == {"out", "seconds", "figures", "tables", "table1"}
     assert result["out"] == str(out) and result["seconds"] > 0
     assert set(result["tables"]) == {"2", "3", "4", "5", "6", "7"}
     for number, rows in result["tables"].items():
@@ -112,7 +112,7 @@ def test_report_files(report):
     assert "## Sec. 5.2-5.3: the plant's omega0 against the rig (Table 1)" in md
     names = [Path(p).name for p in result["figures"]]
     assert names == [f"fig{n}.png" for n in range(17, 25)] + [
-        "lugre_angle_velocity.png", "lugre_control_friction.png"]
+        "lugre_angle_velocity.png", "lugre_control_friction.png", "table1.png"]
     for path in result["figures"]:
         data = Path(path).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
@@ -126,6 +126,37 @@ def test_report_files(report):
     verdicts = {s["statement"]: s["agrees"] for s in full["statements"]}
     assert verdicts and all(v is not False for v in verdicts.values()), verdicts
     assert len(full["omega0_studies"]) == len(rp.CASES)
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("reproduce-report")
+def test_table1_by_one_plausible_set(report):
+    """Table 1 (the rig) by one set in the plausible box; its RMS is that of the
+    12 relative errors of the two runs, which `simulate` repeats."""
+    from frictionlab.studies.reference import TABLE1
+
+    result, out = report
+    t1 = result["table1"]
+    assert set(t1) == {"rms", "set"} and t1["set"] == rp.TABLE1_SET
+    assert 6.5 <= t1["set"]["plant.omega0"] <= 7.1
+    assert 0.8 <= t1["set"]["plant.input_gain"] <= 1.25
+    full = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    errs = []
+    for rig in ("fast", "slow"):
+        sets = [a for k, v in t1["set"].items() for a in ("--set", f"{k}={v}")]
+        sim = _json_of(["simulate", "--design", rig, "--friction", "classical", "--duration",
+                        str(rp.DURATION), *sets, "--json"])["features"]
+        row = full["table1"]["rows"][rig]
+        for name, ref in zip(TABLE_COLUMNS, TABLE1[rig], strict=True):
+            assert row["features"][name] == sim[name]
+            v = sim[name]
+            if v is None and name == "valley":
+                v = sim["peak2"]
+            if v is None:
+                v = sim["peak1"]
+            errs.append((v - ref) / ref)
+    assert len(errs) == 12
+    assert t1["rms"] == pytest.approx((sum(e * e for e in errs) / 12) ** 0.5, rel=1e-12)
 
 
 @pytest.mark.slow
@@ -147,12 +178,12 @@ def test_rows_match_simulate(report):
 
 @pytest.mark.slow
 def test_every_run_goes_through_the_sweep_engine(monkeypatch):
-    from frictionlab.model import simulation
+    from frictionlab import runs
     from frictionlab.studies import batch, sweep
 
     points, sims = [], []
     evaluate, run_batch = sweep.evaluate, batch.run
-    simulate_config = simulation.simulate_config
+    simulate_config = runs.simulate_config
 
     def counting_evaluate(base, pts, **kw):
         points.extend(pts)
@@ -169,7 +200,7 @@ def test_every_run_goes_through_the_sweep_engine(monkeypatch):
 
     monkeypatch.setattr(sweep, "evaluate", counting_evaluate)
     monkeypatch.setattr(batch, "run", counting_run)
-    monkeypatch.setattr(simulation, "simulate_config", counting_simulate)
+    monkeypatch.setattr(runs, "simulate_config", counting_simulate)
     results = rp.run(workers=1)
     assert len(points) == len(sims) == rp.count_runs()
     # the tables share runs: Table 2's F_C = 1.5 is Table 3's F_S = 2.3
@@ -217,6 +248,6 @@ def test_a_failed_run_is_a_row_not_a_crash(tmp_path, monkeypatch):
     assert row["status"] == "error" and "injected failure" in row["error"]
     figures = rp.write_report(results, str(tmp_path), 1.0)
     names = {Path(p).name for p in figures}
-    assert "fig23.png" not in names and "fig24.png" not in names and len(names) == 8
+    assert "fig23.png" not in names and "fig24.png" not in names and len(names) == 9
     md = (tmp_path / "report.md").read_text(encoding="utf-8")
     assert "slow, plant omega0 6.1, F_C 1.3 (Figs. 23-24) [error]" in md

@@ -168,7 +168,7 @@ def test_sigint_during_an_experiment_zeroes_the_motor_and_keeps_the_log(tmp_path
     import signal
     import time
 
-    from frictionlab.realtime.datalog import read_csv_log
+    from frictionlab.io.logs import read_log
 
     proc = subprocess.Popen([*CLI, "identify", "experiment", "stribeck", "--backend", "sim",
                              "--log-dir", str(tmp_path), "--no-realtime", "--json"],
@@ -189,7 +189,7 @@ def test_sigint_during_an_experiment_zeroes_the_motor_and_keeps_the_log(tmp_path
     assert stdout == ""
     assert "stopped before it finished: signal" in stderr
     log = stderr.split("log kept: ")[1].split()[0]
-    rows = read_csv_log(log)
+    rows = read_log(log, partial=True)
     assert rows["u_da"][-1] == 0.0 and int(rows["flags"][-1]) & 32  # the STOP row
     assert any(abs(u) > 0 for u in rows["u_da"][:-1])
 

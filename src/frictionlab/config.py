@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .model.actuator import ActuatorParams
 from .model.controller import COMPENSATOR_FIELDS, COMPENSATOR_KINDS
 from .model.controller import check_compensator as _check_compensator
 from .model.design import DesignSpec, preset
@@ -48,6 +49,7 @@ __all__ = [
     "Config",
     "ConfigError",
     "ConfigValueError",
+    "ControllerLimits",
     "SimParams",
     "UnknownKeyError",
     "build_config",
@@ -178,6 +180,18 @@ class SimParams(Validated):
     duration: float = param(40.0, "simulated time", "s", lo=0.0, hi=1e5, lo_open=True)
 
 
+@dataclass(frozen=True)
+class ControllerLimits(Validated):
+    """Limits on every controller command for the whole run (keys ``controller.*``)."""
+
+    _prefix = "controller."
+
+    u_max: float | None = param(None, "|u| limit of every controller command (swing-up, "
+                                "catch, balancing, compensation), in the simulator and the "
+                                "loop (None = only the DAC's range, 1/|rig.u_scale|)",
+                                "units of u", lo=0.0, lo_open=True, optional=True)
+
+
 #: Default arm/friction substeps per sampling period, by plant friction model
 #: (the cheapest counts that keep the limit-cycle features within 0.3 % of a
 #: run with 20 times as many, docs/model.md "Integration"): the static models
@@ -206,6 +220,8 @@ class Config:
     sim: SimParams = dataclasses.field(default_factory=SimParams)
     rig: RigScaling = dataclasses.field(default_factory=RigScaling)
     swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
+    actuator: ActuatorParams = dataclasses.field(default_factory=ActuatorParams)
+    controller: ControllerLimits = dataclasses.field(default_factory=ControllerLimits)
     plant_kind: str = "thesis"
 
     def __post_init__(self) -> None:
@@ -242,6 +258,20 @@ class Config:
         if not self.motor:
             return self.plant.arm_length
         return 1.0 / float(linearization(self.plant)[1][3, 0])
+
+    def plant_row(self) -> Any:
+        """The float row the compiled plant reads: ``plant.*`` with the actuator's
+        ``actuator.*`` (:mod:`frictionlab.model.actuator`)."""
+        return self.plant.record(self.actuator.record())
+
+    @property
+    def u_limit(self) -> float:
+        """The bound on every controller command (units of u): ``controller.u_max``
+        within the DAC's range (``rig.u_max``, the harder bound the loop applies to
+        u_DA as well; a motor plant's ``plant.voltage_limit``)."""
+        # a motor plant's: its amplifier's voltage limit
+        dac = self.plant.voltage_limit if self.motor else self.rig.u_max
+        return dac if self.controller.u_max is None else min(self.controller.u_max, dac)
 
     @property
     def substeps(self) -> int:
@@ -282,10 +312,12 @@ class Config:
         return out
 
 
-_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig", "swingup")
+_SECTIONS = ("plant", "design", "friction", "compensation", "sim", "rig", "swingup",
+             "actuator", "controller")
 _CLASSES = {"plant": PlantParams, "design": DesignSpec, "friction": FrictionParams,
             "compensation": FrictionParams, "sim": SimParams, "rig": RigScaling,
-            "swingup": SwingUpParams}
+            "swingup": SwingUpParams, "actuator": ActuatorParams,
+            "controller": ControllerLimits}
 
 
 _NEG = {"stiction_negative", "coulomb_negative", "viscous_negative"}

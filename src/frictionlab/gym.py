@@ -219,7 +219,7 @@ class _Plants:
     def start(self, i: int, cfg: Config, theta0: float) -> None:
         """Plant i at rest at ``theta0`` with the parameters of ``cfg``."""
         self.configs[i] = cfg
-        self.pps[i] = cfg.plant.record()
+        self.pps[i] = cfg.plant_row()
         self.fps[i] = friction_row(cfg.friction.record())
         self.fkinds[i] = KINDS.index(cfg.friction_kind)
         self.substeps[i] = cfg.substeps

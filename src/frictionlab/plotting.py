@@ -43,6 +43,7 @@ __all__ = [
     "key_label",
     "parameter_lines",
     "plot_cycle_figure",
+    "plot_rig_rows",
     "plot_trajectory",
     "save_figure",
     "series_style",
@@ -311,5 +312,47 @@ def plot_cycle_figure(trace, path: str, kind: str, title: str, dpi: int = 100) -
                   fontsize=8, borderaxespad=0.1)
     axes[-1].set_xlabel(axis_label("time", "s"))
     axes[-1].set_xlim(t[0], t[-1])
+    fig.suptitle(title, fontsize=9)
+    return save_figure(fig, path, dpi=dpi)
+
+
+def plot_rig_rows(traces, rows, reference, path: str, title: str, dpi: int = 100) -> str:
+    """Simulated limit cycles against the rig's Table 1, one panel per row.
+
+    Parameters
+    ----------
+    traces : mapping
+        Row name (``fast``, ``slow``) -> arrays ``t``, ``theta_m`` of the run's
+        last cycles.
+    rows : mapping
+        Row name -> the run's features (Table 1's names).
+    reference : mapping
+        Row name -> Table 1's six features (peak1, peak2, valley, period,
+        max_u, max_arm_velocity).
+    """
+    names = list(traces)
+    fig, axes = plt.subplots(len(names), 1, figsize=(9, 3.0 * len(names)),
+                             layout="constrained")
+    for ax, name in zip(np.atleast_1d(axes), names, strict=True):
+        tr, f, ref = traces[name], rows[name], reference[name]
+        t = np.asarray(tr["t"])
+        ax.plot(t - t[0], tr["theta_m"], label=r"simulated $\theta_m$", **TRACES["measured"])
+        for i, (feat, color) in enumerate((("peak1", "C1"), ("peak2", "C3"), ("valley", "C2"))):
+            ax.axhline(ref[i], color=color, ls="--", lw=1.0, label=f"rig's {feat} {ref[i]:.3g}")
+            if f.get(feat) is not None:
+                ax.axhline(f[feat], color=color, ls=":", lw=1.0,
+                           label=f"simulated {feat} {f[feat]:.3g}")
+        cols = ("period", "max_u", "max_arm_velocity")
+        units = ("s", "m/s²", "rad/s")
+        text = "\n".join(
+            f"{c}: {f[c]:.3g} {u} (rig {r:g})" if f.get(c) is not None else f"{c}: - (rig {r:g})"
+            for c, u, r in zip(cols, units, ref[3:], strict=True))
+        ax.text(0.01, 0.03, text, transform=ax.transAxes, fontsize=8, va="bottom",
+                bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
+        ax.set_title(f"{name} design", fontsize=9)
+        ax.set_ylabel(axis_label(r"$\theta_m$", "rad"))
+        ax.grid(alpha=0.3)
+        ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, frameon=False)
+    np.atleast_1d(axes)[-1].set_xlabel(axis_label("time", "s"))
     fig.suptitle(title, fontsize=9)
     return save_figure(fig, path, dpi=dpi)

@@ -12,11 +12,12 @@ module, one layer above the configuration, builds them: the sensor
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from .config import Config, build_config
+from .model.actuator import ActuatedPlant
 from .model.controller import DEFAULT_ERROR_SIGNAL, Controller
 from .model.design import design as make_design
 from .model.limit_cycles import LimitCycleFeatures, trajectory_features
@@ -40,7 +41,6 @@ __all__ = [
     "simulate",
     "simulate_config",
     "simulated_plant",
-    "u_limit",
 ]
 
 
@@ -83,24 +83,22 @@ def linearization_json(cfg: Config) -> dict:
             "input": f"u ({cfg.plant_model.u_unit})"}
 
 
-def u_limit(cfg: Config) -> float:
-    """The saturation of u: the DAC's range (``rig.*``) for the thesis plant,
-    the amplifier's ``plant.voltage_limit`` for a motor plant."""
-    return cfg.plant.voltage_limit if cfg.motor else cfg.rig.u_max
-
-
 def make_controller(cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL) -> Controller:
     """The balancing controller a configuration describes (design, compensator, the
-    saturation of u: :func:`u_limit`)."""
+    saturation of u at ``controller.u_max`` within the DAC's range or a motor
+    plant's voltage limit, Config.u_limit)."""
     return Controller(plant_design(cfg), cfg.compensation_kind, cfg.compensation,
-                      error_signal=error_signal, u_max=u_limit(cfg))
+                      error_signal=error_signal, u_max=cfg.u_limit)
 
 
 def loop_spec(cfg: Config, controller: Controller | None = None,
               open_loop: bool = False) -> LoopSpec:
     """The closed loop a configuration describes (``controller`` in place of its
     own; ``open_loop``: u held at 0, no fall stop, :class:`LoopSpec`)."""
-    return LoopSpec(cfg.plant_model, cfg.plant, cfg.friction_kind, cfg.friction,
+    # the thesis plant with its actuator (App. B.4) when actuator.* is on
+    plant = (ActuatedPlant(cfg.plant, cfg.actuator) if cfg.actuator.enabled and not cfg.motor
+             else cfg.plant)
+    return LoopSpec(cfg.plant_model, plant, cfg.friction_kind, cfg.friction,
                     controller or make_controller(cfg), make_sensor(cfg), cfg.design.h,
                     cfg.substeps, cfg.pendulum_ratio, cfg.sim.fall_angle, cfg.sim.initial_angle,
                     cfg.sim.duration, cfg, open_loop)
@@ -127,6 +125,8 @@ def simulate_config(
     progress: Callable[[float], None] | None = None,
     controller: Controller | None = None,
     open_loop: bool = False,
+    switches: Sequence[tuple[float, Controller]] = (),
+    transition: tuple[float, float] = (2.0, 2.0),
 ) -> Trajectory:
     """Run the closed loop described by ``cfg``.
 
@@ -143,11 +143,14 @@ def simulate_config(
         report progress).
     controller : Controller, optional
         Use this controller instead of the one ``cfg`` describes.
+    switches, transition
+        Changes of controller while the loop runs, made bumpless as the 200 Hz
+        loop makes them (:func:`frictionlab.model.simulation.simulate`).
     open_loop : bool
         Hold u at 0 for the whole run, with no fall stop (a free swing).
     """
     return simulate_spec(loop_spec(cfg, controller, open_loop), duration, record=record,
-                         progress=progress)
+                         progress=progress, switches=switches, transition=transition)
 
 
 def run_features(cfg: Config, duration: float | None = None,

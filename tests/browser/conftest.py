@@ -4,6 +4,13 @@ driven by Playwright (``scripts/install-system-deps`` installs chromium when it 
 The page runs under its own strict Content-Security-Policy (no ``bypass_csp``); waits poll the
 page's state (``window.__console``) or use Playwright's auto-waiting assertions, never fixed
 sleeps.
+
+A loop that stopped is a failure, with one documented exception (docs/development.md, "A busy
+machine"): a trial that the loop's own host-stall stop ended (:data:`HOST_STALL_STOPS`) is
+run again, at most :data:`MAX_STALL_RETRIES` times, with a warning in pytest's summary
+(:func:`retry_host_stalls`).  Any other stop - the safety stop a test checks included - fails
+at once, and a test that finds the loop stopped fails (:func:`assert_running`) rather than
+starting it again.
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import sys
 import threading
 import time
 import urllib.request
+import warnings
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -30,6 +38,49 @@ CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-q
                  "--disable-component-update", "--disable-sync"]
 STARTUP_TIMEOUT = 60.0
 _URL = re.compile(r"frictionlab console: (http://\S+)")
+#: The stops of a stalled host (the loop's safety stop when it was not running for longer than
+#: its slack): the only ones after which a browser test runs its trial again.
+HOST_STALL_STOPS = ("paused", "rig_silent")
+#: How many times a trial is run again after a host-stall stop.
+MAX_STALL_RETRIES = 2
+
+
+class LoopStopped(AssertionError):
+    """The loop stopped while a test needed it running; ``reason`` is its stop reason."""
+
+    def __init__(self, reason: str | None, detail: str | None = ""):
+        super().__init__(f"the loop stopped: {reason} {detail or ''}".rstrip())
+        self.reason = reason
+        self.detail = detail
+
+
+class HostStallWarning(UserWarning):
+    """A browser test's trial ran again after a host-stall stop (how often, in the summary)."""
+
+
+def check_running(st: dict) -> dict:
+    """``st`` (a status), or :class:`LoopStopped` with its stop reason if the loop stopped."""
+    if not st.get("running"):
+        raise LoopStopped(st.get("stop_reason"), st.get("stop_detail"))
+    return st
+
+
+def retry_host_stalls(trial, restart, what: str):
+    """``trial()``'s result; after a :class:`LoopStopped` with a host-stall reason
+    (:data:`HOST_STALL_STOPS`), warn, ``restart()`` and run it again, at most
+    :data:`MAX_STALL_RETRIES` times; any other stop (or one retry too many) is raised."""
+    for attempt in range(MAX_STALL_RETRIES + 1):
+        try:
+            return trial()
+        except LoopStopped as stop:
+            if stop.reason not in HOST_STALL_STOPS or attempt == MAX_STALL_RETRIES:
+                raise
+            # shown in pytest's warnings summary: how often a host stalls this long
+            warnings.warn(HostStallWarning(f"{what}: a stalled host stopped the loop "
+                                           f"({stop.reason}: {stop.detail}); run again"),
+                          stacklevel=2)
+            restart()
+    raise AssertionError("unreachable")
 
 
 class ConsoleProcess:

@@ -16,7 +16,7 @@ from playwright.sync_api import expect
 
 from frictionlab.model.design import PRESETS, design
 
-from .conftest import ConsoleProcess, wait_until
+from .conftest import ConsoleProcess, check_running, retry_host_stalls, wait_until
 
 # a browser and a console server: slow; the tests share the console and go on from
 # each other's state, so under pytest-xdist they run in one worker, in order
@@ -65,29 +65,28 @@ def gains(page, which: str) -> np.ndarray:
     return np.array([float(v) for v in re.findall(r"[-+]?\d[\d.]*(?:e[-+]?\d+)?", text)])
 
 
-class LoopStopped(AssertionError):
-    """The loop stopped while a test waited for it."""
-
-
 def wait_sim_time(page, t_target: float, timeout: float = 60.0) -> dict:
-    """Wait until the loop's time (reported in the status) reaches ``t_target``."""
+    """Wait until the loop's time (reported in the status) reaches ``t_target``
+    (:class:`LoopStopped` if it stops)."""
     def reached():
-        st = status(page)
-        if not st["running"]:
-            raise LoopStopped(f"the loop stopped: {st.get('stop_reason')} "
-                              f"{st.get('stop_detail')}")
+        st = check_running(status(page))
         return st if st["t"] >= t_target else None
 
     return wait_until(reached, timeout, what=f"loop time {t_target:.1f} s")
 
 
-def ensure_running(page) -> None:
-    """Start the loop again if a safety stop ended it (a host stall on a busy machine)."""
-    if not status(page)["running"]:
-        expect(page.locator("#start")).to_have_text("Start")
-        page.locator("#start").click()
-        wait_until(lambda: status(page)["running"] and status(page)["ticks"] > 0,
-                   what="the loop running again")
+def assert_running(page) -> None:
+    """Fail (:class:`LoopStopped`, with its stop reason) if the loop is not running: a test
+    that finds it stopped does not start it again (an earlier test, or the loop, stopped it)."""
+    check_running(status(page))
+
+
+def start_loop(page) -> None:
+    """Press Start (the loop is stopped) and wait until it ticks."""
+    expect(page.locator("#start")).to_have_text("Start")
+    page.locator("#start").click()
+    wait_until(lambda: status(page)["running"] and status(page)["ticks"] > 0,
+               what="the loop running again")
 
 
 def test_address_printed_and_status_line(console, page):
@@ -284,13 +283,14 @@ def _compensation_trial(page) -> tuple[float, float]:
 
 
 def test_compensation_shrinks_the_limit_cycle(page):
-    try:
-        off, on = _compensation_trial(page)
-    except LoopStopped:  # a safety stop (busy host): start again, once
+    def restart():  # after a host-stall stop: compensation off, start again
         if page.locator("#compensation").get_attribute("aria-pressed") == "true":
             page.locator("#compensation").click()
-        ensure_running(page)
-        off, on = _compensation_trial(page)
+        start_loop(page)
+
+    assert_running(page)
+    off, on = retry_host_stalls(lambda: _compensation_trial(page), restart,
+                                "the compensation trial")
     assert on < 0.5 * off, (off, on)
     button = page.locator("#compensation")
     button.click()
@@ -302,7 +302,7 @@ def test_compensation_shrinks_the_limit_cycle(page):
 
 
 def test_friction_type_and_model_parameters(page):
-    ensure_running(page)
+    assert_running(page)
     page.select_option("#friction-type", "classical")
     expect(page.locator("#friction-msg")).to_have_text("friction type classical")
     expect(page.locator("#friction-sigma0")).to_have_count(0)
@@ -338,7 +338,7 @@ def test_friction_type_and_model_parameters(page):
 def test_adaptive_friction_type_shows_its_estimates(page):
     """The Adaptive choice: the LuGre fields and the law's, the adapted levels beside
     the panel, and the friction estimate F-hat switched on in the plot."""
-    ensure_running(page)
+    assert_running(page)
     button = page.locator("#compensation")
     if button.get_attribute("aria-pressed") != "true":
         button.click()
@@ -364,7 +364,7 @@ def test_adaptive_friction_type_shows_its_estimates(page):
 
 
 def test_server_refusals_are_shown_beside_the_field(console, page):
-    ensure_running(page)
+    assert_running(page)
     expect(page.locator("#friction-sigma0")).to_be_visible()  # LuGre, from the test above
     before = console.get("/api/status")[1]["compensation"]
     sigma0 = page.locator("#friction-sigma0")
@@ -401,7 +401,7 @@ def test_unsafe_change_asks_the_operator(console, page):
     """A change the model predicts unstable: the page shows why and asks; Cancel keeps the
     settings and marks the field with the reason and what passes; Apply anyway resends the
     same change with confirm (answered here by the test, so the loop is not hurt)."""
-    ensure_running(page)
+    assert_running(page)
     before = console.get("/api/status")[1]["design"]["spec"]
     field = page.locator("#observer-observer_omega1")
     field.fill("1000")
@@ -462,8 +462,7 @@ def _push_trial(page, kick: float) -> tuple[float, float, float]:
     limit = max(3.0 * before, before + 0.01)
 
     def excursion():
-        if not status(page)["running"]:
-            raise LoopStopped(f"the loop stopped: {status(page).get('stop_reason')}")
+        check_running(status(page))
         t, theta = _theta(page, t_mark)
         big = np.abs(theta) > limit
         if big.any():
@@ -476,8 +475,7 @@ def _push_trial(page, kick: float) -> tuple[float, float, float]:
     peak = np.nanmax(np.abs(_theta(page, t_mark)[1]))
 
     def recovered():
-        if not status(page)["running"]:
-            raise LoopStopped(f"the loop stopped: {status(page).get('stop_reason')}")
+        check_running(status(page))
         t_end = ui(page, "lastT")
         if t_end < t_big + 1.5:
             return None
@@ -492,7 +490,7 @@ def _push_trial(page, kick: float) -> tuple[float, float, float]:
 
 
 def test_push_disturbs_the_simulated_pendulum_and_the_loop_recovers(page):
-    ensure_running(page)
+    assert_running(page)
     kick = page.locator("#kick")
     kick.fill("lots")
     page.locator("#push").click()
@@ -503,18 +501,15 @@ def test_push_disturbs_the_simulated_pendulum_and_the_loop_recovers(page):
     if button.get_attribute("aria-pressed") != "true":
         button.click()
         expect(button).to_have_text("Compensating")
-    try:
-        before, peak, after = _push_trial(page, 0.3)
-    except LoopStopped:  # a safety stop (busy host): start again, once
-        ensure_running(page)
-        before, peak, after = _push_trial(page, 0.3)
+    before, peak, after = retry_host_stalls(lambda: _push_trial(page, 0.3),
+                                            lambda: start_loop(page), "the push trial")
     assert peak > max(3.0 * before, before + 0.01), (before, peak)
     assert after <= max(2.0 * before, before + 0.005), (before, after)
     assert status(page)["running"]
 
 
 def test_save_data_records_names_and_downloads(console, page):
-    ensure_running(page)
+    assert_running(page)
     save = page.locator("#save")
     save.click()
     expect(save).to_have_text("Stop saving")
@@ -570,7 +565,7 @@ def test_experiments_panel_runs_an_experiment_on_the_connected_rig(page):
                                                             timeout=60_000)
     expect(page.locator("#experiment-result")).to_contain_text("input_gain = 1.0")
     assert status(page)["stop_reason"] == "finished"
-    ensure_running(page)
+    start_loop(page)  # this test stopped it: balancing again for the next test
 
 
 def test_exit_stops_the_loop_and_ends_the_server(console, page):

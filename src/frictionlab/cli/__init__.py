@@ -35,11 +35,11 @@ from .common import (
     add_config_args,
     add_plant_arg,
     check_output_path,
+    check_window,
     config_from_args,
     emit_json,
     error_message,
     feature_lines,
-    finite,
     flush_notes,
     hanging_start,
     note,
@@ -95,7 +95,8 @@ def cmd_simulate(args) -> int:
             cfg = cfg.with_values({"sim.duration": args.duration})
         except ValueError as exc:
             raise UsageError(f"--duration: {exc}") from None
-    finite("--window", args.window, 0.0)
+    check_window(args.window, cfg.sim.duration,
+                 "--duration" if args.duration is not None else "sim.duration")
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     if args.open_loop and args.swing_up:
@@ -151,10 +152,10 @@ def cmd_simulate(args) -> int:
     else:
         print(f"status: {status}  ({out['duration']:.2f} s simulated)")
         if swing is not None:
-            when = ("never" if swing.swing_up_time is None
-                    else f"at {swing.swing_up_time:.2f} s")
-            print(f"  swing-up: caught {when}, {swing.catches} catch(es)"
-                  + (f", stopped: {swing.stop_reason}" if swing.stop_reason else ""))
+            when = ("never caught" if swing.swing_up_time is None
+                    else f"{swing.swing_up_time:.2f} s")
+            print(f"  swing_up_time      {when} ({swing.catches} catch(es)"
+                  + (f", stopped: {swing.stop_reason})" if swing.stop_reason else ")"))
         for line in feature_lines(feats.interface_dict()):
             print(line)
     return 0

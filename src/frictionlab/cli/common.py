@@ -100,6 +100,17 @@ def finite(option: str, value: float | None, lo: float | None = None,
         raise UsageError(f"{option} must be {rel}{rng}, got {value:g}")
 
 
+def check_window(window: float | None, duration: float, duration_name: str = "--duration"
+                 ) -> None:
+    """Refuse a ``--window`` that is not a positive finite number or is longer than
+    the run it analyses (``duration`` s, given by ``duration_name``: an option or a
+    key), naming both values (``None``, the default window, passes)."""
+    finite("--window", window, 0.0)
+    if window is not None and window > duration * (1.0 + 1e-12):
+        raise UsageError(f"--window {window:g} s is longer than the run ({duration_name} "
+                         f"{duration:g} s); give a window of at most {duration:g} s")
+
+
 _clean = json_safe  # the one sanitiser (frictionlab.io.jsonsafe)
 
 #: Library argument names (a :class:`~frictionlab.model.params.ParamError`'s
@@ -140,6 +151,7 @@ def note_text(note: str, options: dict[str, str] = OPTIONS) -> str:
 SAFETY_OPTIONS = {"safety.angle_limit": "--angle-limit",
                   "safety.start_tolerance": "--start-tolerance",
                   "safety.gain_transition": "--gain-transition",
+                  "safety.compensation_transition": "--compensation-transition",
                   "safety.silent_periods": "--silent-periods",
                   "safety.max_pause": "--max-pause"}
 

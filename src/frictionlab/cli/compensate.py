@@ -19,6 +19,7 @@ from .common import (
     add_engine_args,
     check_engine_args,
     check_output_path,
+    check_window,
     config_from_args,
     emit_json,
     finite,
@@ -145,8 +146,7 @@ def _compensated_config(args):
 def _check_run_args(args):
     hi = SimParams.__dataclass_fields__["duration"].metadata["hi"]
     finite("--duration", args.duration, 0.0, hi=hi)
-    if args.window is not None and not (0 < args.window <= args.duration):
-        raise UsageError(f"--window must be in (0, --duration], got {args.window:g}")
+    check_window(args.window, args.duration)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
 
 

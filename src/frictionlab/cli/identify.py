@@ -23,6 +23,7 @@ from .common import (
     check_engine_args,
     check_output_dir,
     check_output_path,
+    check_window,
     emit_json,
     error_message,
     feature_lines,
@@ -233,6 +234,7 @@ def cmd_limit_cycle(args) -> int:
     # validate the whole problem (settings, bounds, run length) before any
     # output or simulation: bad input exits 2 with a single stderr line
     constrained = not args.allow_stiction_below_coulomb
+    check_window(args.window, args.duration)
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
                       evaluate=_never, stiction_above_coulomb=constrained, plant=args.plant)
@@ -355,7 +357,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
     from ..io.logs import read_log
     from ..realtime import RigError
     from ..studies.identification.onrig import run_on_rig
-    from .run import _RunSignals, interface_stats
+    from .run import RunSignals, interface_stats
 
     safety = safety_from_args(args)  # a refused value exits 2 before the announcement
     err = sys.stderr
@@ -375,7 +377,7 @@ def _run_experiment(exp, cfg, backend, log_dir, args, clock=None):
             last[0] = e.phase
             print(f"  {100 * e.progress:3.0f} %  {e.phase}", file=err)
 
-    with _RunSignals() as signals, progress_bar(exp.name, tty and clock is None) as upd:
+    with RunSignals() as signals, progress_bar(exp.name, tty and clock is None) as upd:
         def on_start(ctl):
             signals.ctl = ctl
 
@@ -446,10 +448,10 @@ def cmd_experiment(args) -> int:
         from ..studies.identification.onrig import make_rig_experiment
 
         if args.backend not in (None, "sim"):
-            from ..realtime.api import _check_backend
+            from ..realtime.api import check_backend
 
             try:
-                _check_backend(args.backend)
+                check_backend(args.backend)
             except ValueError as exc:
                 raise UsageError(error_message(exc)) from None
         if args.backend is None and args.save and not args.save.endswith(".csv"):
@@ -543,6 +545,8 @@ def cmd_features(args) -> int:
             raise UsageError(f"--set {key}: features takes only design.h (the period of a "
                              ".dat without its sidecar)")
     out = _log_experiment(args.log, h, args.window, args.design, what="features:")
+    if args.window is not None and out["window"] < args.window:  # the log is shorter
+        check_window(args.window, out["window"], f"the log {args.log} holds")
     if args.json:
         emit_json(out)
         return 0

@@ -20,6 +20,7 @@ import os
 import signal
 import sys
 
+from ..startsignals import Interrupted, interface_stats, not_started, take_over
 from .common import (
     UsageError,
     add_config_args,
@@ -106,10 +107,14 @@ def register_cli(sub) -> None:
                    help="start only if |theta| <= this (default 0.15 rad; no swing-up)")
     add_stall_args(p)
     p.add_argument("--gain-transition", type=float, default=2.0, metavar="S",
-                   help="new state-feedback gains (a design change while running) replace "
-                        "the running ones linearly over S seconds, so a switch in mid-cycle "
-                        "does not throw the pendulum past the angle limit; 0: at once "
-                        "(default: 2)")
+                   help="new gains (a design change while running) replace the running "
+                        "ones over S seconds, through the designs in between, so a switch in "
+                        "mid-cycle does not throw the pendulum past the angle limit; 0: at "
+                        "once (default: 2)")
+    p.add_argument("--compensation-transition", type=float, default=2.0, metavar="S",
+                   help="a compensator switched on while running (or to another kind) "
+                        "starts at its steady estimate and is ramped in over S seconds, so "
+                        "that u does not jump; 0: at once (default: 2)")
     p.add_argument("--prewarm-us", type=float, default=PREWARM_US, metavar="US",
                    help="wake US microseconds before each deadline, run the tick's code on "
                         f"scratch data and busy-wait to the deadline (default {PREWARM_US:g}; "
@@ -166,6 +171,15 @@ def register_cli(sub) -> None:
 
 
 def cmd_run(args) -> int:
+    try:
+        return _cmd_run(args)
+    except Interrupted as exc:
+        # a stop signal before the run's own handlers took over (frictionlab.startsignals,
+        # installed by the executable first thing): nothing opened, nothing written
+        return _report(not_started(exc.name), args)
+
+
+def _cmd_run(args) -> int:
     from ..realtime import RealtimeController
     from ..realtime.clock import MonotonicClock
 
@@ -182,10 +196,13 @@ def cmd_run(args) -> int:
         raise UsageError(f"--port must be in 0..65535, got {args.port}")
     safety = safety_from_args(args, angle_limit=args.angle_limit,
                               start_tolerance=args.start_tolerance,
-                              gain_transition=args.gain_transition)
+                              gain_transition=args.gain_transition,
+                              compensation_transition=args.compensation_transition)
     check_output_dir(args.log_dir, "--log-dir")
     flush_notes(args)
-    with _RunSignals() as signals:
+    with RunSignals() as signals:
+        if signals.received is not None:  # came during the start-up: nothing ran
+            return _report(not_started(signals.received), args)
         ctl = RealtimeController(cfg, args.backend, log_dir=args.log_dir,
                                  clock=MonotonicClock(), safety=safety,
                                  prewarm_us=args.prewarm_us, duration=args.duration,
@@ -195,7 +212,7 @@ def cmd_run(args) -> int:
                                  swing_up=args.swing_up)
         signals.ctl = ctl
         if signals.received is not None:  # before anything ran: no rig opened, no log
-            return _report(_not_started(signals.received), args)
+            return _report(not_started(signals.received), args)
         if not args.headless:
             # until the console serves (and takes these signals over) a signal ends
             # `run` at once; nothing runs yet
@@ -237,7 +254,7 @@ def start_console(ctl, host: str, port: int, token: str | None = None) -> bool:
     return True
 
 
-class _RunSignals:
+class RunSignals:
     """The signals of ``frictionlab run``, from the controller's creation to the output.
 
     SIGINT, SIGTERM, SIGHUP and SIGQUIT (:data:`~.realtime.osrt.STOP_SIGNALS`)
@@ -264,8 +281,11 @@ class _RunSignals:
     def __enter__(self):
         from ..realtime.osrt import STOP_SIGNALS
 
+        early = take_over()  # the executable's start-up handler raises no more
         for sig in STOP_SIGNALS:
             self._previous[sig] = signal.signal(sig, self._stop)
+        if self.received is None:
+            self.received = early
         if hasattr(signal, "SIGTSTP"):
             self._previous[signal.SIGTSTP] = signal.signal(signal.SIGTSTP, self._suspend)
         if hasattr(signal, "SIGXFSZ"):
@@ -295,14 +315,6 @@ class _RunSignals:
             os.kill(os.getpid(), signal.SIGTSTP)  # suspended here until SIGCONT (fg)
         finally:
             signal.signal(signal.SIGTSTP, self._suspend)
-
-
-def _not_started(reason_detail: str) -> dict:
-    """The statistics of a run that a signal ended before it started."""
-    none3 = {"p50": None, "p99": None, "max": None}
-    return {"ticks": 0, "missed": 0, "overruns": 0, "rig_timeouts": 0, "jitter_ms": none3,
-            "compute_us": dict(none3), "stop_reason": "signal",
-            "stop_detail": f"{reason_detail} before the run started", "log": None}
 
 
 def _run_headless(ctl, args) -> int:
@@ -345,17 +357,6 @@ def _report(st: dict, args) -> int:
     print(f"frictionlab run: stopped: {reason} ({what}): {st.get('stop_detail') or ''}",
           file=sys.stderr)
     return 1
-
-
-def interface_stats(st: dict) -> dict:
-    """The fields ``frictionlab run --headless --json`` prints (docs/cli.md), from the
-    run's full statistics (all of which are in the run's JSON sidecar)."""
-    j, c = st["jitter_ms"], st["compute_us"]
-    return {"ticks": st["ticks"], "missed": st["missed"], "overruns": st["overruns"],
-            "jitter_ms": {"p50": j["p50"], "p99": j["p99"], "max": j["max"]},
-            "compute_us": {"p50": c["p50"], "p99": c["p99"]},
-            "stop_reason": st["stop_reason"], "log": st["log"],
-            **({"swing_up": st["swing_up"]} if st.get("swing_up") is not None else {})}
 
 
 def refuse_motor_plant(cfg, command: str) -> None:

@@ -40,9 +40,9 @@ from .common import (
     add_engine_args,
     check_engine_args,
     check_output_path,
+    check_window,
     config_from_args,
     emit_json,
-    finite,
     flush_notes,
     hanging_start,
     note,
@@ -73,7 +73,7 @@ def _key_cell(v: Any) -> str:
 def _one_table(rows: Sequence[Mapping[str, Any]], keys: Sequence[str]) -> str:
     with_status = any(r["status"] != "limit_cycle" for r in rows)
     swing_up = any("caught" in r for r in rows)
-    head = ([*keys, *(h for _, h in TABLE_HEADERS)] + (["caught", "catch time"] if swing_up
+    head = ([*keys, *(h for _, h in TABLE_HEADERS)] + (["caught", "swing_up_time"] if swing_up
                                                          else [])
             + (["status"] if with_status else []))
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
@@ -82,7 +82,7 @@ def _one_table(rows: Sequence[Mapping[str, Any]], keys: Sequence[str]) -> str:
         if swing_up:
             caught = r.get("caught")
             cells += ["-" if caught is None else ("yes" if caught else "no"),
-                      _cell(r.get("catch_time"))]
+                      _cell(r.get("swing_up_time"))]
         if with_status:
             cells.append(r["status"])
         lines.append("| " + " | ".join(cells) + " |")
@@ -114,7 +114,7 @@ def markdown_table(rows: Sequence[Mapping[str, Any]],
 
     Columns: the varied key(s), peak1, peak2, valley, T, max(u), max(Ω̇)
     (three significant digits; ``-`` where undefined), plus ``caught`` and
-    ``catch time`` (s) for a sweep with ``--swing-up`` and ``status`` when
+    ``swing_up_time`` (s) for a sweep with ``--swing-up`` and ``status`` when
     some row is not a limit cycle.  In ``oat`` mode with several keys, one
     table per key (blank line between), each with its own key column only.
 
@@ -285,7 +285,7 @@ def register_cli(sub) -> None:
     p.add_argument("--swing-up", action="store_true",
                    help="each point swings up from sim.initial_angle (pi = hanging unless "
                         "set) before balancing; adds the columns caught (1/0) and "
-                        "catch_time (s), status not_caught when it never balanced")
+                        "swing_up_time (s), status not_caught when it never balanced")
     p.add_argument("--table", action="store_true",
                    help="print a markdown table shaped like the thesis's Tables 2-7 (on "
                         "stderr with --json)")
@@ -318,7 +318,12 @@ def _plan(args):
             base = base.with_values({"sim.duration": args.duration})
         except ValueError as exc:
             raise UsageError(f"--duration: {exc}") from None
-    finite("--window", args.window, 0.0)
+    if "sim.duration" in keys:  # each point's own length: the window fits the shortest
+        check_window(args.window, min(v for k, vals in varies if k == "sim.duration"
+                                      for v in vals), "--vary sim.duration, shortest")
+    else:
+        check_window(args.window, base.sim.duration,
+                     "--duration" if args.duration is not None else "sim.duration")
     check_engine_args(args)
     if args.chunk_size is not None and args.chunk_size < 1:
         raise UsageError(f"--chunk-size must be >= 1, got {args.chunk_size}")

@@ -25,8 +25,12 @@ from ..model.simulation import LOGGED
 __all__ = ["log_warnings", "read_log"]
 
 
-def read_log(path: str | Path, h: float = 0.005) -> dict[str, np.ndarray]:
+def read_log(path: str | Path, h: float = 0.005, *,
+             partial: bool = False) -> dict[str, np.ndarray]:
     """Signals of a log file by name (``t`` always present).
+
+    The one reader of the project's logs (the simulator's and the real-time
+    loop's ``.dat`` and ``.csv``).
 
     Parameters
     ----------
@@ -34,6 +38,9 @@ def read_log(path: str | Path, h: float = 0.005) -> dict[str, np.ndarray]:
         ``.csv`` (with header) or ``.dat`` (ten columns).
     h : float
         Sampling period for ``.dat`` files (``design.h``).
+    partial : bool
+        The log may still be being written: a last line without its newline
+        is left out (else it is read like any other).
 
     Raises
     ------
@@ -47,6 +54,8 @@ def read_log(path: str | Path, h: float = 0.005) -> dict[str, np.ndarray]:
         text = p.read_text()
     except OSError as exc:
         raise ValueError(f"cannot read log {p}: {exc.strerror}") from None
+    if partial and not text.endswith("\n"):
+        text = text[:text.rfind("\n") + 1]
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("#")]
     if not lines:
         raise ValueError(f"{p}: empty log")

@@ -232,6 +232,14 @@ class Gains(NamedTuple):
         Index in :data:`ERROR_SIGNALS` of the LuGre observer's error e.
     feed_net : float
         1.0: the observers receive :math:`u - \\hat F` (module docstring), 0.0: u.
+    comp_weight : float
+        The share of the compensator's estimate that is applied (and fed to the
+        observers): 1 but while a compensator is being ramped in after a switch
+        (:class:`frictionlab.model.switching.Transition`).
+    error_weight : float
+        The share of the error signal e that the LuGre observer receives: 1 but
+        while it is being ramped in after a switch
+        (:class:`frictionlab.model.switching.Transition`).
     observer : int
         Which observers: :data:`THESIS_OBSERVERS` (0, the thesis's pendulum
         and arm observers, gains k1..k4) or :data:`DC_OBSERVER` (the DC-motor
@@ -260,6 +268,8 @@ class Gains(NamedTuple):
     compensator: int
     error_signal: int
     feed_net: float
+    comp_weight: float = 1.0
+    error_weight: float = 1.0
     observer: int = 0
     obs: tuple = (0.0,) * 32
 
@@ -267,6 +277,16 @@ class Gains(NamedTuple):
     def feedback(self) -> np.ndarray:
         """The state feedback L = (l1, l2, l3, l4)."""
         return np.array(self[:4])
+
+    @property
+    def gains8(self) -> np.ndarray:
+        """The state feedback and the observer gains (l1, l2, l3, l4, k1, k2, k3, k4)."""
+        return np.array(self[:8])
+
+    def with_gains8(self, g) -> Gains:
+        """These gains with L and K replaced by ``g`` (as :attr:`gains8`)."""
+        return self._replace(l1=float(g[0]), l2=float(g[1]), l3=float(g[2]), l4=float(g[3]),
+                             k1=float(g[4]), k2=float(g[5]), k3=float(g[6]), k4=float(g[7]))
 
     def with_feedback(self, L) -> Gains:
         """These gains with the state feedback L replaced."""
@@ -290,11 +310,11 @@ OBS_LEN = 32
 def gains_record(row):
     """The :class:`Gains` stored as the float row :func:`gains_row`."""
     r = row
-    obs = (r[17], r[18], r[19], r[20], r[21], r[22], r[23], r[24], r[25], r[26], r[27],
-           r[28], r[29], r[30], r[31], r[32], r[33], r[34], r[35], r[36], r[37], r[38],
-           r[39], r[40], r[41], r[42], r[43], r[44], r[45], r[46], r[47], r[48])
+    obs = (r[19], r[20], r[21], r[22], r[23], r[24], r[25], r[26], r[27], r[28], r[29],
+           r[30], r[31], r[32], r[33], r[34], r[35], r[36], r[37], r[38], r[39], r[40],
+           r[41], r[42], r[43], r[44], r[45], r[46], r[47], r[48], r[49], r[50])
     return Gains(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11],
-                 r[12], int(r[13]), int(r[14]), r[15], int(r[16]), obs)
+                 r[12], int(r[13]), int(r[14]), r[15], r[16], r[17], int(r[18]), obs)
 
 
 #: Candidate error signals e for the LuGre compensator's observer, eq. (19):
@@ -464,10 +484,12 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
             e = arm_dot_m
         elif err == E_ARM_ANGLE:
             e = arm_m
+        e *= gp.error_weight  # ramped in after a switch (model.switching)
         if kind == ADAPTIVE:
             f_hat = adaptive_force(s, cp, arm_dot_m, e, h, gp.arm_length, gp.u_max)
         else:
             f_hat = compensator_force(kind, s, cp, arm_dot_m, u_fb, e, h)
+        f_hat *= gp.comp_weight
     u = u_fb + f_hat
     umax = gp.u_max
     if u > umax:
@@ -588,8 +610,8 @@ class Controller:
             # law's velocity predictor (arm acceleration = (u - F)/length)
             gains = Gains(*L, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0 / float(d.B[3, 0]),
                           float(d.spec.h), float(self.u_max), int(self.compensator_code),
-                          ERROR_SIGNALS.index(self.error_signal), feed_net, DC_OBSERVER,
-                          tuple(float(v) for v in observer_row(d)))
+                          ERROR_SIGNALS.index(self.error_signal), feed_net,
+                          observer=DC_OBSERVER, obs=tuple(float(v) for v in observer_row(d)))
             return gains, compensator_params(self.compensation_params)
         K = [float(x) for x in d.K]
         gains = Gains(*L, *K, float(d.spec.omega0), float(d.g), float(d.arm_length),

@@ -45,6 +45,7 @@ __all__ = [
     "discrete_pair",
     "feedback_closed_form",
     "feedback_numeric",
+    "gain_path",
     "match_poles",
     "observer_gains",
     "place",
@@ -336,6 +337,46 @@ def design(
         spec = preset(spec)
     plant = plant or PlantParams()
     return _design(spec, plant.g, plant.arm_length, method)
+
+
+def gain_path(spec_from: DesignSpec, spec_to: DesignSpec, plant: PlantParams | None = None,
+              steps: int = 10) -> np.ndarray:
+    r"""The gains along the straight line between two designs' specifications.
+
+    Row i holds the state feedback L and the observer gains K (App. C) of the
+    specification i/steps of the way from ``spec_from`` to ``spec_to`` (every
+    field but ``h``): each row places the closed-loop and the observer poles of
+    an intermediate design, whereas a straight line in L itself can pass
+    through gains that place them badly.  From the fast design to the slow
+    one, with K switched at once, a straight line in L left the pendulum
+    swinging up to 0.27 rad, against 0.19 rad along this path
+    (docs/realtime.md, "Switching while running").  A gain transition moves
+    the gains piecewise linearly along these rows.  With given gains
+    (``spec.gains``) at either end, only the two ends.
+
+    Returns
+    -------
+    ndarray (steps + 1, 8)
+        ``(l1, l2, l3, l4, k1, k2, k3, k4)``, of ``spec_from`` first, of
+        ``spec_to`` last.
+    """
+    plant = plant or PlantParams()
+
+    def row(sp):
+        d = design(sp, plant)
+        return np.concatenate([d.L, d.K])
+
+    if spec_from.gains is not None or spec_to.gains is not None or steps < 2:
+        return np.array([row(spec_from), row(spec_to)])
+    names = [f.name for f in dataclasses.fields(DesignSpec) if f.name not in ("h", "gains")]
+    rows = [row(spec_from)]
+    for i in range(1, steps):
+        r = i / steps
+        rows.append(row(dataclasses.replace(spec_from, **{
+            f: getattr(spec_from, f) + r * (getattr(spec_to, f) - getattr(spec_from, f))
+            for f in names})))
+    rows.append(row(spec_to))
+    return np.array(rows, dtype=float)
 
 
 @functools.lru_cache(maxsize=256)

@@ -1,29 +1,53 @@
 r"""Limit-cycle features of the measured pendulum angle (Table 1's columns).
 
 For each positive half-cycle of the measured angle (from an upward zero
-crossing to the next downward one):
+crossing to the next downward one), as the thesis reads its plots (Table 1):
 
 * ``peak1`` - the first local maximum,
-* ``peak2`` - the last local maximum,
-* ``valley`` - the minimum between them.
+* ``peak2`` - the last local maximum; with a single maximum, the *shoulder*
+  after it, if the angle has one (below),
+* ``valley`` - the minimum between the two maxima (none for a shoulder).
 
-A half-cycle with a single maximum contributes ``peak1`` only (its
-``peak2``/``valley`` are missing).  Each feature is averaged over the
-half-cycles inside the analysis window; a feature no half-cycle has is
-reported as ``None``.  ``period`` is the mean spacing of upward zero crossings
-(linearly interpolated); ``max_u`` and ``max_arm_velocity`` are the maxima of
-``|u|`` and ``|measured arm velocity|``; ``peak_to_peak`` is max - min of the
-measured angle.  The same figures for the negative half-cycles (of
-``-theta``) are returned as ``neg_peak1``/``neg_peak2``/``neg_valley``, a
-symmetry check.
+A maximum counts however shallow its dip, as long as it stands above the
+measurement noise: its prominence (:func:`scipy.signal.find_peaks`'s
+definition, compiled: the height above the higher of its two bases) must be
+at least 3 noise standard deviations and :data:`REL_PROMINENCE` (10^-6) of
+the half-cycle's height.  That floor is what a noise-free run needs: the
+simulator's angle has no secondary maximum below 10^-3 of the height in any
+run of the thesis's tables, and rounding is at 10^-16.
 
-Local maxima are found with a prominence threshold (the definitions of
-:func:`scipy.signal.find_peaks`, compiled) (by default 2% of the half-cycle's height, at least
-3 noise standard deviations), so that measurement noise and quantisation
-steps do not count as peaks.  Zero crossings use a small hysteresis for the
-same reason.  With a known measurement-noise level (``noise > 0``) the angle
-is first smoothed by a 9-sample centred moving average (45 ms at h = 5 ms),
-which also removes the upward bias noise gives a raw maximum.
+A *shoulder* is a local minimum of the slope's magnitude between the first
+peak and the fall, with no valley: the angle keeps falling but slows down and
+steepens again (the second peak of a double top whose dip has filled in).
+With the slope taken as the difference of consecutive samples, it is a local
+maximum of ``-|slope|`` after the maximum whose prominence is at least 3
+standard deviations of a difference's noise and :data:`REL_PROMINENCE` of the
+steepest descent; the highest one gives ``peak2`` (the angle where the
+descent is least steep) and ``valley`` stays missing.
+
+A half-cycle with neither contributes ``peak1`` only.  Each feature is
+averaged over the half-cycles inside the analysis window that have it; a
+feature no half-cycle has is reported as ``None``.  ``period`` is the mean
+spacing of upward zero crossings (linearly interpolated); ``max_u`` and
+``max_arm_velocity`` are the maxima of ``|u|`` and ``|measured arm
+velocity|``; ``peak_to_peak`` is max - min of the measured angle.  The same
+figures for the negative half-cycles (of ``-theta``) are returned as
+``neg_peak1``/``neg_peak2``/``neg_valley``, a symmetry check.
+
+Zero crossings use a small hysteresis so that noise and quantisation steps do
+not count as crossings.  With a known measurement-noise level (``noise > 0``)
+the angle is first smoothed by a 9-sample centred moving average (45 ms at
+h = 5 ms), which also removes the upward bias noise gives a raw maximum; a
+shoulder's slope prominence must then exceed 3 times
+:math:`\sqrt2\,\sigma/3`, the noise of the difference of two 9-sample means
+(the difference of consecutive averaged samples is less noisy,
+:math:`\sqrt2\,\sigma/9`, but a fall holds dozens of them and the largest
+of their wiggles passes 3 of those).
+
+This is the one definition: ``simulate``, ``features`` (run logs), sweeps,
+fits, ``reproduce``, ``predict`` and the console all reduce a run through
+:func:`features_kernel` (the batch evaluator calls it compiled, the others
+through :func:`features`).
 
 ``status`` is ``"fell"`` when the run fell; ``"settled"`` when the angle's
 peak-to-peak over the window is below ``settle_tol``, or when the window holds
@@ -43,7 +67,7 @@ import numpy as np
 
 from ._jit import jit
 
-__all__ = ["FEATURES", "LimitCycleFeatures", "features", "trajectory_features"]
+__all__ = ["FEATURES", "LimitCycleFeatures", "comparable", "features", "trajectory_features"]
 
 #: Feature names of ``simulate --json`` (docs/cli.md), in Table 1's order plus peak_to_peak.
 FEATURES = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity", "peak_to_peak")
@@ -105,7 +129,7 @@ def _crossings_kernel(t, y, hyst):
     return up_t[:nu], up_i[:nu], dn_t[:nd], dn_i[:nd]
 
 
-def _crossings(t: np.ndarray, y: np.ndarray, hyst: float):
+def crossings(t: np.ndarray, y: np.ndarray, hyst: float):
     """Interpolated times and sample indices of upward / downward zero crossings.
 
     A crossing counts once the signal has moved from beyond ``-hyst`` to beyond
@@ -159,7 +183,77 @@ def _segment_peaks(seg, min_prominence):
 
 
 @jit
-def _half_cycle_kernel(y, starts, ends, noise, rel_prominence):
+def _shoulder(seg, p, min_prominence):
+    """The shoulder after the maximum at ``p`` of ``seg``: ``(index, value)`` or ``(-1, nan)``.
+
+    A shoulder is a local minimum of the slope's magnitude on the way down
+    from the maximum (the descent slows, then steepens again) that is not a
+    valley: the angle keeps falling through it.  The slope is the first
+    difference ``d[j] = seg[j + 1] - seg[j]``; a shoulder is a local maximum of
+    ``-|d|`` after ``p`` whose prominence (:func:`scipy.signal.find_peaks`'s
+    definition, the segment's ends not counting as peaks) is at least
+    ``min_prominence`` (rad per sample).  Its value is the highest angle (the
+    mean of a difference's two samples) over the stretch that follows it
+    while the slope's magnitude stays within ``min_prominence`` of its
+    minimum: under noise, a dip too shallow to count is such a flat stretch,
+    from its bottom over its second top, and the shoulder is that top.  Of
+    several shoulders, the highest; its index is where its stretch starts.
+    """
+    n = len(seg) - p - 1  # differences after the maximum
+    if n < 3:
+        return -1, np.nan
+    w = np.empty(n)
+    for j in range(n):
+        w[j] = -abs(seg[p + j + 1] - seg[p + j])
+    best = -1
+    best_value = -np.inf
+    i = 1
+    while i < n - 1:
+        if w[i - 1] < w[i]:
+            k = i + 1
+            while k < n and w[k] == w[i]:
+                k += 1
+            if k < n and w[k] < w[i]:
+                c = (i + k - 1) // 2
+                hc = w[c]
+                left_min = hc
+                q = c - 1
+                while q >= 0 and w[q] <= hc:
+                    left_min = min(left_min, w[q])
+                    q -= 1
+                right_min = hc
+                q = c + 1
+                while q < n and w[q] <= hc:
+                    right_min = min(right_min, w[q])
+                    q += 1
+                if hc - max(left_min, right_min) >= min_prominence:
+                    # the flat stretch that follows, within the prominence of the
+                    # least steep slope: its highest point is the shoulder's
+                    value = seg[p + c] + seg[p + c + 1]
+                    q = c + 1
+                    while q < n and w[q] >= hc - min_prominence:
+                        value = max(value, seg[p + q] + seg[p + q + 1])
+                        q += 1
+                    if value > best_value:
+                        best, best_value = c, value
+            i = k
+        else:
+            i += 1
+    if best < 0:
+        return -1, np.nan
+    return p + best, 0.5 * best_value
+
+
+@jit
+def _half_cycle_kernel(y, starts, ends, noise, rel_prominence, slope_noise):
+    """peak1, peak2 and valley of each half-cycle ``y[starts[c]:ends[c]]`` (nan: none).
+
+    A maximum counts when its prominence is at least ``rel_prominence`` times
+    the half-cycle's height and 3 noise standard deviations (``noise``); with
+    a single maximum, a shoulder after it (:func:`_shoulder`, its slope
+    prominence at least ``rel_prominence`` times the steepest descent and 3
+    ``slope_noise``) is ``peak2``, with no valley.
+    """
     m = len(starts)
     p1 = np.full(m, np.nan)
     p2 = np.full(m, np.nan)
@@ -178,6 +272,13 @@ def _half_cycle_kernel(y, starts, ends, noise, rel_prominence):
         if len(idx) >= 2:
             p2[c] = seg[idx[-1]]
             va[c] = seg[idx[0]:idx[-1] + 1].min()
+        else:
+            steepest = 0.0
+            for j in range(idx[0], len(seg) - 1):
+                steepest = max(steepest, seg[j] - seg[j + 1])
+            slope_prom = max(rel_prominence * steepest, 3.0 * slope_noise, 1e-15)
+            _, value = _shoulder(seg, idx[0], slope_prom)
+            p2[c] = value
     return p1, p2, va
 
 
@@ -300,16 +401,26 @@ def _moving_average(y, size):
     return out
 
 
-#: Status codes of :func:`_features_kernel`.
+#: Default smallest prominence of a maximum, relative to its half-cycle's height (and
+#: of a shoulder, relative to the steepest descent after the maximum): the floor
+#: of a noise-free run, far above the simulator's rounding and far below any dip
+#: it produces (docs/cli.md, "Features").  Measured noise raises it.
+REL_PROMINENCE = 1e-6
+#: Default peak-to-peak (rad) below which the loop counts as settled.
+SETTLE_TOL = 2e-3
+#: Default moving-average length (samples) for noisy measurements.
+SMOOTH = 9
+
+#: Status codes of :func:`features_kernel`.
 ST_LIMIT_CYCLE, ST_SETTLED, ST_FELL = 0, 1, 2
 STATUS_CODES = ("limit_cycle", "settled", "fell")
-#: Value order of :func:`_features_kernel`'s result (nan = None).
+#: Value order of :func:`features_kernel`'s result (nan = None).
 KERNEL_VALUES = ("peak1", "peak2", "valley", "period", "max_u", "max_arm_velocity",
                  "peak_to_peak", "neg_peak1", "neg_peak2", "neg_valley")
 
 
 @jit
-def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, smooth):
+def features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, smooth):
     """The features of :func:`features`, compiled (also run by the batch evaluator).
 
     ``u`` and ``v`` of length 0 stand for "not given".  Returns ``(status code,
@@ -354,10 +465,18 @@ def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, 
         yw = yw[keep]
         if len(yw) < 3:
             return empty_code, vals, 0
+    # the noise of one sample-to-sample difference of the angle searched
+    slope_noise = math.sqrt(2.0) * noise
     if noise > 0.0 and len(yw) >= smooth:
         # noisy measurements: a short centred moving average (default 9 samples,
-        # 45 ms at h = 5 ms, far shorter than any limit cycle) before peak search
+        # 45 ms at h = 5 ms, far shorter than any limit cycle) before peak search;
+        # a difference of the average is (y[i + smooth] - y[i]) / smooth, of noise
+        # sqrt(2) noise / smooth; a fall holds dozens of them, and the largest of so
+        # many independent wiggles would pass 3 of those: the shoulder has to stand
+        # out from sqrt(2) noise / sqrt(smooth) (the noise of a difference of
+        # means of smooth samples each)
         yw = _moving_average(yw, smooth)
+        slope_noise = math.sqrt(2.0) * noise / math.sqrt(smooth)
     ptp = yw.max() - yw.min()
     if len(u) > 0:
         vals[4] = _abs_max(uw)
@@ -377,9 +496,9 @@ def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, 
         vals[3] = _pairwise_sum(d) / (nup - 1)
     # positive half-cycles: an upward crossing followed by the next downward one
     a, b = _half_cycles(up_i, dn_i)
-    p1, p2, va = _half_cycle_kernel(yw, a, b, noise, rel_prominence)
+    p1, p2, va = _half_cycle_kernel(yw, a, b, noise, rel_prominence, slope_noise)
     a, b = _half_cycles(dn_i, up_i)
-    n1, n2, nv = _half_cycle_kernel(-yw, a, b, noise, rel_prominence)
+    n1, n2, nv = _half_cycle_kernel(-yw, a, b, noise, rel_prominence, slope_noise)
     vals[0] = _finite_mean(p1)
     vals[1] = _finite_mean(p2)
     vals[2] = _finite_mean(va)
@@ -397,7 +516,7 @@ def _features_kernel(t, y, u, v, span, fell, noise, rel_prominence, settle_tol, 
 
 
 def _from_kernel(code: int, vals: np.ndarray, cycles: int) -> LimitCycleFeatures:
-    """:class:`LimitCycleFeatures` from :func:`_features_kernel`'s result."""
+    """:class:`LimitCycleFeatures` from :func:`features_kernel`'s result."""
     f = [None if math.isnan(x) else float(x) for x in vals]
     return LimitCycleFeatures(STATUS_CODES[code], *f[:7], *f[7:], int(cycles))
 
@@ -411,9 +530,9 @@ def features(
     window: float | None = None,
     fell: bool = False,
     noise: float = 0.0,
-    rel_prominence: float = 0.02,
-    settle_tol: float = 2e-3,
-    smooth: int = 9,
+    rel_prominence: float = REL_PROMINENCE,
+    settle_tol: float = SETTLE_TOL,
+    smooth: int = SMOOTH,
 ) -> LimitCycleFeatures:
     """Limit-cycle features of a measured pendulum angle.
 
@@ -457,7 +576,7 @@ def features(
     for name, a in (("u", us), ("arm_velocity", vs)):
         if a is not none and a.shape != t.shape:
             raise ValueError(f"{name} must have the length of t ({n}), got {a.shape}")
-    return _from_kernel(*_features_kernel(t, y, us, vs, float(span), bool(fell), float(noise),
+    return _from_kernel(*features_kernel(t, y, us, vs, float(span), bool(fell), float(noise),
                                           float(rel_prominence), float(settle_tol),
                                           int(smooth)))
 
@@ -473,6 +592,24 @@ def trajectory_features(traj, window: float | None = None) -> LimitCycleFeatures
         traj.t, traj["theta_m"], traj["u"], traj["arm_dot_m"], window=window,
         fell=traj.status == "fell", noise=noise,
     )
+
+
+def comparable(values, name: str) -> float | None:
+    """Feature ``name`` of ``values`` (a mapping of feature names) as compared with
+    a measured one: a missing ``valley`` is the ``peak2`` (a shoulder), a missing
+    ``peak2`` or ``valley`` the ``peak1`` (a single maximum): each the limit of a
+    dip that has just filled in.  ``None`` where even that is missing."""
+
+    def get(n):
+        v = values.get(n)
+        return None if v is None or not math.isfinite(float(v)) else float(v)
+
+    v = get(name)
+    if v is None and name == "valley":
+        v = get("peak2")
+    if v is None and name in ("peak2", "valley"):
+        v = get("peak1")
+    return v
 
 
 def _isnan(x) -> bool:

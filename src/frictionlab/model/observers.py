@@ -29,9 +29,16 @@ where :math:`\ddot\theta_{\rm model}` is :func:`frictionlab.model.plants.thesis.
 thesis's design model), :math:`\hat{\dot\Omega}` is the arm observer's
 velocity estimate, and :math:`\omega_0` is the *design* value.  The gains
 :math:`k_1, k_2` (:func:`frictionlab.model.design.observer_gains`) place the
-linearisation's poles; the wrong printed signs would leave the linearisation
-unchanged (they only flip the nonlinear terms), which is why the error is
-invisible in the gain formulas.  The filter is implemented, as in the
+poles of :math:`A - KC`, which neither printed sign touches, which is why the
+errors are invisible in the gain formulas.  They are not alike, though.  The
+centripetal term is quadratic in :math:`\dot\Omega` and vanishes in the
+linearisation.  The control term :math:`(\omega_0/g)\,u\cos x_1` is a
+*linear input* term: it is the input column :math:`B = (0, -\omega_0/g)^T`
+of the linearisation, and the printed sign makes it :math:`+\omega_0/g`.  The
+estimation error would then obey
+:math:`\dot e = (A - KC)e + (0, -2\omega_0 u/g)^T`: driven by the control
+signal, not decaying to zero, even for the linear model
+(``tests/test_observers.py``).  The filter is implemented, as in the
 thesis, with forward differences at the sampling period h.
 
 Arm observer

@@ -85,7 +85,7 @@ from .controller import (
     state_view,
 )
 from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
-from .limit_cycles import LimitCycleFeatures, _crossings, features
+from .limit_cycles import LimitCycleFeatures, crossings, features
 from .sensor import arm_zero
 from .simulation import STATUS, LoopSpec, Trajectory
 
@@ -467,7 +467,7 @@ def _seed(loop: _Loop, periods: int, max_time: float, settle_tol: float = 2e-3):
             return "no cycle: the transient run from sim.initial_angle settles", n
         amp = float(np.abs(th[len(th) // 2:]).max())
         t = np.arange(len(th)) * h
-        up_t, up_i, _dt, _di = _crossings(t, th, 0.3 * amp)
+        up_t, up_i, _dt, _di = crossings(t, th, 0.3 * amp)
         if len(up_i) >= periods + 1:
             break
         if n >= n_max:
@@ -702,7 +702,7 @@ def _perturbed_runs(loop: _Loop, X: np.ndarray, free: np.ndarray, scale: np.ndar
         rec = loop.record(Y, n)
         if len(rec) < n + 1:
             continue
-        _ut, up_i, _dt, _di = _crossings(t, rec[:, 0], hyst)
+        _ut, up_i, _dt, _di = crossings(t, rec[:, 0], hyst)
         if len(up_i) < 4:
             continue
         k = int(up_i[-1])

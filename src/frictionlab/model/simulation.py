@@ -16,7 +16,7 @@ becomes non-finite stops at once with status ``"fell"``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +25,7 @@ import numpy as np
 from ._jit import jit
 from .closedloop import COLUMNS, LOGGED, NC, no_swing, run_loop
 from .controller import STATE_DTYPE, Controller
+from .design import DesignSpec, gain_path
 from .friction import (
     KINDS,
     FrictionParams,
@@ -35,7 +36,9 @@ from .friction import (
     resolve_drift,
 )
 from .plants import PlantKind, plant_step
+from .plants.thesis import PlantParams
 from .sensor import SensorParams
+from .switching import switch_controller
 
 __all__ = [
     "COLUMNS",
@@ -313,6 +316,8 @@ def simulate(
     *,
     record: bool = True,
     progress: Callable[[float], None] | None = None,
+    switches: Sequence[tuple[float, Controller]] = (),
+    transition: tuple[float, float] = (2.0, 2.0),
 ) -> Trajectory:
     """Run the closed loop ``spec`` (:func:`frictionlab.model.closedloop.run_loop`).
 
@@ -327,8 +332,20 @@ def simulate(
     progress : callable, optional
         Called with the fraction done (runs are chunked so long runs can
         report progress).
+    switches : sequence of (t, Controller)
+        Changes of controller while the loop runs, as the operator makes them in
+        the 200 Hz loop: from the tick nearest ``t`` (s) on, that controller runs
+        on the plant, the sensor and the controller state as they are, made
+        bumpless as the loop makes it
+        (:func:`frictionlab.model.switching.switch_controller`: a new
+        compensator started at its steady value for the last measured arm
+        velocity and ramped in, new gains moved through the designs in between)
+        over ``transition`` = (gain, compensation) seconds (the loop's
+        ``safety.gain_transition`` and ``safety.compensation_transition``).
+        A run with switches is recorded.
     """
     h = spec.h
+    record = record or bool(switches)
     n = run_ticks(h, spec.duration if duration is None else duration, record)
     ctrl = spec.controller
     gp, cp = ctrl.record()
@@ -347,13 +364,33 @@ def simulate(
     pp = spec.plant_params.record()
     # the swing-up supervisor's arguments, unused here (run_loop's swing is off)
     sup_row, wx, phase = no_swing()
-    # chunks of whole ticks when progress is reported; the noise of sample n is a
-    # function of (seed, n), and the arm's zero x0 is carried over, so a chunked
-    # run is the unchunked one bit for bit
+    thesis = isinstance(spec.plant_params, PlantParams)
+    events = sorted((round(t / h), i, c) for i, (t, c) in enumerate(switches))
+    n_gain, n_comp = (round(t / h) for t in transition)
+    arm_dot_m = COLUMNS.index("arm_dot_m")
+    # run_loop in chunks of whole ticks: up to each switch, tick by tick through
+    # its transition (:class:`frictionlab.model.switching.Transition`), and in 50
+    # chunks when progress is reported.  The plant, its friction memory, the
+    # sensor's arm zero and the controller state carry over, and the noise of
+    # sample n is a function of (seed, n): a chunked run is the single run bit for bit
     chunk = n if progress is None else max(1, n // 50)
     done, status, mem, x0 = 0, 0, 0.0, 0.0
+    trans = None
     while done < n and status == 0:
-        m = min(chunk, n - done)
+        while events and events[0][0] <= done:
+            new = events.pop(0)[2]
+            new_gp, new_cp = new.record()
+            a, b = ctrl.design.spec, new.design.spec
+            path = (gain_path(a, b, spec.plant_params)
+                    if thesis and isinstance(a, DesignSpec) and isinstance(b, DesignSpec)
+                    and a != b else None)
+            v = out[done - 1, arm_dot_m] if done else 0.0
+            trans = switch_controller(s, gp, cp, new_gp, new_cp, v, n_gain, n_comp, path)
+            gp, cp, ctrl = trans.current(), new_cp, new
+        if trans is not None and not trans.done:
+            gp, m = trans.advance(), 1
+        else:
+            m = min(done + chunk, events[0][0] if events else n, n) - done
         view = out[done:done + m] if record else out
         d, status, mem, x0 = run_loop(x, mem, m, spec.plant.code, spec.substeps, spec.ratio, pp,
                                       fkind, fp, gp, cp, s, spec.sensor, done, x0,

@@ -37,9 +37,23 @@ conventions (u positive accelerates the arm positively; theta positive
 clockwise as in eq. 6, where u enters with a minus sign).
 ``sign(0)`` is taken as +1, so a pendulum hanging exactly at rest is kicked.
 
-To that is added an arm-centring term :math:`-k_p\Omega - k_d\dot\Omega`
-(``swingup.arm_stiffness``, ``swingup.arm_damping``) that keeps the arm near
-its start; the sum is saturated at ``swingup.max_acceleration``.
+The command is
+
+.. math::
+
+    u = \mathrm{sat}_{u_s}\bigl((1 - c)^b\,(u_E + F_m\,\mathrm{sign}\,u_E)
+        - k_p\Omega - (k_d + k_b c)\dot\Omega\bigr), \qquad c = \max(\cos\theta, 0),
+
+with :math:`u_E` the energy law above (its target :math:`E_t`, see below),
+:math:`F_m` the friction margin (``swingup.friction_margin``, or the
+compensator's Coulomb level when larger: the arm slides when the law asks,
+instead of sticking below the stiction level near the target), the fade
+:math:`(1-c)^b` (``swingup.blend``: pumping in the lower half, where it acts),
+the arm-centring gains :math:`k_p, k_d` (``swingup.arm_stiffness``,
+``swingup.arm_damping``) and the brake :math:`k_b` (``swingup.arm_brake``)
+that stops the arm as the pendulum nears upright.  :math:`u_s` is the
+smallest of ``swingup.max_acceleration`` and the balancing controller's
+saturation (``controller.u_max`` within the DAC's range).
 
 The angular velocity comes from a nonlinear observer on the full model
 (:math:`\ddot\theta` of eq. 6 with the design's omega_0, the applied u and
@@ -48,33 +62,42 @@ at :math:`e^{-\omega_s h}` (``swingup.observer_omega``); the linear
 balancing observers are only valid near upright.  Angles are wrapped into
 [-pi, pi) (the rig's angle channel wraps, App. B.1).
 
+The energy target, swing by swing
+---------------------------------
+:math:`E_t` starts at ``swingup.energy_target`` and is corrected
+(:func:`target_correction`, gain ``swingup.energy_adapt``) whenever the
+pendulum leaves the upper half (:math:`\cos\theta > 0`) without a catch: up by
+:math:`\cos(\theta_c/2) - \cos\theta_{apex}` after a swing that turned back (at
+the apex :math:`\dot\theta = 0`, so its height measures the energy whatever
+the plant's omega_0, which the design only assumes), down by the energy over
+the top plus :math:`1 - \cos(\theta_c/2)` after one that passed over;
+:math:`\theta_c` is ``swingup.catch_angle``.
+
 Hand-over
 ---------
-When the measured angle enters the catch region (``|theta| <
-swingup.catch_angle``) the balancing controller takes over: its observers
-start from the current measurement (theta, the swing-up observer's
-theta_dot, the arm at its current position with the measured velocity).  The
-arm's reference is the position where it was caught (an offset
-subtracted from the arm angle) and returns to 0 exponentially with the time
-constant ``swingup.recentre_time``, so the balancing controller does not
-react to an arm error of several radians the moment it takes over.  A catch
-that fails (``|theta| > swingup.release_angle`` before ``swingup.settle_time``
-has passed) returns to swinging; one that holds for ``settle_time`` is
-*balancing*, after which the usual falls and angle limits apply.
+The balancing controller takes over when the measured angle is in the catch
+region (``|theta| < swingup.catch_angle``) and its command, predicted on the
+linearised plant (eq. 7, no friction) under its state feedback from the
+current state (:func:`predicted_peak`), stays within
+``swingup.catch_fraction`` of its saturation for ``swingup.catch_horizon``:
+a pendulum arriving fast, or with the arm moving, goes on swinging.  The
+balancing observers start from the current measurement (theta, the swing-up
+observer's theta_dot, the arm at its current position with the measured
+velocity).  The arm's reference is the position where it was caught (an
+offset subtracted from the arm angle); once balancing it returns to 0
+exponentially with the time constant ``swingup.recentre_time``.  A catch
+that fails (``|theta| > swingup.release_angle`` before
+``swingup.settle_time`` has passed) returns to swinging; one that holds for
+``settle_time`` is *balancing*, after which the usual falls and angle limits
+apply.
 
 Friction
 --------
 The arm bearing's friction (any plant model, present throughout) eats into
-the net acceleration :math:`a = u - F`: while the law is saturated at
-``max_acceleration`` (4-5 times the thesis's stiction level 2.3 m/s^2), the
-arm moves and friction only reduces the pumping rate by
-:math:`F_C/u_s`; near the target energy the command falls below the
-stiction level, the arm sticks (at the pendulum's turning points, where
-``sign`` flips and the arm reverses), and the pendulum swings freely with
-the energy it has - which is what the law wants there.  The catch happens
-at whatever energy is left; :math:`E_0` slightly above 0
-(``swingup.energy_target``) makes up for the damping and friction losses of
-the last swing.  docs/swingup.md maps the success rate over friction levels.
+the net acceleration :math:`a = u - F`; the margin :math:`F_m` puts a level
+back in the direction the law asks for, and the target correction makes up
+for what is left (and for the pendulum's damping).  docs/swingup.md maps the
+success rate over friction levels and plant mismatch on a 10 m/s^2 actuator.
 
 Safety (the same checks in the simulator and the loop)
 ------------------------------------------------------
@@ -106,6 +129,11 @@ pos   field              meaning
 8     ``catch_tick``     tick of the last catch (-1: none)
 9     ``u``              last applied u (m/s^2)
 10    ``catches``        number of catches so far
+11    ``target``         energy target E_t (:func:`target_correction`)
+12    ``side``           sign of theta when the swing entered the upper half (0: not there)
+13    ``top``            largest cos(theta) of that swing
+14    ``top_energy``     E where cos(theta) was largest
+15    ``crossed``        1 when that swing passed over the top
 ====  =================  =====================================================
 
 A caller in Python at every tick (the 200 Hz loop) keeps the state as a float
@@ -149,6 +177,7 @@ __all__ = [
     "copy_swing_state",
     "energy",
     "new_swing_state",
+    "predicted_peak",
     "swing_index",
     "swing_record",
     "swing_vector",
@@ -157,6 +186,7 @@ __all__ = [
     "swingup_row",
     "swingup_step",
     "swingup_step_rows",
+    "target_correction",
     "wrap_angle",
 ]
 
@@ -168,7 +198,8 @@ STOP_CODES = ("", "not_caught", "arm_travel", "arm_speed")
 
 #: Fields of the swing-up state, in their storage order (module table).
 SWING_FIELDS = ("phase", "tick", "phase_ticks", "theta_hat", "theta_dot_hat", "arm_offset",
-                "energy", "stop", "catch_tick", "u", "catches")
+                "energy", "stop", "catch_tick", "u", "catches", "target", "side", "top",
+                "top_energy", "crossed")
 #: The swing-up state's record type: one float64 per field of :data:`SWING_FIELDS`.
 SWING_DTYPE = float_record_dtype(SWING_FIELDS)
 
@@ -215,7 +246,7 @@ class SwingUpRecord(NamedTuple):
     Attributes
     ----------
     gain, max_acceleration, energy_target : float
-        Energy law k (m/s^2), its |u| limit (m/s^2) and E0.
+        Energy law k (m/s^2), its |u| limit (m/s^2) and the initial target E0.
     catch_angle, release_angle : float
         Hand-over and failed-catch angles (rad).
     settle_ticks, limit_ticks : float
@@ -230,6 +261,13 @@ class SwingUpRecord(NamedTuple):
         Safety limits on |Omega| (rad) and |Omega'| (rad/s).
     decay : float
         Per-tick factor of the arm reference's return to 0 (0: at once).
+    catch_fraction, horizon_ticks : float
+        Hand-over: the predicted balancing command within this fraction of its
+        saturation for this many ticks (:func:`predicted_peak`).
+    friction_margin, arm_brake, blend : float
+        :math:`F_m` (m/s^2), :math:`k_b` (m/s^2 per rad/s) and the fade exponent b.
+    adapt, apex_cos : float
+        Gain of the target's correction and cos(catch_angle / 2).
     """
 
     gain: float
@@ -249,6 +287,13 @@ class SwingUpRecord(NamedTuple):
     arm_limit: float
     arm_speed_limit: float
     decay: float
+    catch_fraction: float
+    friction_margin: float
+    arm_brake: float
+    adapt: float
+    apex_cos: float
+    blend: float
+    horizon_ticks: float
 
 
 @jit
@@ -256,7 +301,8 @@ def swingup_record(row):
     """The :class:`SwingUpRecord` stored as the float row :func:`swingup_row`."""
     return SwingUpRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7],
                          row[8], row[9], row[10], row[11], row[12], row[13], row[14], row[15],
-                         row[16])
+                         row[16], row[17], row[18], row[19], row[20], row[21],
+                         row[22], row[23])
 
 
 def swingup_row(rec: SwingUpRecord) -> np.ndarray:
@@ -274,7 +320,7 @@ class SwingUpParams(Validated):
                         "m/s^2", lo=0.0, hi=1e4, lo_open=True)
     max_acceleration: float = param(10.0, "|u| limit while swinging", "m/s^2", lo=0.0,
                                     hi=1e3, lo_open=True)
-    energy_target: float = param(0.5, "target normalised energy E0 (0 = upright at rest)",
+    energy_target: float = param(0.0, "target normalised energy E0 (0 = upright at rest)",
                                  "1", lo=-1.0, hi=2.0)
     catch_angle: float = param(0.3, "hand over to the balancing controller when |theta| is "
                                "below this", "rad", lo=0.0, hi=1.0, lo_open=True)
@@ -291,12 +337,32 @@ class SwingUpParams(Validated):
                                "m/s^2/(rad/s)", lo=0.0, hi=1e3)
     recentre_time: float = param(3.0, "time constant of the arm reference's return from the "
                                  "catch position to 0 (0 = at once)", "s", lo=0.0, hi=1e3)
-    observer_omega: float = param(40.0, "swing-up angle observer's error pole frequency",
+    observer_omega: float = param(80.0, "swing-up angle observer's error pole frequency",
                                   "rad/s", lo=0.0, hi=1e3, lo_open=True)
     arm_limit: float = param(6.0, "stop (arm_travel) when |Omega| exceeds this", "rad",
                              lo=0.0, hi=1e3, lo_open=True)
     arm_speed_limit: float = param(25.0, "stop (arm_speed) when |Omega'| exceeds this",
                                    "rad/s", lo=0.0, hi=1e3, lo_open=True)
+    catch_fraction: float = param(0.5, "hand over only when the balancing controller's "
+                                  "predicted command stays within this fraction of the |u| "
+                                  "limit (controller.u_max, or the DAC's range) for "
+                                  "catch_horizon", "1", lo=0.0, hi=1.0, lo_open=True)
+    catch_horizon: float = param(0.5, "how far ahead the hand-over test predicts the "
+                                 "balancing controller's command (linear, no friction)", "s",
+                                 lo=0.0, hi=5.0)
+    friction_margin: float = param(3.0, "arm friction level added to the energy law's "
+                                   "command in its direction (the compensator's Coulomb "
+                                   "level instead when compensation is on)", "units of u",
+                                   lo=0.0, hi=1e3)
+    arm_brake: float = param(8.0, "extra arm damping in the upper half, k_b cos(theta) on "
+                             "Omega', so that the arm is near rest when the pendulum arrives",
+                             "m/s^2/(rad/s)", lo=0.0, hi=1e3)
+    blend: float = param(1.0, "the energy law is weighted by (1 - max(cos theta, 0))^blend: "
+                         "full in the lower half, fading out towards upright (0 = no fade)",
+                         "1", lo=0.0, hi=10.0)
+    energy_adapt: float = param(0.5, "gain of the target's correction after each swing "
+                                "into the upper half that falls short of or passes over the "
+                                "catch region (0 = a fixed target)", "1", lo=0.0, hi=2.0)
 
     def record(self, omega0: float, g: float, h: float) -> SwingUpRecord:
         """The :class:`SwingUpRecord` for :func:`swingup_step` (design omega_0, g and h)."""
@@ -319,6 +385,13 @@ class SwingUpParams(Validated):
             arm_limit=float(self.arm_limit),
             arm_speed_limit=float(self.arm_speed_limit),
             decay=0.0 if self.recentre_time == 0 else math.exp(-h / self.recentre_time),
+            catch_fraction=float(self.catch_fraction),
+            friction_margin=float(self.friction_margin),
+            arm_brake=float(self.arm_brake),
+            adapt=float(self.energy_adapt),
+            apex_cos=math.cos(0.5 * self.catch_angle),
+            blend=float(self.blend),
+            horizon_ticks=float(max(1, round(self.catch_horizon / h))),
         )
 
 
@@ -335,6 +408,58 @@ def energy_law(theta, theta_dot, e, k, e0, umax):
     sg = 1.0 if theta_dot * math.cos(theta) >= 0.0 else -1.0
     u = k * (e - e0) * sg
     return min(max(u, -umax), umax)
+
+
+@jit
+def predicted_peak(gp, theta, theta_dot, arm_dot, n):
+    """Largest |u| of the balancing controller over the next ``n`` ticks, predicted
+    on the linearised plant (eq. 7 at upright, no friction) under its state
+    feedback from (theta, theta', arm 0, arm'): the hand-over test."""
+    w2 = gp.omega0 * gp.omega0
+    b = w2 / gp.g
+    il = 1.0 / gp.arm_length
+    hs = 0.5 * gp.h
+    x1, x2, x3, x4 = theta, theta_dot, 0.0, arm_dot
+    peak = 0.0
+    for _ in range(int(n)):
+        u = -(gp.l1 * x1 + gp.l2 * x2 + gp.l3 * x3 + gp.l4 * x4)
+        peak = max(peak, abs(u))
+        for _ in range(2):  # two semi-implicit Euler substeps per tick, u held
+            x2 += hs * (w2 * x1 - b * u)
+            x1 += hs * x2
+            x4 += hs * u * il
+            x3 += hs * x4
+    return peak
+
+
+@jit
+def target_correction(w, th, e, sp):
+    """Track a swing into the upper half (``cos theta > 0``) and, when it leaves
+    that half without a catch, correct the energy target ``w.target``: by the
+    shortfall ``cos(catch_angle/2) - max cos(theta)`` of a swing that turned back
+    (at the apex theta' = 0, so its height measures the energy whatever the
+    plant's omega_0), or by minus the energy over the top plus
+    ``1 - cos(catch_angle/2)`` of one that passed over; times ``sp.adapt``."""
+    c = math.cos(th)
+    if c > 0.0:
+        if w.side == 0.0:
+            w.side = 1.0 if th >= 0.0 else -1.0
+            w.top = c
+            w.top_energy = e
+            w.crossed = 0.0
+        else:
+            if th * w.side < 0.0:
+                w.crossed = 1.0
+            if c > w.top:
+                w.top = c
+                w.top_energy = e
+    elif w.side != 0.0:
+        if w.crossed != 0.0:
+            w.target -= sp.adapt * (max(w.top_energy, 0.0) + 1.0 - sp.apex_cos)
+        else:
+            w.target += sp.adapt * (sp.apex_cos - w.top)
+        w.target = min(max(w.target, sp.energy_target - 1.0), sp.energy_target + 1.0)
+        w.side = 0.0
 
 
 @jit
@@ -400,7 +525,8 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == CAUGHT and abs(th_m) > sp.release_angle:
         phase = SWINGING
         w.phase_ticks = 0.0
-    if phase == SWINGING and abs(th_m) < sp.catch_angle:
+    if phase == SWINGING and abs(th_m) < sp.catch_angle and predicted_peak(
+            gp, th_m, thd, arm_dot_m, sp.horizon_ticks) <= sp.catch_fraction * gp.u_max:
         phase = CAUGHT
         w.phase_ticks = 0.0
         w.catch_tick = w.tick - 1.0
@@ -410,18 +536,28 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
         s.x1 = th_m
         s.x2 = thd / gp.omega0
         s.arm_dot = arm_dot_m
+    if phase == SWINGING:
+        target_correction(w, th, e, sp)
+    else:
+        w.side = 0.0
     if phase == CAUGHT and w.phase_ticks >= sp.settle_ticks:
         phase = BALANCING
         w.phase_ticks = 0.0
     w.phase = phase
     if phase == SWINGING:
-        u = energy_law(th, thd, e, sp.gain, sp.energy_target, sp.max_acceleration)
-        u -= sp.arm_stiffness * arm_m + sp.arm_damping * arm_dot_m
+        up = max(math.cos(th), 0.0)  # 0 in the lower half, 1 upright
+        u = energy_law(th, thd, e, sp.gain, w.target, sp.max_acceleration)
+        if u != 0.0:
+            fm = sp.friction_margin if gp.compensator == 0 else max(sp.friction_margin, cp.fc)
+            u += fm if u > 0.0 else -fm
+        u = ((1.0 - up) ** sp.blend) * u - (sp.arm_stiffness * arm_m
+                                           + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
         umax = min(sp.max_acceleration, gp.u_max)  # and the DAC range
         u = min(max(u, -umax), umax)
         w.u = u
         return u, u, 0.0
-    w.arm_offset *= sp.decay
+    if phase == BALANCING:
+        w.arm_offset *= sp.decay
     u, u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m - w.arm_offset, arm_dot_m)
     w.u = u
     return u, u_fb, f_hat
@@ -462,7 +598,8 @@ class SwingUp:
     def init(self, theta0: float = math.pi) -> tuple[np.record, np.record]:
         """Initial ``(w, s)`` (:data:`SWING_DTYPE` and controller state records):
         swinging, the observer at the first measured angle, at rest."""
-        return (new_swing_state(theta_hat=wrap_angle(float(theta0)), catch_tick=-1.0),
+        return (new_swing_state(theta_hat=wrap_angle(float(theta0)), catch_tick=-1.0,
+                                target=float(self.params.energy_target)),
                 new_state())
 
     def step(self, state, theta_m: float, arm_m: float, arm_dot_m: float):

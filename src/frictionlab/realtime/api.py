@@ -114,7 +114,7 @@ class RealtimeController:
             raise ValueError(f"prewarm_us must be in [0, h/2), got {prewarm_us}")
         self.scaling = scaling or cfg.rig
         if isinstance(backend, str) and backend != "sim":
-            _check_backend(backend)
+            check_backend(backend)
         self._params = ControlParams.from_config(cfg)
         self._params.warm()
         self.blas_single_threaded = single_thread_blas() if realtime else []
@@ -367,6 +367,7 @@ class RealtimeController:
             new = current.apply(changes)
             if not confirm and not new.loop_check.ok:
                 raise current.refusal(new)
+            new.l_path  # noqa: B018 - the gain transition's path, designed here, not in a tick
             self._params = new
             fut: Future = Future()
             loop = self._loop
@@ -596,7 +597,7 @@ class RealtimeController:
         }
 
 
-def _check_backend(spec: str) -> None:
+def check_backend(spec: str) -> None:
     """Validate a backend string's syntax without connecting (:func:`.rigs.parse_backend`)."""
     parse_backend(spec)
 

@@ -64,6 +64,7 @@ from concurrent.futures import Future
 from pathlib import Path
 
 from ..io.jsonsafe import json_safe
+from ..io.logs import read_log
 from ..model.simulation import DAT_LINE, LOGGED
 from .samples import Sample
 
@@ -73,7 +74,6 @@ __all__ = [
     "RESERVE_BYTES",
     "LogWriter",
     "link_no_clobber",
-    "read_csv_log",
     "read_sidecar",
     "write_json_atomic",
     "write_parquet",
@@ -172,21 +172,6 @@ def read_sidecar(path) -> dict:
     return meta
 
 
-def read_csv_log(path) -> dict:
-    """Read a CSV log back: ``{column: ndarray}`` (a truncated last line is ignored)."""
-    import numpy as np
-
-    with open(path) as fh:
-        header = fh.readline().strip().split(",")
-        rows = []
-        for line in fh:
-            if not line.endswith("\n"):
-                break
-            rows.append([float(v) for v in line.split(",")])
-    arr = np.array(rows, dtype=float).reshape(-1, len(header))
-    return {name: arr[:, i] for i, name in enumerate(header)}
-
-
 def write_parquet(csv_path, meta: dict | None = None) -> Path:
     """Convert a CSV log (a run's or a recording's) to ``<stem>.parquet`` beside it.
 
@@ -202,7 +187,7 @@ def write_parquet(csv_path, meta: dict | None = None) -> Path:
     out = csv_path.with_suffix(".parquet")
     if os.path.lexists(out):
         raise FileExistsError(errno.EEXIST, "File exists", str(out))
-    cols = read_csv_log(csv_path)
+    cols = read_log(csv_path, partial=True)
     arrays = {k: (v.astype("int64") if k in ("tick", "flags") else v) for k, v in cols.items()}
     table = pa.table(arrays)
     if meta is not None:

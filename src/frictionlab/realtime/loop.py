@@ -25,21 +25,22 @@ nanoseconds on the monotonic clock, so there is no drift):
    (log writer, console subscriptions) without blocking;
 7. between ticks, after every tick (one without a reading too): apply
    pending parameter changes atomically (the mailbox; in effect from the
-   next tick; a change of compensator, or of the adaptive compensator's
-   parameters, restarts the compensator's state), and the scheduled
+   next tick, made bumpless: see below), and the scheduled
    housekeeping (garbage collection once a second, the host's steal time
    every 100 ms).
 
-Gain transitions: a change of the state-feedback gains L while the loop runs
-(a new design) moves L linearly from the gains in use to the new ones over
-:attr:`Safety.gain_transition` seconds (2 s), one step per tick; everything
-else of the change (observer gains, compensation) takes effect at once.
-Switched at once in the middle of the slow design's limit cycle, the fast
-design's gains meet an arm swinging at up to 5 rad/s about 1.4 rad from its
-reference and throw the pendulum to 0.41-0.44 rad, past the 0.35 rad angle
-limit, two times in three (simulated over a whole cycle of switch times);
-over 2 s the swing stays below 0.31 rad.  ``gain_transition = 0`` switches at
-once.
+Switching while running (bumpless; docs/realtime.md and docs/compensation.md,
+"Switching while running"): a change is made by
+:func:`frictionlab.model.switching.switch_controller`, as the simulator makes
+it.  New gains (a design change) move from the gains in use to the new ones
+over :attr:`Safety.gain_transition` seconds (2 s), along the gains of the
+designs in between (:func:`frictionlab.model.design.gain_path`, computed
+outside the loop), one step per tick: switched at once in the middle of the
+slow design's limit cycle, the fast design's gains throw the pendulum past the
+0.35 rad angle limit two times in three.  A compensator switched on (or to
+another kind) starts at its steady estimate for the last measured arm velocity
+and is ramped in over :attr:`Safety.compensation_transition` seconds (2 s).
+``0`` switches at once.
 
 Pre-warming (``prewarm_us`` > 0): on a virtual machine whose CPU sits idle
 between ticks, the first microseconds after a wake-up run from cold caches
@@ -93,10 +94,8 @@ from dataclasses import dataclass
 
 from ..model import sensor
 from ..model.controller import (
-    ADAPTIVE,
     controller_step_rows,
     gains_row,
-    reset_compensator,
     state_index,
     state_record,
     state_vector,
@@ -117,6 +116,7 @@ from ..model.swingup import (
     swingup_row,
     swingup_step_rows,
 )
+from ..model.switching import switch_controller
 from .osrt import normal_priority, try_realtime_priority
 from .params import ControlParams
 from .protocol import STATUS_HELD, STATUS_WATCHDOG
@@ -179,6 +179,10 @@ class Safety(Validated):
     gain_transition: float = param(2.0, "time over which new state-feedback gains L replace "
                                    "the running ones, linearly (0: at once)", "s", lo=0.0,
                                    hi=60.0)
+    compensation_transition: float = param(2.0, "time over which a compensator switched on "
+                                           "(or to another kind) is ramped in, linearly from "
+                                           "its steady estimate times 0 (0: at once)", "s",
+                                           lo=0.0, hi=60.0)
     max_pause: float = param(0.05, "stop (reason paused) when the loop was not running for "
                              "longer than this: a wake-up this late after its deadline, or a "
                              "tick this long from its deadline to its output (a suspended "
@@ -447,12 +451,11 @@ class Loop:
         w0 = gp.omega0
         comp_flag = COMPENSATE if params.comp_enabled else 0
         ramp_n = round(safety.gain_transition / h)
-        ramp_k = ramp_n  # ticks of the gain transition done (ramp_n: none under way)
-        l_from = l_to = None
-        # the gains during a transition: the target gains with L moved from l_from
-        # to l_to (Gains.with_feedback keeps the record's field types: the compiled
-        # step's argument type does not change, nothing is compiled mid-run)
-        gp_target = gp
+        comp_n = round(safety.compensation_transition / h)
+        # a change's transition (model.switching.Transition): the gains of the ticks
+        # after it, with L and the compensator's weight moving (the record's field types
+        # stay: nothing is compiled mid-run)
+        trans = None
         g_row = gains_row(gp)  # what the compiled step reads (controller_step_rows)
         s = None  # the controller state: a record (self.state) viewing the vector sx
         sx = None
@@ -625,14 +628,11 @@ class Loop:
                     arm_hat = sx[_ARM]
                     armd_hat = sx[_ARMDOT]
                     z_hat = sx[_ZHAT]
-                    if ramp_k < ramp_n:
-                        ramp_k += 1
-                        if ramp_k == ramp_n:
-                            gp = params.gp
-                        else:
-                            gp = gp_target.with_feedback(
-                                l_from + (ramp_k / ramp_n) * (l_to - l_from))
+                    if trans is not None:
+                        gp = trans.advance()
                         g_row = gains_row(gp)
+                        if trans.done:
+                            trans = None
                     if swing:
                         u, _u_fb, f_hat = swingup_step_rows(w, sx, g_row, cp, sp, theta, arm,
                                                             arm_dot)
@@ -684,8 +684,6 @@ class Loop:
             self.ticks += 1
             # ---- between ticks ----
             if mailbox:
-                old_kind = gp.compensator
-                old_cp = cp
                 applied = []
                 while mailbox:
                     applied.append(mailbox.popleft())
@@ -695,24 +693,16 @@ class Loop:
                     # the swing-up's observer and energy use the design's omega_0 too
                     sp = self._sp = swingup_row(
                         SwingUp(params.controller, self.swingup).record()[2])
-                l_now = gp.feedback
-                gp, cp = params.gp, params.cp
-                if ramp_n and s is not None and not (l_now == gp.feedback).all():
-                    # move L from the gains in use (mid-transition too) to the new ones
-                    l_from, l_to = l_now, gp.feedback
-                    gp_target = gp
-                    gp = gp_target.with_feedback(l_from)
-                    ramp_k = 0
-                else:
-                    ramp_k = ramp_n
+                # bumpless: from the gains in use (mid-transition too), a new compensator
+                # started at its steady value for the arm's velocity and ramped in
+                trans = switch_controller(s, gp, cp, params.gp, params.cp, arm_dot, ramp_n,
+                                          comp_n, params.l_path)
+                gp, cp = trans.current(), params.cp
+                if trans.done:
+                    trans = None
                 g_row = gains_row(gp)
                 w0 = gp.omega0
                 comp_flag = COMPENSATE if params.comp_enabled else 0
-                if s is not None and (gp.compensator != old_kind or (
-                        gp.compensator == ADAPTIVE and not (cp == old_cp).all())):
-                    # a new compensator, or new starting values of the adaptive one:
-                    # it starts afresh at the next tick
-                    reset_compensator(s)
                 pending_flags = CHANGED
                 self.changes_applied += len(applied)
                 for _p, fut in applied:

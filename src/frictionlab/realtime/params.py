@@ -51,7 +51,7 @@ import numpy as np
 
 from ..config import Config, ConfigError
 from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller, Gains
-from ..model.design import PRESETS, Design, DesignSpec, design, preset
+from ..model.design import PRESETS, Design, DesignSpec, design, gain_path, preset
 from ..model.friction import FrictionParams, friction_row
 from ..model.loopcheck import DEFAULT_DISTURBANCE, DEFAULT_NOISE, LoopCheck, check_loop
 from ..model.params import ParamError
@@ -172,6 +172,7 @@ class ControlParams:
     controller: Controller = field(repr=False)
     gp: Gains = field(repr=False)
     cp: np.ndarray = field(repr=False)
+    previous_spec: DesignSpec | None = field(default=None, repr=False)
 
     @classmethod
     def from_config(cls, cfg: Config, error_signal: str = DEFAULT_ERROR_SIGNAL
@@ -184,17 +185,18 @@ class ControlParams:
         return cls._build(cfg, cfg.design, enabled, kind, params, error_signal)
 
     @classmethod
-    def _build(cls, cfg, spec, enabled, kind, params, error_signal) -> ControlParams:
+    def _build(cls, cfg, spec, enabled, kind, params, error_signal,
+               previous=None) -> ControlParams:
         cfg = dataclasses.replace(cfg, design=spec,
                                   compensation_kind=kind if enabled else "none",
                                   compensation=params[kind])
         d = design(spec, cfg.plant)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
-                          error_signal=error_signal, u_max=cfg.rig.u_max)
+                          error_signal=error_signal, u_max=cfg.u_limit)
         gp, rec = ctrl.record()
         cp = friction_row(rec)
         cp.flags.writeable = False
-        return cls(cfg, enabled, kind, dict(params), error_signal, d, ctrl, gp, cp)
+        return cls(cfg, enabled, kind, dict(params), error_signal, d, ctrl, gp, cp, previous)
 
     def apply(self, changes: dict) -> ControlParams:
         """A new snapshot with ``changes`` applied (see the module docstring).
@@ -277,7 +279,8 @@ class ControlParams:
                               f"(it is {self.cfg.design.h} s)", ["design.h"])
         keys = self._keys(spec, enabled, kind, params, error_signal)
         try:
-            new = self._build(self.cfg, spec, enabled, kind, params, error_signal)
+            new = self._build(self.cfg, spec, enabled, kind, params, error_signal,
+                              self.cfg.design)
         except (ValueError, ArithmeticError) as exc:
             # a combination the design or the controller refuses (a singular LuGre
             # compensator): the values this change touched, else the model it selected
@@ -334,6 +337,17 @@ class ControlParams:
         if error_signal != self.error_signal:
             keys.append("error_signal")
         return keys
+
+    @functools.cached_property
+    def l_path(self) -> np.ndarray | None:
+        """The gains a running loop moves L along to these settings' over its gain
+        transition (:func:`~frictionlab.model.design.gain_path` from the design these
+        settings replace; None: L does not change).  Computed once, outside the loop
+        (:meth:`~.api.RealtimeController.submit`)."""
+        prev = self.previous_spec
+        if prev is None or prev == self.cfg.design:
+            return None
+        return gain_path(prev, self.cfg.design, self.cfg.plant)
 
     @functools.cached_property
     def loop_check(self) -> LoopCheck:

@@ -68,6 +68,7 @@ from ..model.sensor import dac, u_from_dac
 from ..model.simulation import SimulatedPlant
 from ..runs import simulated_plant
 from . import protocol as P
+from .clock import MonotonicClock
 from .osrt import try_realtime_priority
 from .protocol import Frame, FrameError
 from .rigs import ARM_START, AdcModel, send_control, serial_settings
@@ -652,8 +653,6 @@ def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,
                 announce=None, hand: dict | None = None) -> None:
     """The ``frictionlab rig-sim`` process: serve until SIGINT/SIGTERM."""
     import signal
-
-    from .clock import MonotonicClock
 
     stop = threading.Event()
 

@@ -11,7 +11,7 @@ compiled driver, which for every set runs the same compiled closed loop as
 (:func:`~frictionlab.model.closedloop.run_loop`:
 sensor model, controller step, plant tick) and the same compiled feature
 extraction as :func:`frictionlab.model.limit_cycles.features`
-(:func:`~frictionlab.model.limit_cycles._features_kernel`), with no Python per run.
+(:func:`~frictionlab.model.limit_cycles.features_kernel`), with no Python per run.
 The features are those of :func:`frictionlab.runs.run_features`, bit
 for bit (noise included: :func:`frictionlab.model.sensor.measure`'s noise is a
 function of the seed and the sample number, with no generator state to share
@@ -40,15 +40,21 @@ from ..model._jit import jit, jit_nogil
 from ..model.closedloop import NC, run_loop
 from ..model.controller import NS, gains_record, gains_row, state_vector, state_view
 from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
-from ..model.limit_cycles import FEATURES, KERNEL_VALUES, STATUS_CODES, _features_kernel
+from ..model.limit_cycles import (
+    FEATURES,
+    KERNEL_VALUES,
+    REL_PROMINENCE,
+    SETTLE_TOL,
+    SMOOTH,
+    STATUS_CODES,
+    features_kernel,
+)
 from ..model.sensor import SensorParams, sensor_record
 from ..model.swingup import SWING_FIELDS, SwingUpRecord
 from ..runs import make_controller, make_sensor, run_ticks
 
 __all__ = ["Batch", "evaluate_rows", "prepare", "rows", "run"]
 
-#: Feature-extraction settings of :func:`frictionlab.model.limit_cycles.features`'s defaults.
-REL_PROMINENCE, SETTLE_TOL, SMOOTH = 0.02, 2e-3, 9
 #: Status code of a set whose window is not positive (an error row).
 _BAD_WINDOW = 3
 _FEATURE_INDEX = [KERNEL_VALUES.index(name) for name in FEATURES]
@@ -132,7 +138,7 @@ def _one(i, x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
         lo -= 1
     lo = min(lo, done - 3)
     t = np.arange(lo, done) * hi
-    code, fv, cyc = _features_kernel(t, sig[0, lo:done], sig[1, lo:done], sig[2, lo:done], span,
+    code, fv, cyc = features_kernel(t, sig[0, lo:done], sig[1, lo:done], sig[2, lo:done], span,
                                      fell, sp.noise, REL_PROMINENCE, SETTLE_TOL, SMOOTH)
     codes[i] = code
     vals[i, :] = fv
@@ -200,7 +206,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
             shared = (gains_row(g),  # gains_record reads it back
                       friction_row(c),  # friction_view reads it back
                       state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
-                      cfg.plant.record(),
+                      cfg.plant_row(),
                       np.array(make_sensor(cfg), dtype=float))  # sensor_record reads it back
             last_key = key
         gp.append(shared[0])

@@ -101,7 +101,7 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     out = np.zeros((n, NC))
     phase = np.zeros(n)
     done, status, _, _ = run_loop(x, 0.0, n, THESIS.code, cfg.substeps, cfg.pendulum_ratio,
-                                  cfg.plant.record(), KINDS.index(cfg.friction_kind),
+                                  cfg.plant_row(), KINDS.index(cfg.friction_kind),
                                   resolve_drift(cfg.friction.record(), n * h), gp, cp, s,
                                   make_sensor(cfg), 0, 0.0, cfg.sim.fall_angle, out, True, True,
                                   swingup_row(sp), wx, phase)

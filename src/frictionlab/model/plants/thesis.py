@@ -87,7 +87,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .._jit import jit
-from ..friction import LUGRE, NONE, friction_step
+from ..actuator import actuator_accel
+from ..friction import COULOMB, LUGRE, NONE, friction_step
 from ..params import Validated, param
 
 __all__ = [
@@ -134,11 +135,14 @@ class PlantParams(Validated):
         """Equivalent pendulum length :math:`L_2 = g/\\omega_0^2` in m."""
         return self.g / self.omega0**2
 
-    def record(self) -> np.ndarray:
+    def record(self, actuator: np.ndarray | None = None) -> np.ndarray:
         """The float row the compiled integrator reads (:class:`PlantRecord`'s
-        fields in order; :func:`plant_record` views it as the record)."""
-        return np.array([self.omega0, self.zeta, self.g, self.arm_length, self.input_gain],
-                        dtype=float)
+        fields in order; :func:`plant_record` views it as the record), with the
+        actuator's row (:meth:`frictionlab.model.actuator.ActuatorParams.record`;
+        default: the ideal input)."""
+        act = (0.0, 0.0) if actuator is None else tuple(actuator)
+        return np.array([self.omega0, self.zeta, self.g, self.arm_length, self.input_gain,
+                         *act], dtype=float)
 
 
 class PlantRecord(NamedTuple):
@@ -150,12 +154,15 @@ class PlantRecord(NamedTuple):
     g: float
     arm_length: float
     input_gain: float
+    #: the actuator (:mod:`frictionlab.model.actuator`): curvature c, back-EMF b
+    act_curvature: float
+    act_back_emf: float
 
 
 @jit
 def plant_record(row):
     """The :class:`PlantRecord` stored as the float row ``np.array(record)``."""
-    return PlantRecord(row[0], row[1], row[2], row[3], row[4])
+    return PlantRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6])
 
 
 @jit
@@ -340,7 +347,11 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     p = plant_record(pp)
     omega0, zeta, g, arm_len, ku = p.omega0, p.zeta, p.g, p.arm_length, p.input_gain
     dt = h / substeps
-    fe = ku * u
+    # the actuator (App. B.4): the acceleration the motor gives for k_u u, at the
+    # substep's arm velocity when it has a back-EMF
+    act_c, act_b = p.act_curvature, p.act_back_emf
+    fe = actuator_accel(act_c, 0.0, ku * u, 0.0, arm_len)
+    fe_cmd = fe
     half_dt_over_l = 0.5 * dt / arm_len
     f_sum = 0.0
     th, thd, arm, ad, z = x[0], x[1], x[2], x[3], x[4]
@@ -361,6 +372,8 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
             th_acc, _ = accelerations_sc(sn, cs, thd, ad, fe - mem, omega0, zeta, g, arm_len)
             tau = 0.5 * dt
         for _ in range(m):
+            if act_b != 0.0:
+                fe = actuator_accel(0.0, act_b, fe_cmd, ad, arm_len)
             if fkind == LUGRE:
                 # the bristle sees the velocity at the substep's midpoint, predicted
                 # with the last friction: second order for this smooth model
@@ -374,6 +387,12 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
             elif fkind == NONE:
                 f = 0.0
             else:
+                if fkind == COULOMB and ad != 0.0:
+                    # a plant's relay follows the velocity's sign at once: kept
+                    # inside the hysteresis (the compensator's device, Sec. 6.1), the
+                    # old sign would push the arm along a reversed velocity
+                    # (docs/model.md, "Coulomb friction as a plant")
+                    mem = 1.0 if ad > 0.0 else -1.0
                 f, mem = friction_step(fkind, fp, mem, ad, fe, dt, 0.0)
             f_sum += f
             a = fe - f

@@ -21,9 +21,11 @@ and the cost is :math:`C(p) = \sum r_{e,f}^2`.  A run that falls or does not
 settle into a limit cycle, or lacks a measured feature, gets the finite
 residual :data:`PENALTY` (times the weight) for each such feature, larger than
 any plausible relative error, so the global search is steered away from it.
-A half-cycle with a single maximum has no separate second peak or valley;
-its ``peak2`` and ``valley`` are then taken equal to ``peak1``, which is the
-continuous limit of a double peak whose valley has filled in.
+A simulated cycle with a shoulder (``peak2`` but no ``valley``,
+:mod:`frictionlab.model.limit_cycles`) has its ``valley`` taken equal to its
+``peak2``, and one with a single maximum and no shoulder its ``peak2`` and
+``valley`` equal to ``peak1``: each is the continuous limit of a double peak
+whose dip has just filled in.
 
 Search
 ------
@@ -62,45 +64,8 @@ lifts it.
 
 Uncertainty and identifiability
 -------------------------------
-With J the Jacobian of the residuals at the optimum (m residuals, n keys),
-the covariance is estimated as
-
-.. math::
-
-    \frac{\nu}{\nu - 2}\,(s^2 + s_j^2)\,(J^T J)^{-1},
-    \qquad s^2 = C/\nu, \quad \nu = m - n.
-
-* J comes from straight-line fits of each residual through the optimum and
-  the points 1 and 2 steps (``rel_step``) to either side of it along each
-  key (:meth:`LimitCycleProblem.line_fit`), not from one central difference:
-  a single step can land on a jump of the piecewise-constant features and
-  set a column of J several times too steep, which made the standard error
-  of that key several times too small.
-* :math:`s_j^2` is the simulator's own feature jitter: the pooled variance
-  of the residuals about those lines.  It limits how well even noise-free
-  features determine the parameters, and the optimiser partly fits it away
-  from :math:`C`.
-* :math:`\nu/(\nu - 2)`: with :math:`s^2` estimated from :math:`\nu`
-  degrees of freedom, the standardised error is Student-t distributed, and
-  this factor makes the reported value its standard deviation (the
-  marginal posterior standard deviation under a flat prior on the
-  parameters and on :math:`\log\sigma`).  With :math:`\nu \le 2` that
-  variance is infinite: no standard error is reported (``None``), as with a
-  singular :math:`J^T J`, and a warning says why.
-
-The identifiability check takes the singular value decomposition of the
-Jacobian scaled to relative parameter changes, :math:`J\,\mathrm{diag}(|p|)`:
-a relative change :math:`\delta` of the parameters along the singular vector
-:math:`v_i` moves the (weighted, relative) features by :math:`\sigma_i\delta`
-in Euclidean norm.  A direction with :math:`\sigma_i <` :data:`FLAT_SENSITIVITY`
-(a 20 % parameter change moving the features by less than 1 % in all), or
-below :data:`FLAT_RATIO` times the largest singular value (numerically flat),
-is flat: the parameters dominating its singular vector are named in a warning
-(the features cannot determine them, or only a combination of them).  The
-criterion is absolute, not relative to the best-determined direction, because
-a very sensitive parameter such as ``plant.omega0`` must not make a merely
-less sensitive one look unidentifiable.  A parameter whose
-relative standard error exceeds 50 % is reported as poorly determined.
+The covariance of the estimate and the identifiability check:
+:mod:`frictionlab.studies.identification.uncertainty`.
 """
 
 from __future__ import annotations
@@ -120,12 +85,29 @@ from ...config import (
     ConfigError,
     ConfigValueError,
     build_config,
-    key_metadata,
     parse_assignment,
-    valid_keys,
 )
 from ...io.notes import Note
-from ...model.limit_cycles import FEATURES
+from ...model.limit_cycles import FEATURES, comparable
+from .. import sweep
+from .measured import (
+    DEFAULT_BOUNDS,
+    PENALTY,
+    STICTION_PAIRS,
+    Experiment,
+    check_bounds,
+    check_fit_keys,
+    default_bounds,
+    parse_experiments,
+    refusal,
+)
+from .uncertainty import (
+    FLAT_RATIO,
+    FLAT_SENSITIVITY,
+    POOR_RELATIVE_STDERR,
+    covariance,
+    identifiability,
+)
 
 __all__ = [
     "DEFAULT_BOUNDS",
@@ -138,212 +120,9 @@ __all__ = [
     "LimitCycleProblem",
     "default_bounds",
     "fit_limit_cycle",
+    "identifiability",
     "parse_experiments",
 ]
-
-def _refusal(field: str, value: Any, allowed: str, message: str,
-             *hints: str) -> ConfigValueError:
-    """A :class:`ConfigValueError` naming ``field`` and, as ``hints``, the other
-    arguments that would lift it (the command line names their options)."""
-    err = ConfigValueError(field, value, allowed, message)
-    err.hints = hints
-    return err
-
-
-#: Residual given to a feature of a run that fell, settled, or lacks the feature.
-PENALTY = 10.0
-#: Singular value of the relatively scaled Jacobian below which a direction
-#: counts as flat (not identifiable): a 20 % parameter change along it moves
-#: the weighted relative features by under 1 % (Euclidean norm over all).
-FLAT_SENSITIVITY = 0.05
-#: Singular-value ratio (to the largest) below which a direction is
-#: numerically flat whatever its absolute size.
-FLAT_RATIO = 1e-4
-#: Relative standard error above which a parameter is reported as poorly determined.
-POOR_RELATIVE_STDERR = 0.5
-#: (Coulomb, stiction) key pairs searched with F_S >= F_C when both are fitted.
-STICTION_PAIRS = (("friction.coulomb", "friction.stiction"),
-                  ("friction.coulomb_negative", "friction.stiction_negative"))
-
-#: Default search bounds of the usual keys (the thesis's values lie well inside).
-DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
-    "friction.coulomb": (0.2, 4.0),
-    "friction.stiction": (0.2, 6.0),
-    "friction.coulomb_negative": (0.2, 4.0),
-    "friction.stiction_negative": (0.2, 6.0),
-    "friction.viscous": (0.0, 0.5),
-    "friction.stribeck_velocity": (0.05, 5.0),
-    "friction.sigma0": (10.0, 3000.0),
-    "friction.sigma1": (0.0, 50.0),
-    "friction.observer_gain": (0.0, 20.0),
-    "friction.zero_velocity_band": (0.001, 0.1),
-    "friction.hysteresis": (0.0, 0.2),
-    "plant.omega0": (5.0, 9.0),
-    "plant.input_gain": (0.5, 2.0),
-    "plant.zeta": (0.0, 0.2),
-}
-
-_FITTABLE_SECTIONS = ("plant", "design", "friction", "compensation")
-
-
-# ---------------------------------------------------------------------------
-# problem specification
-# ---------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Experiment:
-    """One measured limit cycle.
-
-    Attributes
-    ----------
-    design : {"fast", "slow"}
-        Design preset the rig ran (Sec. 2.4).
-    sets : dict
-        Further parameter keys of this experiment (``{key: value}``).
-    features : dict
-        Measured features (names of :data:`frictionlab.model.limit_cycles.FEATURES`);
-        unknown features are left out.
-    label : str
-        Name used in the residual report.
-    """
-
-    design: str
-    sets: Mapping[str, float]
-    features: Mapping[str, float]
-    label: str
-
-    def __post_init__(self) -> None:
-        if self.design not in ("fast", "slow"):
-            raise ConfigError(f"experiment {self.label!r}: design must be 'fast' or 'slow', "
-                              f"got {self.design!r}")
-        for name, value in self.features.items():
-            if name not in FEATURES:
-                raise ConfigError(f"experiment {self.label!r}: unknown feature {name!r}; "
-                                  f"known features: {', '.join(FEATURES)}")
-            if not (isinstance(value, float) and math.isfinite(value) and value > 0):
-                raise ConfigError(f"experiment {self.label!r}: feature {name} must be a "
-                                  f"positive number (relative errors need it), got {value!r}")
-        if not self.features:
-            raise ConfigError(f"experiment {self.label!r} has no known feature")
-
-
-def _number(where: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"{where}: {value!r} is not a number")
-    return float(value)
-
-
-def parse_experiments(obj: Any) -> list[Experiment]:
-    """Validate the ``--measured`` JSON object and return its experiments.
-
-    The object is ``{"experiments": [{"design": "fast"|"slow", "set": {KEY:
-    VALUE}, "features": {"peak1": ..., ...}}, ...]}``; an optional ``"name"``
-    labels an experiment (default: its design, numbered when repeated).  A
-    feature given as ``null`` is unknown.
-
-    Raises
-    ------
-    ConfigError
-        Empty list, unknown feature, non-positive value, bad design.
-    """
-    if not isinstance(obj, Mapping) or "experiments" not in obj:
-        raise ConfigError('measured features must be a JSON object {"experiments": [...]}')
-    items = obj["experiments"]
-    if not isinstance(items, list) or not items:
-        raise ConfigError("measured features: 'experiments' must be a non-empty list")
-    labels: list[str] = []
-    out = []
-    for i, item in enumerate(items):
-        where = f"experiment {i + 1}"
-        if not isinstance(item, Mapping):
-            raise ConfigError(f"{where}: must be a JSON object")
-        unknown = set(item) - {"design", "set", "features", "name"}
-        if unknown:
-            raise ConfigError(f"{where}: unknown field(s) {', '.join(sorted(unknown))}; "
-                              "allowed: design, set, features, name")
-        design = item.get("design", "fast")
-        sets = item.get("set") or {}
-        feats = item.get("features")
-        if not isinstance(sets, Mapping):
-            raise ConfigError(f"{where}: 'set' must be an object {{KEY: VALUE}}")
-        if not isinstance(feats, Mapping):
-            raise ConfigError(f"{where}: 'features' must be an object {{FEATURE: VALUE}}")
-        known = {}
-        for name, value in feats.items():
-            if name not in FEATURES:
-                raise ConfigError(f"{where}: unknown feature {name!r}; known features: "
-                                  f"{', '.join(FEATURES)}")
-            if value is not None:
-                known[name] = _number(f"{where}: feature {name}", value)
-        for key in sets:
-            if key not in valid_keys():
-                raise ConfigError(f"{where}: unknown key {key!r} in 'set'")
-        label = str(item.get("name") or design)
-        if label in labels:
-            label = f"{label}#{labels.count(label) + 1}" if item.get("name") is None else label
-        if label in labels:
-            raise ConfigError(f"{where}: duplicate experiment name {label!r}")
-        labels.append(label)
-        out.append(Experiment(str(design), dict(sets), known, label))
-    return out
-
-
-
-
-def check_fit_keys(keys: Sequence[str], plant: str = "thesis") -> list[str]:
-    """Validate the keys to fit: known (with the plant ``plant``), real-valued
-    parameters, no repeats."""
-    if not keys:
-        raise ConfigValueError("fit", "", "one or more parameter keys", "needs at least one key")
-    out: list[str] = []
-    for key in keys:
-        if key not in valid_keys(plant):
-            raise ConfigValueError("fit", key, "parameter keys", f"{key!r} is not a parameter key; "
-                              "see 'frictionlab keys'")
-        section = key.split(".")[0]
-        if section not in _FITTABLE_SECTIONS or key_metadata(key, plant)["integer"]:
-            raise ConfigValueError("fit", key, "real-valued model parameters",
-                                   f"{key!r} is not a real-valued model parameter "
-                              f"(fittable sections: {', '.join(_FITTABLE_SECTIONS)})")
-        if key in out:
-            raise ConfigValueError("fit", key, "each key once", f"{key!r} given twice")
-        out.append(key)
-    return out
-
-
-def default_bounds(key: str, current: float | None, plant: str = "thesis") -> tuple[float, float]:
-    """Search bounds of ``key``: :data:`DEFAULT_BOUNDS` (the thesis plant's), else
-    [v/2, 2v] around the current value v, clipped to the key's allowed range
-    (a motor plant's levels are in volts: always [v/2, 2v])."""
-    if key in DEFAULT_BOUNDS and plant == "thesis":
-        return DEFAULT_BOUNDS[key]
-    if current is None or current <= 0:
-        raise ConfigValueError("bounds", key, "LO:HI of each fitted key without default "
-                               "bounds", f"no default search bounds for {key} (current value "
-                               f"{current}); give its bounds")
-    meta = key_metadata(key, plant)
-    lo, hi = 0.5 * current, 2.0 * current
-    if meta["lo"] is not None:
-        lo = max(lo, meta["lo"])
-    if meta["hi"] is not None:
-        hi = min(hi, meta["hi"])
-    return lo, hi
-
-
-def _check_bounds(key: str, lo: float, hi: float, plant: str = "thesis") -> None:
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise ConfigError(f"bounds of {key}: {lo}:{hi} must be finite")
-    if not lo < hi:
-        raise ConfigError(f"bounds of {key}: lower {lo:g} must be below upper {hi:g}")
-    meta = key_metadata(key, plant)
-    if meta["lo"] is not None and (lo < meta["lo"] or (meta["lo_open"] and lo == meta["lo"])):
-        raise ConfigError(f"bounds of {key}: lower {lo:g} is outside the key's allowed "
-                          f"range (minimum {meta['lo']:g})")
-    if meta["hi"] is not None and (hi > meta["hi"] or (meta["hi_open"] and hi == meta["hi"])):
-        raise ConfigError(f"bounds of {key}: upper {hi:g} is outside the key's allowed "
-                          f"range (maximum {meta['hi']:g})")
-
 
 # ---------------------------------------------------------------------------
 # the problem: parameters -> residuals
@@ -354,9 +133,8 @@ Evaluator = Callable[..., list[dict]]
 
 
 def _sweep_evaluate(base, points, **kw) -> list[dict]:
-    from ..sweep import evaluate
 
-    return evaluate(base, points, **kw)
+    return sweep.evaluate(base, points, **kw)
 
 
 class LimitCycleProblem:
@@ -379,7 +157,7 @@ class LimitCycleProblem:
     duration, window : float
         Simulated time per run and the analysed final window (s).
     evaluate : callable, optional
-        ``evaluate(base, points, duration=, window=, workers=, dask=)`` with
+        ``sweep.evaluate(base, points, duration=, window=, workers=, dask=)`` with
         the contract of :func:`frictionlab.studies.sweep.evaluate` (the default).
     workers, dask
         Passed to ``evaluate``.
@@ -476,7 +254,7 @@ class LimitCycleProblem:
         lo, hi = [], []
         for k in self.keys:
             b = given.get(k) or default_bounds(k, self.base.get(k), plant)
-            _check_bounds(k, float(b[0]), float(b[1]), plant)
+            check_bounds(k, float(b[0]), float(b[1]), plant)
             lo.append(float(b[0]))
             hi.append(float(b[1]))
         self.lo, self.hi = np.array(lo), np.array(hi)
@@ -518,7 +296,7 @@ class LimitCycleProblem:
         """
         c_key, s_key = self.keys[ic], self.keys[i_s]
         if self.lo[ic] >= self.hi[i_s]:
-            raise _refusal(
+            raise refusal(
                 "bounds", {c_key: (self.lo[ic], self.hi[ic]), s_key: (self.lo[i_s], self.hi[i_s])},
                 "bounds that leave some stiction >= Coulomb level",
                 f"bounds of {c_key} ({self.lo[ic]:g}:{self.hi[ic]:g}) and {s_key} "
@@ -706,15 +484,7 @@ class LimitCycleProblem:
 def _sim_feature(row: Mapping[str, Any], name: str) -> float | None:
     if row.get("status") != "limit_cycle":
         return None
-
-    def get(n):
-        v = row.get(n)
-        return None if v is None or not math.isfinite(float(v)) else float(v)
-
-    v = get(name)
-    if v is None and name in ("peak2", "valley"):
-        v = get("peak1")
-    return v
+    return comparable(row, name)
 
 
 # ---------------------------------------------------------------------------
@@ -769,74 +539,6 @@ class FitResult:
             "evaluations": self.evaluations,
             "seconds": self.seconds,
         }
-
-
-def _covariance(J: np.ndarray, cost: float, m: int, n: int, jitter: float = 0.0):
-    """Covariance of the estimate, or None and the reason it is not estimable.
-
-    ``nu/(nu - 2) (s^2 + jitter) (J^T J)^-1`` with ``nu = m - n`` and
-    ``s^2 = cost/nu`` (see the module docstring), via the SVD of J.
-    """
-    nu = m - n
-    if nu <= 2:
-        return None, f"{m} known feature(s) for {n} fitted key(s): {max(nu, 0)} residual " \
-                     "degree(s) of freedom, standard errors need at least 3"
-    _, s, vt = np.linalg.svd(J, full_matrices=False)
-    if s[0] <= 0 or s[-1] <= 1e-10 * s[0]:
-        return None, "J^T J is singular at the optimum: standard errors not estimated"
-    s2 = nu / (nu - 2) * (cost / nu + jitter)
-    cov = s2 * (vt.T / s**2) @ vt
-    return cov, None
-
-
-def identifiability(J: np.ndarray, p: np.ndarray, keys: Sequence[str],
-                    sensitivity: float = FLAT_SENSITIVITY,
-                    ratio: float = FLAT_RATIO) -> tuple[list[float], list[str]]:
-    """Singular values of the relatively scaled Jacobian and flat-direction warnings.
-
-    Parameters
-    ----------
-    J : ndarray (m, n)
-        Residual Jacobian in parameter units.
-    p : ndarray (n,)
-        Parameter values (the scale of each column).
-    keys : names of the parameters.
-    sensitivity : singular value below which a direction is flat.
-    ratio : singular-value ratio (to the largest) below which a direction is flat.
-
-    Returns
-    -------
-    (singular values, warnings)
-    """
-    scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
-    Js = J * scale
-    warnings = []
-    col = np.linalg.norm(Js, axis=0)
-    for k, c in zip(keys, col, strict=True):
-        if c == 0.0:
-            warnings.append(f"{k} does not affect the given features: not identifiable")
-    if Js.shape[0] == 0:
-        return [], warnings
-    _, s, vt = np.linalg.svd(Js, full_matrices=True)
-    sv = [float(x) for x in s]
-    smax = s[0] if len(s) else 0.0
-    n = len(keys)
-    # directions beyond the number of residuals are flat too (m < n)
-    svals = np.concatenate([s, np.zeros(max(0, n - len(s)))])
-    for i in range(n):
-        if smax > 0 and svals[i] >= max(ratio * smax, sensitivity):
-            continue
-        v = vt[i]
-        big = [k for k, c in sorted(zip(keys, v, strict=True), key=lambda t: -abs(t[1]))
-               if abs(c) >= 0.5 * np.max(np.abs(v))]
-        if len(big) == 1 and any(big[0] in w for w in warnings):
-            continue
-        warnings.append(
-            "not identifiable from the given features: flat direction dominated by "
-            f"{', '.join(big)} (a 20 % change along it moves the features by "
-            f"{20.0 * svals[i]:.2g} %)"
-            + ("" if len(big) == 1 else "; only a combination of them is determined"))
-    return sv, warnings
 
 
 #: Most function and Jacobian evaluations of the least-squares polish.
@@ -957,9 +659,9 @@ def fit_limit_cycle(
         raise ConfigError(f"rel_step must be in [1e-5, 0.2], got {rel_step}")
     prob = LimitCycleProblem(experiments, keys, **problem)
     if prob.workers is None and prob.dask is None:
-        from ..sweep import auto_workers
 
-        prob.workers = auto_workers(prob.base, _max_runs(prob, maxiter, popsize), prob.duration)
+        prob.workers = sweep.auto_workers(prob.base, _max_runs(prob, maxiter, popsize),
+                                          prob.duration)
     search = prob
     s_duration, s_window = search_settings(prob.duration, prob.window, search_duration,
                                            search_window)
@@ -1012,7 +714,7 @@ def fit_limit_cycle(
     cost = float(np.sum(r**2))
     J, jitter = prob.line_fit(p, rel_step)
     warnings: list[str] = []
-    cov, why = _covariance(J, cost, prob.m, prob.n, jitter)
+    cov, why = covariance(J, cost, prob.m, prob.n, jitter)
     if why:
         warnings.append(why)
     stderr: dict[str, float | None] = {}

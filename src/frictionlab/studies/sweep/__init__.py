@@ -62,7 +62,7 @@ chunk), reads them back for ``--resume``, and at the end rewrites the file in
 sweep order (atomically).  Columns: the varied keys, the seven features of
 :data:`frictionlab.model.limit_cycles.FEATURES`, ``status``, ``error`` (a
 ``reduce``'s extra columns are not written, except the swing-up sweep's
-``caught`` and ``catch_time``).  A
+``caught`` and ``swing_up_time``).  A
 ``.parquet`` output is written at the end from all rows; while the sweep runs
 the rows go to the crash-safe CSV journal ``FILE.parquet.partial.csv``.
 A sidecar ``FILE.meta.json`` records the base configuration, duration and

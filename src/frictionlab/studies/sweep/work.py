@@ -18,7 +18,7 @@ __all__ = ["STATUSES", "SWINGUP_COLUMNS", "Reduce", "check_reduce", "error_row",
 #: Row statuses: the three of ``frictionlab simulate`` plus ``error``.
 STATUSES = ("limit_cycle", "settled", "fell", "not_caught", "error")
 #: The extra columns of a swing-up sweep (:func:`reduce_swingup`).
-SWINGUP_COLUMNS = ("caught", "catch_time")
+SWINGUP_COLUMNS = ("caught", "swing_up_time")
 
 
 def _clean(v: Any) -> float | None:
@@ -71,7 +71,7 @@ def reduce_swingup(cfg: Config, duration: float | None,
     Returns the features and status of
     :func:`frictionlab.studies.swingup_sim.swingup_outcome` (``not_caught`` when it
     never reached the balancing phase) and ``caught`` (1 when it did, else 0)
-    and ``catch_time`` (s, the catch that led to balancing; ``None`` if none).
+    and ``swing_up_time`` (s, the catch that led to balancing; ``None`` if none).
     """
     # start-up: the swing-up simulation loads with the first swing-up sweep, not with
     # the command line (which imports this package)
@@ -82,7 +82,7 @@ def reduce_swingup(cfg: Config, duration: float | None,
     out: dict[str, Any] = {name: getattr(feats, name) for name in FEATURES}
     out["status"] = status
     out["caught"] = int(res.balanced)
-    out["catch_time"] = res.swing_up_time
+    out["swing_up_time"] = res.swing_up_time
     return out
 
 
