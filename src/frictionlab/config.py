@@ -261,7 +261,10 @@ class Config:
 
     def plant_row(self) -> Any:
         """The float row the compiled plant reads: ``plant.*`` with the actuator's
-        ``actuator.*`` (:mod:`frictionlab.model.actuator`)."""
+        ``actuator.*`` (:mod:`frictionlab.model.actuator`); a motor plant's
+        :meth:`~frictionlab.model.plants.furuta_dc.FurutaDCParams.record`."""
+        if self.motor:
+            return self.plant.record()
         return self.plant.record(self.actuator.record())
 
     @property

@@ -206,7 +206,7 @@ class _Plants:
         self.us = np.zeros(n)
         self.substeps = np.zeros(n, dtype=np.int64)
         self.ratios = np.zeros(n, dtype=np.int64)
-        self.pps = np.zeros((n, len(cfg.plant.record())))
+        self.pps = np.zeros((n, len(cfg.plant_row())))
         self.fkinds = np.zeros(n, dtype=np.int64)
         self.fps = np.zeros((n, NP))  # friction records as float rows
         self.steps = np.zeros(n, dtype=np.int64)
