@@ -31,6 +31,11 @@ from .model.controller import check_compensator as _check_compensator
 from .model.design import DesignSpec, preset
 from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
+from .model.plants import FURUTA_DC, THESIS, PlantKind
+from .model.plants.furuta_dc import PRESET_FRICTION, linearization
+from .model.plants.furuta_dc import SUBSTEPS as DC_SUBSTEPS
+from .model.plants.furuta_dc import preset as dc_preset
+from .model.plants.furuta_dc_design import dc_spec
 from .model.plants.thesis import PlantParams
 from .model.rig import RigScaling
 from .model.swingup import SwingUpParams
@@ -40,6 +45,7 @@ __all__ = [
     "COMPENSATOR_KINDS",
     "PLANT_FIELDS",
     "PLANT_FRICTION_KINDS",
+    "PLANT_NAMES",
     "Config",
     "ConfigError",
     "ConfigValueError",
@@ -55,6 +61,19 @@ __all__ = [
 
 #: Plant friction models selectable with ``--friction``.
 PLANT_FRICTION_KINDS = KINDS
+
+#: ``--plant`` names: the thesis's plant (eq. 6) and the DC-motor Furuta
+#: pendulum (:mod:`frictionlab.model.plants.furuta_dc`) with its presets
+#: (``furuta-dc`` and ``qube2``: the QUBE-Servo 2; ``qube3``: the QUBE-Servo 3).
+PLANT_NAMES = ("thesis", "furuta-dc", "qube2", "qube3")
+
+
+def plant_model(name: str) -> PlantKind:
+    """The plant (:data:`frictionlab.model.plants.PLANTS`) behind a ``--plant`` name."""
+    if name not in PLANT_NAMES:
+        raise ConfigValueError("plant", name, ", ".join(PLANT_NAMES),
+                               f"plant must be one of {', '.join(PLANT_NAMES)}; got {name!r}")
+    return THESIS if name == "thesis" else FURUTA_DC
 
 
 class ConfigError(ValueError):
@@ -81,16 +100,17 @@ class UnknownKeyError(ConfigError):
         or TOML key; the command line names its option.
     """
 
-    def __init__(self, key: str, where: str = "", field: str | None = None):
+    def __init__(self, key: str, where: str = "", field: str | None = None,
+                 plant: str = "thesis"):
         self.key = key
         self.field = field
-        self.suggestions = suggest_keys(key)
+        self.suggestions = suggest_keys(key, plant=plant)
         section = key.split(".", 1)[0]
         if self.suggestions:
             hint = f"did you mean {' or '.join(self.suggestions)}?"
         elif section in _SECTIONS and "." in key:
             hint = (f"the {section} keys are "
-                    f"{', '.join(k for k in valid_keys() if k.startswith(section + '.'))}")
+                    f"{', '.join(k for k in valid_keys(plant) if k.startswith(section + '.'))}")
         else:
             hint = f"keys are section.field with section one of {', '.join(_SECTIONS)}"
         super().__init__(f"{where}unknown key {_short(key)}; {hint}")
@@ -101,7 +121,7 @@ def _short(text: str, limit: int = 60) -> str:
     return r if len(r) <= limit else r[:limit - 3] + "..."
 
 
-def suggest_keys(key: str, n: int = 3) -> list[str]:
+def suggest_keys(key: str, n: int = 3, plant: str = "thesis") -> list[str]:
     """The valid keys nearest to ``key``, best first (at most ``n``).
 
     A known section with a misspelt field is matched within its section
@@ -110,7 +130,7 @@ def suggest_keys(key: str, n: int = 3) -> list[str]:
     ``coulomb`` -> ``friction.coulomb``, ``compensation.coulomb``); anything
     else is matched against whole keys (:func:`difflib.get_close_matches`).
     """
-    keys = valid_keys()
+    keys = valid_keys(plant)
     key = key.strip()[:100]
     section, dot, field = key.rpartition(".") if key.count(".") > 1 else key.partition(".")
     if not dot:
@@ -184,9 +204,13 @@ DEFAULT_SUBSTEPS_STATIC = 10
 
 @dataclass(frozen=True)
 class Config:
-    """Everything a closed-loop run needs."""
+    """Everything a closed-loop run needs.
 
-    plant: PlantParams = dataclasses.field(default_factory=PlantParams)
+    ``plant_kind`` is the ``--plant`` name (:data:`PLANT_NAMES`); ``plant`` its
+    parameters (keys ``plant.*``: the class of :func:`plant_model`).
+    """
+
+    plant: Any = dataclasses.field(default_factory=PlantParams)
     design: DesignSpec = dataclasses.field(default_factory=DesignSpec)
     friction_kind: str = "classical"
     friction: FrictionParams = dataclasses.field(default_factory=FrictionParams)
@@ -198,8 +222,13 @@ class Config:
     swingup: SwingUpParams = dataclasses.field(default_factory=SwingUpParams)
     actuator: ActuatorParams = dataclasses.field(default_factory=ActuatorParams)
     controller: ControllerLimits = dataclasses.field(default_factory=ControllerLimits)
+    plant_kind: str = "thesis"
 
     def __post_init__(self) -> None:
+        kind = plant_model(self.plant_kind)
+        if not isinstance(self.plant, kind.params):
+            raise ConfigError(f"plant {self.plant_kind!r} takes {kind.params.__name__} "
+                              f"parameters, got {type(self.plant).__name__}")
         for field, kind, kinds in (("friction", self.friction_kind, PLANT_FRICTION_KINDS),
                                    ("compensation", self.compensation_kind, COMPENSATOR_KINDS)):
             if kind not in kinds:
@@ -208,27 +237,54 @@ class Config:
                                        f"got {kind!r}")
         if self.compensation_kind != "none":
             check_compensator(self.compensation_kind, self.compensation, h=self.design.h,
-                              arm_length=self.plant.arm_length)
+                              arm_length=self.input_length)
+
+    @property
+    def plant_model(self) -> PlantKind:
+        """The plant (:data:`frictionlab.model.plants.PLANTS`) of ``plant_kind``."""
+        return plant_model(self.plant_kind)
+
+    @property
+    def motor(self) -> bool:
+        """True for a plant driven by a motor voltage (u in volts)."""
+        return self.plant_kind != "thesis"
+
+    @property
+    def input_length(self) -> float:
+        """The length L (m) with arm acceleration = (u - F)/L at rest (eq. 6's
+        L_1 for the thesis plant); for a motor plant 1/B[3] of its
+        linearisation at upright (V s^2/rad), the adaptive compensator's
+        velocity predictor's gain (docs/model.md)."""
+        if not self.motor:
+            return self.plant.arm_length
+        return 1.0 / float(linearization(self.plant)[1][3, 0])
 
     def plant_row(self) -> Any:
         """The float row the compiled plant reads: ``plant.*`` with the actuator's
-        ``actuator.*`` (:mod:`frictionlab.model.actuator`)."""
+        ``actuator.*`` (:mod:`frictionlab.model.actuator`); a motor plant's
+        :meth:`~frictionlab.model.plants.furuta_dc.FurutaDCParams.record`."""
+        if self.motor:
+            return self.plant.record()
         return self.plant.record(self.actuator.record())
 
     @property
     def u_limit(self) -> float:
         """The bound on every controller command (units of u): ``controller.u_max``
         within the DAC's range (``rig.u_max``, the harder bound the loop applies to
-        u_DA as well)."""
-        dac = self.rig.u_max
+        u_DA as well; a motor plant's ``plant.voltage_limit``)."""
+        # a motor plant's: its amplifier's voltage limit
+        dac = self.plant.voltage_limit if self.motor else self.rig.u_max
         return dac if self.controller.u_max is None else min(self.controller.u_max, dac)
 
     @property
     def substeps(self) -> int:
         """Arm/friction substeps per sampling period: ``sim.substeps``, or the
-        plant friction model's default (:data:`DEFAULT_SUBSTEPS`)."""
+        plant friction model's default (:data:`DEFAULT_SUBSTEPS`; a motor
+        plant's: :data:`frictionlab.model.plants.furuta_dc.SUBSTEPS`)."""
         if self.sim.substeps is not None:
             return self.sim.substeps
+        if self.motor:
+            return DC_SUBSTEPS[self.friction_kind]
         return DEFAULT_SUBSTEPS.get(self.friction_kind, DEFAULT_SUBSTEPS_STATIC)
 
     @property
@@ -238,7 +294,7 @@ class Config:
         return max(1, -(-self.substeps // self.sim.pendulum_steps))
 
     def get(self, key: str) -> Any:
-        section, field = _split(key)
+        section, field = _split(key, self.plant_kind)
         return getattr(getattr(self, section), field)
 
     def with_values(self, values: Mapping[str, Any]) -> Config:
@@ -249,6 +305,8 @@ class Config:
         """All keys and their values (for logs and sidecars)."""
         out: dict[str, Any] = {"friction_kind": self.friction_kind,
                                "compensation_kind": self.compensation_kind}
+        if self.plant_kind != "thesis":
+            out["plant_kind"] = self.plant_kind
         for section in _SECTIONS:
             obj = getattr(self, section)
             for f in dataclasses.fields(obj):
@@ -318,61 +376,88 @@ _NOT_IN_SECTION = {
 }
 
 
+def _class(section: str, plant: str = "thesis") -> type:
+    """The parameter class of a section (``plant``: that of the plant ``plant``)."""
+    if section == "plant":
+        return plant_model(plant).params
+    return _CLASSES[section]
+
+
 @functools.cache
-def _key_tuple() -> tuple[str, ...]:
+def _key_tuple(plant: str = "thesis") -> tuple[str, ...]:
     keys = []
     for section in _SECTIONS:
-        for f in dataclasses.fields(_CLASSES[section]):
+        for f in dataclasses.fields(_class(section, plant)):
             if "doc" in f.metadata and f.name not in _NOT_IN_SECTION.get(section, ()):
                 keys.append(f"{section}.{f.name}")
     return tuple(keys)
 
 
 @functools.cache
-def _key_set() -> frozenset[str]:
-    return frozenset(_key_tuple())
+def _key_set(plant: str = "thesis") -> frozenset[str]:
+    return frozenset(_key_tuple(plant))
 
 
-def valid_keys() -> list[str]:
-    """Every accepted ``section.field`` key."""
-    return list(_key_tuple())
+def valid_keys(plant: str = "thesis") -> list[str]:
+    """Every accepted ``section.field`` key with the plant ``plant`` (a
+    ``--plant`` name: its ``plant.*`` keys)."""
+    return list(_key_tuple(plant))
 
 
-def key_metadata(key: str) -> Mapping[str, Any]:
+def key_metadata(key: str, plant: str = "thesis") -> Mapping[str, Any]:
     """The field metadata of a parameter key: ``doc``, ``unit``, the range
     (``lo``, ``hi``...), ``integer`` (:func:`frictionlab.model.params.param`).
 
     Raises
     ------
     UnknownKeyError
-        ``key`` is not a parameter key.
+        ``key`` is not a parameter key (with the plant ``plant``).
     """
-    section, field = _split(key)
-    return _CLASSES[section].__dataclass_fields__[field].metadata
+    section, field = _split(key, plant)
+    return _class(section, plant).__dataclass_fields__[field].metadata
 
 
-def describe_keys() -> list[tuple[str, str, str, str]]:
+def describe_keys(plant: str = "thesis") -> list[tuple[str, str, str, str]]:
     """``(key, doc, unit, allowed range)`` of every parameter key, in
-    ``frictionlab keys`` order."""
-    keys = _key_set()
-    return [(f"{section}.{name}", doc, unit, rng)
-            for section in _SECTIONS
-            for name, doc, unit, rng in _CLASSES[section].describe()
-            if f"{section}.{name}" in keys]
+    ``frictionlab keys`` order, with the plant ``plant``.  For a motor plant
+    the friction and compensation levels are in volts, the units of u: their
+    acceleration units read as volts."""
+    keys = _key_set(plant)
+    motor = plant_model(plant) is not THESIS
+    out = []
+    for section in _SECTIONS:
+        for name, doc, unit, rng in _class(section, plant).describe():
+            if f"{section}.{name}" not in keys:
+                continue
+            if motor and section in ("friction", "compensation"):
+                unit = _VOLT_UNITS.get((name, unit), _VOLT_UNITS.get(("", unit), unit))
+            out.append((f"{section}.{name}", doc, unit, rng))
+    return out
 
 
-def _split(key: str) -> tuple[str, str]:
-    if not isinstance(key, str) or key not in _key_set():
-        raise UnknownKeyError(str(key))
+#: A friction field's unit for a motor plant, by (field, unit in the thesis's
+#: units; field "" for any): levels in volts (docs/model.md).
+_VOLT_UNITS = {
+    ("", "m/s^2"): "V",
+    ("", "m/s^2/(rad/s)"): "V/(rad/s)",
+    ("sigma0", "1/s^2"): "V/rad",
+    ("sigma1", "1/s"): "V/(rad/s)",
+}
+
+
+def _split(key: str, plant: str = "thesis") -> tuple[str, str]:
+    if not isinstance(key, str) or key not in _key_set(plant):
+        where = f"(with --plant {plant}) " if plant != "thesis" else ""
+        raise UnknownKeyError(str(key), where, plant=plant)
     section, field = key.split(".")
     return section, field
 
 
-def _vector_length(key: str) -> int | None:
+def _vector_length(key: str, plant: str = "thesis") -> int | None:
     """Length of a vector-valued key (``design.gains``), None for a number."""
     section, field = key.split(".")
-    meta = _CLASSES[section].__dataclass_fields__[field].metadata
-    return meta.get("length")
+    f = _class(section, plant).__dataclass_fields__.get(field)
+    return None if f is None else f.metadata.get("length")
 
 
 def _coerce(key: str, value: Any) -> Any:
@@ -411,7 +496,7 @@ def _coerce_number(key: str, value: Any) -> Any:
 def _apply(cfg: Config, items: list[tuple[str, Any]]) -> Config:
     changes: dict[str, dict[str, Any]] = {}
     for key, value in items:
-        section, field = _split(key)
+        section, field = _split(key, cfg.plant_kind)
         changes.setdefault(section, {})[field] = _coerce(key, value)
     kwargs = {}
     for section, fields in changes.items():
@@ -467,8 +552,9 @@ def _toml_value(where: str, key: str, value: Any) -> Any:
     return value
 
 
-def load_toml(path: str | Path) -> list[tuple[str, Any]]:
-    """Read ``[section] field = number`` (or dotted keys) from a TOML file.
+def load_toml(path: str | Path, plant: str = "thesis") -> list[tuple[str, Any]]:
+    """Read ``[section] field = number`` (or dotted keys) from a TOML file
+    (keys of the plant ``plant``, a ``--plant`` name).
 
     Raises
     ------
@@ -505,16 +591,16 @@ def load_toml(path: str | Path) -> list[tuple[str, Any]]:
             key = f"{section}.{field}"
             if isinstance(value, Mapping):
                 raise UnknownKeyError(f"{key}.{next(iter(value), '')}", f"{where}: ")
-            _split_in(where, key)
+            _split_in(where, key, plant)
             items.append((key, _toml_value(where, key, value)))
     return items
 
 
-def _split_in(where: str, key: str) -> None:
+def _split_in(where: str, key: str, plant: str = "thesis") -> None:
     try:
-        _split(key)
+        _split(key, plant)
     except UnknownKeyError as exc:
-        raise UnknownKeyError(key, f"{where}: ") from exc
+        raise UnknownKeyError(key, f"{where}: ", plant=plant) from exc
 
 
 def build_config(
@@ -523,6 +609,7 @@ def build_config(
     compensation: str = "none",
     config_file: str | Path | None = None,
     sets: Iterable[str | tuple[str, Any]] = (),
+    plant: str = "thesis",
 ) -> Config:
     """Assemble a :class:`Config` the way the command line does.
 
@@ -537,22 +624,73 @@ def build_config(
         ``[compensation]``, ``[sim]``, ``[rig]`` tables.
     sets : iterable of ``"KEY=VALUE"`` or ``(key, value)``
         Overrides, applied in order.
+    plant : str
+        The plant (:data:`PLANT_NAMES`): its preset's parameters, and for a
+        motor plant its friction levels (volts) as the ``friction.*`` defaults
+        and the compensators' defaults scaled to them
+        (:func:`motor_friction_defaults`).
     """
     try:
         spec = preset(design) if design else DesignSpec()
-        cfg = Config(design=spec, friction_kind=friction,
-                     friction=FrictionParams.defaults(friction, "plant"),
-                     compensation_kind=compensation,
-                     compensation=FrictionParams.defaults(
-                         compensation if compensation != "none" else "lugre", "compensation"))
+        kind = plant_model(plant)
+        fr = FrictionParams.defaults(friction, "plant")
+        comp = FrictionParams.defaults(compensation if compensation != "none" else "lugre",
+                                       "compensation")
+        params = kind.params()
+        if kind is not THESIS:
+            params = dc_preset(plant)
+            fr, comp = motor_friction_defaults(plant, fr, comp)
+            # the Sec. 2.4 pattern on this plant (omega0 and the pendulum's
+            # frequencies scaled to its unstable rate): the design.* defaults
+            spec = dc_spec(design or "fast", params)
+        cfg = Config(plant=params, design=spec, friction_kind=friction, friction=fr,
+                     compensation_kind=compensation, compensation=comp, plant_kind=plant)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     items: list[tuple[str, Any]] = []
     if config_file is not None:
-        items.extend(load_toml(config_file))
+        items.extend(load_toml(config_file, plant))
     for s in sets:
         items.append(parse_assignment(s) if isinstance(s, str) else tuple(s))
     for key, _ in items:
-        _split(key)
+        _split(key, plant)
     return _apply(cfg, items) if items else cfg
+
+
+#: The friction fields in units of u (levels, and coefficients per rad or
+#: rad/s): scaled with the level from the thesis plant to a motor plant.
+_LEVEL_FIELDS = ("stiction", "coulomb", "viscous", "sigma0", "sigma1", "stiction_negative",
+                 "coulomb_negative", "viscous_negative", "adaptation_min", "adaptation_max")
+
+
+def motor_friction_defaults(plant: str, friction: FrictionParams,
+                            compensation: FrictionParams) -> tuple[FrictionParams,
+                                                                   FrictionParams]:
+    """The ``friction.*`` and ``compensation.*`` defaults of a motor plant.
+
+    The plant's friction: its preset's levels in volts
+    (:data:`frictionlab.model.plants.furuta_dc.PRESET_FRICTION`), the LuGre
+    bristle's sigma_0 and sigma_1 scaled by r = the preset's F_C over the
+    thesis plant's (so the bristle deflects as many radians).  The
+    compensators': the thesis's Sec. 6 settings with every level-like field
+    (:data:`_LEVEL_FIELDS`) scaled by the same r, and the adaptive law's gain
+    by the ratio of the input lengths (:attr:`Config.input_length`), so its
+    stability margin (gamma h^2/L) is the thesis's.  Velocities (v_S,
+    epsilon, the bands) are unchanged.
+    """
+    pf = PRESET_FRICTION[plant]
+    r = pf["friction.coulomb"] / FrictionParams().coulomb
+
+    def scaled(p: FrictionParams, **fixed: float) -> FrictionParams:
+        vals = {f: float(f"{getattr(p, f) * r:.12g}") for f in _LEVEL_FIELDS
+                if getattr(p, f) is not None}
+        vals.update(fixed)
+        return dataclasses.replace(p, **vals)
+
+    fixed = {k.split(".", 1)[1]: v for k, v in pf.items()}
+    length = 1.0 / float(linearization(dc_preset(plant))[1][3, 0])
+    comp = scaled(compensation)
+    gain = compensation.adaptation_gain * length / PlantParams().arm_length
+    comp = dataclasses.replace(comp, adaptation_gain=float(f"{gain:.12g}"))
+    return scaled(friction, **fixed), comp
 

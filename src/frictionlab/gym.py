@@ -66,6 +66,15 @@ Randomisation per episode (``randomize=True`` or a dict)
     friction model per episode.  The controller design is not part of the
     environment.
 
+QUBE-Servo 2 (``frictionlab/QubeServo2-v0``, ``plant="qube2"``; or ``"qube3"``, ``"furuta-dc"``)
+    The same environment on the DC-motor Furuta pendulum
+    (:mod:`frictionlab.model.plants.furuta_dc`): the action is the motor
+    voltage, saturated at ``plant.voltage_limit`` (10 V), the friction levels
+    are in volts (the preset's), the observation is the SI one (``si`` only;
+    no converters: ``raw`` and ``u_da`` are refused), and ``randomize=True``
+    draws :data:`DC_RANDOMIZATION` (R_m and m_p x [0.9, 1.1], the joints'
+    damping x [0.5, 2], the friction as above).  Balancing only.
+
 Swing-up variant (``frictionlab/FurutaSwingUp-v0``, or ``task="swing_up"``)
     The same plant, friction, sensor, action and randomisation; the task is
     to bring the pendulum up from hanging and keep it there.  Each episode
@@ -105,19 +114,29 @@ from gymnasium.vector.utils import batch_space
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
 from .model.friction import KINDS, NP, friction_row, friction_view
-from .model.plants import THESIS, plant_step
-from .model.plants.thesis import PlantRecord
+from .model.plants import plant_step
 from .model.sensor import reading, wrap_angle
 from .model.simulation import plant_tick_rows
 from .runs import make_sensor
 
-__all__ = ["DEFAULT_RANDOMIZATION", "ENV_ID", "MAX_EPISODE_STEPS", "SWINGUP_ENV_ID", "TASKS",
-           "FurutaEnv", "FurutaVectorEnv"]
+__all__ = [
+    "DC_RANDOMIZATION",
+    "DEFAULT_RANDOMIZATION",
+    "ENV_ID",
+    "MAX_EPISODE_STEPS",
+    "QUBE2_ENV_ID",
+    "SWINGUP_ENV_ID",
+    "TASKS",
+    "FurutaEnv",
+    "FurutaVectorEnv",
+]
 
 #: The registered id.
 ENV_ID = "frictionlab/Furuta-v0"
 #: The registered id of the swing-up variant (``task="swing_up"``).
 SWINGUP_ENV_ID = "frictionlab/FurutaSwingUp-v0"
+#: The registered id of the QUBE-Servo 2 (``plant="qube2"``: u the motor voltage).
+QUBE2_ENV_ID = "frictionlab/QubeServo2-v0"
 #: The tasks: balance from near upright, swing up from hanging.
 TASKS = ("balance", "swing_up")
 #: Steps before an episode is truncated (10 s at 5 ms).
@@ -133,6 +152,18 @@ DEFAULT_RANDOMIZATION: dict[str, tuple[float, float]] = {
     "friction.sigma0": (0.5, 2.0),
     "friction.sigma1": (0.5, 2.0),
 }
+#: The default randomisation of a motor plant (``plant="qube2"``...).
+DC_RANDOMIZATION: dict[str, tuple[float, float]] = {
+    "plant.resistance": (0.9, 1.1),
+    "plant.pendulum_mass": (0.9, 1.1),
+    "plant.arm_damping": (0.5, 2.0),
+    "plant.pendulum_damping": (0.5, 2.0),
+    "friction.stiction": (0.7, 1.3),
+    "friction.coulomb": (0.7, 1.3),
+    "friction.viscous": (0.5, 2.0),
+    "friction.sigma0": (0.5, 2.0),
+    "friction.sigma1": (0.5, 2.0),
+}
 _BIG = float(np.finfo(np.float64).max)  # "unbounded" without an infinite Box bound
 _INFO = ("theta", "theta_dot", "arm", "arm_dot", "z")
 
@@ -140,7 +171,7 @@ _INFO = ("theta", "theta_dot", "arm", "arm_dot", "z")
 @jit
 def _step_plants(mask, pcode, xs, us, mems, friction, substeps, ratios, h, pps, fkinds, fps):
     """Advance plant i (row i of ``xs``) over one sample with ``us[i]`` held,
-    for every i with ``mask[i]``: the simulator's plant step."""
+    for every i with ``mask[i]``: the simulator's plant step (plant code ``pcode``)."""
     for i in range(xs.shape[0]):
         if mask[i]:
             friction[i], mems[i] = plant_step(pcode, xs[i], us[i], mems[i], substeps[i],
@@ -168,14 +199,14 @@ class _Plants:
         self.noise = cfg.sim.noise
         self.sensor = make_sensor(cfg)._replace(noise=0.0)  # the draws come from the env
         self.fall = cfg.sim.fall_angle
-        self.pcode = THESIS.code  # the plant's code (model.plants.plant_step)
+        self.pcode = cfg.plant_model.code  # the plant's code (model.plants.plant_step)
         self.xs = np.zeros((n, 5))
         self.mems = np.zeros(n)
         self.friction = np.zeros(n)
         self.us = np.zeros(n)
         self.substeps = np.zeros(n, dtype=np.int64)
         self.ratios = np.zeros(n, dtype=np.int64)
-        self.pps = np.zeros((n, len(PlantRecord._fields)))
+        self.pps = np.zeros((n, len(cfg.plant_row())))
         self.fkinds = np.zeros(n, dtype=np.int64)
         self.fps = np.zeros((n, NP))  # friction records as float rows
         self.steps = np.zeros(n, dtype=np.int64)
@@ -242,7 +273,7 @@ class _Settings:
     the observation and action conversions, the randomisation."""
 
     def __init__(self, config, design, friction, sets, observation, action, randomize,
-                 render_mode, task="balance"):
+                 render_mode, task="balance", plant="thesis"):
         if task not in TASKS:
             raise ValueError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
         self.task = task
@@ -256,11 +287,22 @@ class _Settings:
         if config is not None and not isinstance(config, Config):
             raise TypeError(f"config must be a frictionlab Config, got {type(config).__name__}")
         self.base = config if config is not None else build_config(design, friction,
-                                                                   sets=list(sets))
+                                                                   sets=list(sets),
+                                                                   plant=plant)
         self.observation = observation
         self.action = action
         self.scaling = self.base.rig
-        self.u_max = self.scaling.u_max
+        motor = self.base.motor
+        if motor and (observation == "raw" or action == "u_da"):
+            raise ValueError(f"the {self.base.plant_kind!r} plant has no 12-bit converters: "
+                             "use observation='si' and action='u' (volts)")
+        if motor and task == "swing_up":
+            raise ValueError(f"the swing-up task of the {self.base.plant_kind!r} plant is not "
+                             "implemented yet")
+        # u's limit: the DAC's range, or a motor plant's voltage limit
+        self.u_max = self.base.plant.voltage_limit if motor else self.scaling.u_max
+        if randomize is True and motor:
+            randomize = DC_RANDOMIZATION
         self.ranges, self.kinds = _check_randomization(self.base, randomize)
         if observation == "si":
             bound = np.array([2.0 * math.pi, _BIG, _BIG])
@@ -385,9 +427,9 @@ class FurutaEnv(gymnasium.Env):
                  friction: str = "classical", sets: Sequence[str] = (),
                  observation: str = "si", action: str = "u",
                  randomize: bool | Mapping[str, Any] = False, render_mode: str | None = None,
-                 task: str = "balance"):
+                 task: str = "balance", plant: str = "thesis"):
         self._s = _Settings(config, design, friction, sets, observation, action, randomize,
-                            render_mode, task)
+                            render_mode, task, plant)
         self.render_mode = None
         self.observation_space = self._s.observation_space
         self.action_space = self._s.action_space
@@ -480,14 +522,14 @@ class FurutaVectorEnv(VectorEnv):
                  observation: str = "si", action: str = "u",
                  randomize: bool | Mapping[str, Any] = False,
                  max_episode_steps: int = MAX_EPISODE_STEPS, render_mode: str | None = None,
-                 task: str = "balance"):
+                 task: str = "balance", plant: str = "thesis"):
         if not (isinstance(num_envs, int) and num_envs >= 1):
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if not (isinstance(max_episode_steps, int) and max_episode_steps >= 1):
             raise ValueError(f"max_episode_steps must be an integer >= 1, got "
                              f"{max_episode_steps!r}")
         self._s = _Settings(config, design, friction, sets, observation, action, randomize,
-                            render_mode, task)
+                            render_mode, task, plant)
         self.num_envs = num_envs
         self.max_episode_steps = max_episode_steps
         self.render_mode = None
@@ -599,6 +641,10 @@ def _register() -> None:
                            vector_entry_point="frictionlab.gym:FurutaVectorEnv",
                            max_episode_steps=MAX_EPISODE_STEPS,
                            kwargs={"task": "swing_up"})
+    if QUBE2_ENV_ID not in gymnasium.registry:
+        gymnasium.register(id=QUBE2_ENV_ID, entry_point="frictionlab.gym:FurutaEnv",
+                           vector_entry_point="frictionlab.gym:FurutaVectorEnv",
+                           max_episode_steps=MAX_EPISODE_STEPS, kwargs={"plant": "qube2"})
 
 
 _register()

@@ -25,7 +25,9 @@ output     ``arm_dot``    measured arm velocity                           rad/s
 
 The outputs are the three signals the rig measures (the C of eq. 7), without
 the sensor's noise and quantisation.  The state derivative is
-:func:`frictionlab.model.plants.thesis.rhs` (eq. 6, with ``plant.input_gain``) driven by the
+:func:`frictionlab.model.plants.thesis.rhs` (eq. 6, with ``plant.input_gain``), or
+for a motor plant (``--plant furuta-dc|qube2|qube3``: u the motor voltage, friction
+in volts) :func:`frictionlab.model.plants.furuta_dc.rhs`, driven by the
 friction law of :mod:`frictionlab.model.friction` that the simulator uses, evaluated
 at the current state: viscous, the ideal Coulomb relay, stiction + Coulomb
 with the zero-velocity band (the applied force is ``input_gain * u``), its
@@ -56,12 +58,15 @@ analysis are for), so it is the frictionless one for those models.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import control
 import numpy as np
 
 from .config import Config, build_config
 from .model.friction import COULOMB, KINDS, LUGRE, NONE, friction_step, lugre_dz, lugre_force
+from .model.plants.furuta_dc import dc_accelerations, dc_record
+from .model.plants.furuta_dc import rhs as dc_rhs
 from .model.plants.thesis import ARM, ARM_DOT, THETA, Z, rhs
 
 __all__ = ["INPUTS", "OUTPUTS", "STATES", "linearize", "to_control"]
@@ -124,8 +129,22 @@ def to_control(config: Config | None = None) -> control.NonlinearIOSystem:
             "hysteresis has a memory a continuous-time system cannot hold; use "
             "friction.hysteresis=0 (the ideal relay) or the sampled simulator")
     plant = cfg.plant
-    ku = plant.input_gain
+    motor = cfg.motor
+    ku = 1.0 if motor else plant.input_gain
+    step = dc_rhs if motor else rhs
+    rec = plant.record()
     states = (*STATES, "z") if kind == LUGRE else STATES
+
+    def external(x, u0):
+        # what the classical law's stiction holds: the applied force (eq. 17);
+        # for a motor plant the voltage that would hold the arm still
+        # (frictionlab.model.plants.furuta_dc's docstring)
+        if not motor:
+            return ku * u0
+        th = float(x[THETA])
+        _, arm_dd, _, g_arm = dc_accelerations(math.sin(th), math.cos(th), float(x[1]),
+                                               float(x[ARM_DOT]), u0, dc_record(rec))
+        return arm_dd / g_arm
 
     def updfcn(t, x, u, params):
         x = np.asarray(x, dtype=float)
@@ -138,8 +157,8 @@ def to_control(config: Config | None = None) -> control.NonlinearIOSystem:
         elif kind == NONE:
             friction = 0.0
         else:
-            friction, _ = friction_step(kind, fp, 0.0, v, ku * u0, 0.0, 0.0)
-        dx = rhs(t, x, (u0, friction), plant)
+            friction, _ = friction_step(kind, fp, 0.0, v, external(x, u0), 0.0, 0.0)
+        dx = step(t, x, (u0, friction), plant)
         if kind == LUGRE:
             dx[Z] = dz
         return dx

@@ -30,6 +30,8 @@ import numpy as np
 
 from .config import COMPENSATOR_FIELDS, PLANT_FIELDS, ConfigError, key_metadata
 from .model.design import PRESETS
+from .model.plants.furuta_dc import preset as dc_preset
+from .model.plants.furuta_dc_design import dc_spec
 from .model.plants.thesis import PlantParams
 
 __all__ = [
@@ -133,11 +135,14 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
     if compensation and comp != "none":
         add("compensation", {f: getattr(cfg.compensation, f)
                              for f in sorted(COMPENSATOR_FIELDS[comp])})
-    ref = PlantParams()
+    # the plant's values that differ from its defaults (a motor plant's: its preset's)
+    ref = dc_preset(cfg.plant_kind) if cfg.motor else PlantParams()
+    if cfg.motor:
+        parts.append(f"plant {cfg.plant_kind} (u in V)")
     add("plant", {f.name: getattr(cfg.plant, f.name) for f in dataclasses.fields(cfg.plant)
                   if getattr(cfg.plant, f.name) != getattr(ref, f.name)})
     if design:
-        base = PRESETS[_design_base(cfg)[1]]
+        base = _presets(cfg)[_design_base(cfg)[1]]
         add("design", {f.name: getattr(cfg.design, f.name)
                        for f in dataclasses.fields(cfg.design)
                        if getattr(cfg.design, f.name) != getattr(base, f.name)})
@@ -151,12 +156,22 @@ def parameter_lines(cfg, exclude=(), width: int = 110, *, design: bool = True,
 def _design_base(cfg) -> tuple[str, str]:
     """(name, preset): ``fast``/``slow`` for a preset, else ``modified P`` where
     P is the preset the spec differs least from."""
+    presets = _presets(cfg)
+
     def ndiff(p):
         return sum(getattr(cfg.design, f.name) != getattr(p, f.name)
                    for f in dataclasses.fields(p))
 
-    base = min(PRESETS, key=lambda k: ndiff(PRESETS[k]))
-    return (base if ndiff(PRESETS[base]) == 0 else f"modified {base}"), base
+    base = min(presets, key=lambda k: ndiff(presets[k]))
+    return (base if ndiff(presets[base]) == 0 else f"modified {base}"), base
+
+
+def _presets(cfg) -> dict:
+    """The design presets of the configured plant (a motor plant's: the Sec. 2.4
+    pattern on it, as its ``design.*`` defaults)."""
+    if not getattr(cfg, "motor", False):
+        return PRESETS
+    return {name: dc_spec(name, cfg.plant) for name in PRESETS}
 
 
 def config_title(cfg, what: str | None = None, exclude=(), width: int = 110) -> str:
@@ -210,6 +225,8 @@ def plot_trajectory(traj, path: str, window: float | None = None, title: str | N
         (at least 5 s) so that the cycle's shape is readable, as in the thesis.
     """
     t = traj.t
+    cfg = traj.config
+    u_unit = cfg.plant_model.u_unit if hasattr(cfg, "plant_model") else "m/s^2"
     if len(t) == 0:
         raise ValueError("empty trajectory: nothing to plot")
     span = window if window is not None else 0.5 * t[-1]
@@ -230,13 +247,13 @@ def plot_trajectory(traj, path: str, window: float | None = None, title: str | N
     ax.set_ylabel(axis_label("arm velocity", "rad/s"))
     ax = axes[2]
     ax.plot(t[m], traj["u"][m], label="control $u$", **TRACES["control"])
-    ax.set_ylabel(axis_label("control u", "m/s^2"))
+    ax.set_ylabel(axis_label("control u", u_unit))
     ax = axes[3]
     ax.plot(t[m], traj["friction"][m], label="friction (plant, true)", **TRACES["true"])
     if np.any(traj["friction_hat"][m] != 0):
         ax.plot(t[m], traj["friction_hat"][m], label="estimate (compensator)",
                 **TRACES["estimated"])
-    ax.set_ylabel(axis_label("friction", "m/s^2"))
+    ax.set_ylabel(axis_label("friction", u_unit))
     ax.set_xlabel(axis_label("time", "s"))
     for a in axes:
         a.grid(alpha=0.3)

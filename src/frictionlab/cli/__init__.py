@@ -33,6 +33,7 @@ from .common import (
     Parser,
     UsageError,
     add_config_args,
+    add_plant_arg,
     check_output_path,
     check_window,
     config_from_args,
@@ -54,17 +55,20 @@ __all__ = ["UsageError", "build_parser", "main", "simulate_result"]
 
 
 def cmd_design(args) -> int:
-    from ..model.design import design
+    from ..runs import linearization_json, plant_design
 
     cfg = config_from_args(args)
-    d = design(cfg.design, cfg.plant, method=args.method)
+    d = plant_design(cfg, method=args.method)
     out = d.to_json()
+    out["linearization"] = linearization_json(cfg)
     if args.json:
         emit_json(out)
     else:
-        print(f"design {args.design}: h = {cfg.design.h} s, omega0 = {cfg.design.omega0} rad/s")
+        print(f"design {args.design} (plant {cfg.plant_kind}): h = {cfg.design.h} s, "
+              f"omega0 = {d.spec.omega0:.6g} rad/s")
         print("L = [" + ", ".join(f"{v:.6g}" for v in out["L"]) + "]")
-        print("K = [" + ", ".join(f"{v:.6g}" for v in out["K"]) + "]")
+        K = [v for row in out["K"] for v in (row if isinstance(row, list) else [row])]
+        print("K = [" + ", ".join(f"{v:.6g}" for v in K) + "]")
         print("closed-loop poles (z): " + ", ".join(
             f"{re:.6f}{im:+.6f}j" for re, im in out["poles"]))
         print("observer poles (z):    " + ", ".join(
@@ -73,11 +77,12 @@ def cmd_design(args) -> int:
 
 
 def simulate_result(cfg: Config, duration: float | None, window: float | None,
-                    progress: Callable[[float], None] | None = None):
+                    progress: Callable[[float], None] | None = None,
+                    open_loop: bool = False):
     from ..model.limit_cycles import trajectory_features
     from ..runs import simulate_config
 
-    traj = simulate_config(cfg, duration, progress=progress)
+    traj = simulate_config(cfg, duration, progress=progress, open_loop=open_loop)
     feats = trajectory_features(traj, window)
     status = "fell" if traj.status == "fell" else feats.status
     return traj, feats, status
@@ -94,7 +99,13 @@ def cmd_simulate(args) -> int:
                  "--duration" if args.duration is not None else "sim.duration")
     check_output_path(args.save, (".dat", ".csv"), "--save")
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
-    if not args.swing_up and abs(cfg.sim.initial_angle) > cfg.sim.fall_angle:
+    if args.open_loop and args.swing_up:
+        raise UsageError("--open-loop holds u at 0: it cannot be given with --swing-up")
+    if args.swing_up and cfg.motor:
+        raise UsageError(f"--swing-up: the swing-up of the {cfg.plant_kind!r} plant within "
+                         "its voltage limit is not implemented yet (docs/qube.md)")
+    if (not args.swing_up and not args.open_loop
+            and abs(cfg.sim.initial_angle) > cfg.sim.fall_angle):
         note(args, f"frictionlab simulate: note: sim.initial_angle = "
                    f"{cfg.sim.initial_angle:g} rad is beyond sim.fall_angle "
                    f"({cfg.sim.fall_angle:g} rad): the run falls at once; --swing-up swings "
@@ -112,7 +123,8 @@ def cmd_simulate(args) -> int:
     else:
         with progress_bar("simulating", long_run) as upd:
             traj, feats, status = simulate_result(cfg, duration, args.window,
-                                                  upd if long_run else None)
+                                                  upd if long_run else None,
+                                                  open_loop=args.open_loop)
     if args.save:
         traj.save(args.save)
     if args.plot:
@@ -154,15 +166,16 @@ def cmd_keys(args) -> int:
     from ..config import describe_keys
 
     cfg = build_config(design=args.design, friction=args.friction,
-                       compensation=args.compensation)
+                       compensation=args.compensation, plant=args.plant)
     rows = [{"key": key, "default": cfg.get(key), "range": rng, "unit": unit, "doc": doc}
-            for key, doc, unit, rng in describe_keys()]
+            for key, doc, unit, rng in describe_keys(args.plant)]
     if args.json:
         emit_json({"design": args.design, "friction": args.friction,
-                   "compensation": args.compensation, "keys": rows})
+                   "compensation": args.compensation, "plant": args.plant, "keys": rows})
         return 0
-    print(f"defaults for --design {args.design} --friction {args.friction} --compensation "
-          f"{args.compensation}; set with --set KEY=VALUE or a --config TOML file")
+    print(f"defaults for --plant {args.plant} --design {args.design} --friction "
+          f"{args.friction} --compensation {args.compensation}; set with --set KEY=VALUE or "
+          "a --config TOML file")
     width = max(len(r["key"]) for r in rows)
     print(f"{'key':{width}s}  {'default':>9s}  {'allowed':20s}  {'unit':14s}  meaning")
     for r in rows:
@@ -205,6 +218,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start from sim.initial_angle (pi = hanging unless set) and swing up by "
                         "energy control (swingup.* keys) before balancing; the JSON adds "
                         "swing_up_time")
+    p.add_argument("--open-loop", action="store_true",
+                   help="hold u at 0 (0 V for a motor plant) for the whole run and never stop "
+                        "for a fall: a free swing from sim.initial_angle")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_simulate)
 
@@ -217,6 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--compensation", choices=COMPENSATOR_KINDS, default="none",
                    help="show the compensation.* defaults of this compensator (default: "
                         "%(default)s, whose values are the LuGre compensator's)")
+    add_plant_arg(p)
     p.add_argument("--json", action="store_true",
                    help='print one JSON object {"keys": [{"key", "default", "range", "unit", '
                         '"doc"}, ...]}')

@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from ..config import (
     COMPENSATOR_KINDS,
     PLANT_FRICTION_KINDS,
+    PLANT_NAMES,
     Config,
     ConfigError,
     UnknownKeyError,
@@ -204,10 +205,20 @@ def emit_json(obj) -> None:
     sys.stdout.flush()
 
 
+def add_plant_arg(p: argparse.ArgumentParser) -> None:
+    """``--plant NAME``: the plant simulated and designed for (docs/cli.md)."""
+    p.add_argument("--plant", choices=PLANT_NAMES, default="thesis",
+                   help="the plant: 'thesis' (eq. 6, u the arm's acceleration), "
+                        "'furuta-dc' or 'qube2' (the QUBE-Servo 2: a DC motor, u in volts, "
+                        "friction in volts), 'qube3' (the QUBE-Servo 3); its presets are "
+                        "the plant.* and friction.* defaults (default: %(default)s)")
+
+
 def add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
     p.add_argument("--design", choices=("fast", "slow"), default="fast",
                    help="design preset of Sec. 2.4 (eqs. 13-16), applied before --set "
                         "(default: %(default)s)")
+    add_plant_arg(p)
     if friction:
         p.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
                        help="friction model of the simulated plant (default: %(default)s)")
@@ -243,13 +254,15 @@ def config_from_args(args) -> Config:
     friction model or compensator ignores."""
     from ..config import inert_keys, load_toml
 
-    items = [*backend_rig_items(args), *(load_toml(args.config) if args.config else []),
+    plant = getattr(args, "plant", "thesis")
+    items = [*backend_rig_items(args), *(load_toml(args.config, plant) if args.config else []),
              *parse_sets(args.sets)]
     cfg = build_config(
         design=args.design,
         friction=getattr(args, "friction", "classical"),
         compensation=getattr(args, "compensation", "none"),
         sets=items,
+        plant=plant,
     )
     given = [k for k, _ in items]
     if hasattr(args, "friction"):

@@ -187,7 +187,7 @@ def cmd_tune(args) -> int:
     cfg = _compensated_config(args)
     finite("--chatter-weight", args.chatter_weight, 0.0, lo_open=False)
     check_engine_args(args)
-    grid = [parse_vary(v) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]
+    grid = [parse_vary(v, args.plant) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]
     n = len(check_grid(cfg, grid))  # every point validated before anything runs
     flush_notes(args)
     print(f"frictionlab compensate tune: {cfg.compensation_kind} compensator, {n} points, "

@@ -17,6 +17,7 @@ from .common import (
     add_config_args,
     add_engine_args,
     add_key_args,
+    add_plant_arg,
     add_stall_args,
     backend_rig_items,
     check_engine_args,
@@ -229,14 +230,14 @@ def cmd_limit_cycle(args) -> int:
     if args.config:
         from ..config import load_toml
 
-        sets = [*load_toml(args.config), *sets]
+        sets = [*load_toml(args.config, args.plant), *sets]
     # validate the whole problem (settings, bounds, run length) before any
     # output or simulation: bad input exits 2 with a single stderr line
     constrained = not args.allow_stiction_below_coulomb
     check_window(args.window, args.duration)
     LimitCycleProblem(experiments, keys, friction=args.friction, sets=sets, bounds=bounds,
                       weights=weights, duration=args.duration, window=args.window,
-                      evaluate=_never, stiction_above_coulomb=constrained)
+                      evaluate=_never, stiction_above_coulomb=constrained, plant=args.plant)
     finite("--search-duration", args.search_duration, 0.0)
     search_settings(args.duration, args.window, args.search_duration, args.search_window)
     err = sys.stderr
@@ -268,7 +269,7 @@ def cmd_limit_cycle(args) -> int:
                 workers=args.workers, dask=args.dask, seed=args.seed, maxiter=args.maxiter,
                 popsize=args.popsize, rel_step=args.rel_step, progress=progress,
                 stiction_above_coulomb=constrained, search_duration=args.search_duration,
-                search_window=args.search_window)
+                search_window=args.search_window, plant=args.plant)
     finally:
         signal.signal(signal.SIGTERM, previous)
     for w in result.warnings:
@@ -601,6 +602,7 @@ def register_cli(sub) -> None:
                    help="plant friction model of the simulations (default: classical)")
     q.add_argument("--fit", required=True, metavar="KEY[,KEY...]",
                    help="keys to estimate, e.g. friction.coulomb,plant.omega0")
+    add_plant_arg(q)
     add_key_args(q, "all experiments")
     q.add_argument("--bounds", action="append", default=[], metavar="KEY=LO:HI",
                    help="search bounds of a fitted key (repeatable; defaults per key)")

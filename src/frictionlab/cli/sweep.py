@@ -302,7 +302,7 @@ def _plan(args):
     base = hanging_start(args, config_from_args(args))
     if not args.vary:
         raise UsageError("a sweep needs at least one --vary KEY=V1,V2,... (or START:STOP:N)")
-    varies = [parse_vary(v) for v in args.vary]
+    varies = [parse_vary(v, args.plant) for v in args.vary]
     points = make_points(base, varies, args.mode)
     validate_points(base, points)
     for key in inert_keys(base, [k for k, _ in varies]):

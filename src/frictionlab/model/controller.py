@@ -76,6 +76,7 @@ from .friction import (
 )
 from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
+from .plants.furuta_dc_design import DCDesign, dc_observer_update, observer_row
 from .plants.thesis import PlantParams
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 from .rig import RigScaling
@@ -86,11 +87,13 @@ __all__ = [
     "COMPENSATOR_CODES",
     "COMPENSATOR_FIELDS",
     "COMPENSATOR_KINDS",
+    "DC_OBSERVER",
     "DEFAULT_ERROR_SIGNAL",
     "ERROR_SIGNALS",
     "NS",
     "STATE_DTYPE",
     "STATE_FIELDS",
+    "THESIS_OBSERVERS",
     "Controller",
     "ControllerOutput",
     "Gains",
@@ -238,6 +241,16 @@ class Gains(NamedTuple):
         The share of the error signal e that the LuGre observer receives: 1 but
         while it is being ramped in after a switch
         (:class:`frictionlab.model.switching.Transition`).
+    observer : int
+        Which observers: :data:`THESIS_OBSERVERS` (0, the thesis's pendulum
+        and arm observers, gains k1..k4) or :data:`DC_OBSERVER` (the DC-motor
+        plant's 4-state predictor,
+        :func:`frictionlab.model.plants.furuta_dc_design.dc_observer_step`,
+        its matrices in ``obs``; the state's ``x2`` then holds
+        :math:`\\hat{\\dot\\theta}` itself, ``omega0`` = 1).
+    obs : tuple of 32 floats
+        The DC observer's row (:func:`~frictionlab.model.plants.furuta_dc_design.observer_row`;
+        zeros for the thesis's observers).
     """
 
     l1: float
@@ -258,6 +271,8 @@ class Gains(NamedTuple):
     feed_net: float
     comp_weight: float = 1.0
     error_weight: float = 1.0
+    observer: int = 0
+    obs: tuple = (0.0,) * 32
 
     @property
     def feedback(self) -> np.ndarray:
@@ -285,12 +300,22 @@ class Gains(NamedTuple):
                              u_max=self.u_max if saturate else math.inf)
 
 
+#: :attr:`Gains.observer` codes: the thesis's pendulum and arm observers; the
+#: DC-motor plant's 4-state predictor.
+THESIS_OBSERVERS, DC_OBSERVER = 0, 1
+#: Length of :attr:`Gains.obs`.
+OBS_LEN = 32
+
+
 @jit
 def gains_record(row):
-    """The :class:`Gains` stored as the float row ``np.array(gains, dtype=float)``."""
-    return Gains(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8],
-                 row[9], row[10], row[11], row[12], int(row[13]), int(row[14]), row[15],
-                 row[16], row[17])
+    """The :class:`Gains` stored as the float row :func:`gains_row`."""
+    r = row
+    obs = (r[19], r[20], r[21], r[22], r[23], r[24], r[25], r[26], r[27], r[28], r[29],
+           r[30], r[31], r[32], r[33], r[34], r[35], r[36], r[37], r[38], r[39], r[40],
+           r[41], r[42], r[43], r[44], r[45], r[46], r[47], r[48], r[49], r[50])
+    return Gains(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11],
+                 r[12], int(r[13]), int(r[14]), r[15], r[16], r[17], int(r[18]), obs)
 
 
 #: Candidate error signals e for the LuGre compensator's observer, eq. (19):
@@ -473,10 +498,14 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     elif u < -umax:
         u = -umax
     u_obs = u - f_hat if gp.feed_net != 0.0 else u
-    x1n, x2n = pendulum_observer_step(s.x1, s.x2, theta_m, armd_hat, u_obs, gp.k1,
-                                      gp.k2, w0, gp.g, h)
-    an, adn = arm_observer_step(arm_hat, armd_hat, arm_m, u_obs, gp.k3, gp.k4, h,
-                                gp.arm_length)
+    if gp.observer == DC_OBSERVER:
+        x1n, x2n, an, adn = dc_observer_update(th_hat, thd_hat, arm_hat, armd_hat, theta_m,
+                                               arm_m, arm_dot_m, u_obs, gp.obs)
+    else:
+        x1n, x2n = pendulum_observer_step(s.x1, s.x2, theta_m, armd_hat, u_obs, gp.k1,
+                                          gp.k2, w0, gp.g, h)
+        an, adn = arm_observer_step(arm_hat, armd_hat, arm_m, u_obs, gp.k3, gp.k4, h,
+                                    gp.arm_length)
     s.x1 = x1n
     s.x2 = x2n
     s.arm = an
@@ -501,8 +530,9 @@ def controller_step_rows(x, g, cp, theta_m, arm_m, arm_dot_m):
 
 
 def gains_row(gains: Gains) -> np.ndarray:
-    """The :class:`Gains` as the float row :func:`gains_record` reads back."""
-    return np.array(gains, dtype=float)
+    """The :class:`Gains` as the float row :func:`gains_record` reads back (its
+    fields in order, :attr:`Gains.obs` spread over the last 32)."""
+    return np.array([*gains[:-1], *gains.obs], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -528,8 +558,11 @@ class Controller:
 
     Parameters
     ----------
-    design : Design
-        Gains from :func:`frictionlab.model.design.design`.
+    design : Design or DCDesign
+        Gains from :func:`frictionlab.model.design.design`, or for the DC-motor
+        plant :func:`frictionlab.model.plants.furuta_dc_design.dc_design`
+        (u in volts; its 4-state predictor observer in place of the
+        thesis's pendulum and arm observers).
     compensation : str
         ``none``, ``coulomb``, ``classical`` (Sec. 6.2's implementation form),
         ``lugre`` (the observer eq. 19) or ``adaptive`` (eq. 19 with levels
@@ -545,7 +578,7 @@ class Controller:
         Feed the observers ``u - F_hat`` (see the module docstring).
     """
 
-    design: Design
+    design: Design | DCDesign
     compensation: str = "none"
     compensation_params: FrictionParams = dataclasses.field(
         default_factory=lambda: FrictionParams.defaults("lugre", "compensation"))
@@ -572,11 +605,20 @@ class Controller:
         compensator's friction record (:func:`compensator_params`)."""
         d = self.design
         L = [float(x) for x in d.L]
+        feed_net = 1.0 if (self.feed_net and self.compensation != "none") else 0.0
+        if isinstance(d, DCDesign):
+            # the 4-state predictor (its matrices in obs); theta_dot_hat held as
+            # itself (omega0 1); arm_length the input length of the adaptive
+            # law's velocity predictor (arm acceleration = (u - F)/length)
+            gains = Gains(*L, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0 / float(d.B[3, 0]),
+                          float(d.spec.h), float(self.u_max), int(self.compensator_code),
+                          ERROR_SIGNALS.index(self.error_signal), feed_net,
+                          observer=DC_OBSERVER, obs=tuple(float(v) for v in observer_row(d)))
+            return gains, compensator_params(self.compensation_params)
         K = [float(x) for x in d.K]
         gains = Gains(*L, *K, float(d.spec.omega0), float(d.g), float(d.arm_length),
                       float(d.spec.h), float(self.u_max), int(self.compensator_code),
-                      ERROR_SIGNALS.index(self.error_signal),
-                      1.0 if (self.feed_net and self.compensation != "none") else 0.0)
+                      ERROR_SIGNALS.index(self.error_signal), feed_net)
         return gains, compensator_params(self.compensation_params)
 
     def init(self, theta0: float = 0.0) -> np.record:
@@ -588,8 +630,7 @@ class Controller:
         """One tick: ``(output, next_state)``; ``state`` is not modified."""
         s = copy_state(state)
         gp, cp = self.record()
-        w0 = self.design.spec.omega0
-        est = (s.x1, w0 * s.x2, s.arm, s.arm_dot)
+        est = (s.x1, gp.omega0 * s.x2, s.arm, s.arm_dot)
         u, u_fb, f_hat = controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m)
         adapted = ((float(s.fc_hat), float(s.fs_hat)) if self.compensation == "adaptive"
                    else (float("nan"), float("nan")))

@@ -312,7 +312,9 @@ def linear_loop(spec: LoopSpec, eps: float = 1e-7) -> LinearLoop:
         Difference step (rad, rad/s, m/s^2).
     """
     loop = _Loop(spec)
-    ku = spec.plant_params.input_gain
+    # the thesis plant's k_u; a motor plant receives u itself (its friction,
+    # in volts, enters where u does)
+    ku = getattr(spec.plant_params, "input_gain", 1.0)
     gp = loop.gp.linear()  # no compensator in the linear loop
     ideal = loop.sensor._replace(step=0.0)  # the true signals (no converter, no noise)
 

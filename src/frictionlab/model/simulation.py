@@ -172,6 +172,10 @@ class LoopSpec:
         The run's default duration (s).
     source : object, optional
         What the loop was built from (carried to :attr:`Trajectory.config`).
+    open_loop : bool
+        Hold u at 0 for the whole run (the controller's feedback and
+        compensator off; its observers still run) and never stop for a fall:
+        free swings (``simulate --open-loop``).
     """
 
     plant: PlantKind
@@ -187,6 +191,7 @@ class LoopSpec:
     initial_angle: float
     duration: float
     source: Any = None
+    open_loop: bool = False
 
 
 @dataclass(frozen=True)
@@ -344,6 +349,11 @@ def simulate(
     n = run_ticks(h, spec.duration if duration is None else duration, record)
     ctrl = spec.controller
     gp, cp = ctrl.record()
+    fall_angle = spec.fall_angle
+    if spec.open_loop:
+        # u = -(0 x_hat) + 0 = 0 every tick, no fall stop (a non-finite state still ends it)
+        gp = gp.with_feedback(np.zeros(4))._replace(compensator=0, feed_net=0.0)
+        fall_angle = math.inf
     x = np.zeros(5)
     x[0] = spec.initial_angle
     s = ctrl.init(spec.initial_angle)
@@ -384,7 +394,7 @@ def simulate(
         view = out[done:done + m] if record else out
         d, status, mem, x0 = run_loop(x, mem, m, spec.plant.code, spec.substeps, spec.ratio, pp,
                                       fkind, fp, gp, cp, s, spec.sensor, done, x0,
-                                      spec.fall_angle, view, record, False, sup_row, wx, phase)
+                                      fall_angle, view, record, False, sup_row, wx, phase)
         done += d
         if progress is not None:
             progress(done / n)

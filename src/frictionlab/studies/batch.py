@@ -38,7 +38,7 @@ import numpy as np
 from ..config import Config
 from ..model._jit import jit, jit_nogil
 from ..model.closedloop import NC, run_loop
-from ..model.controller import NS, gains_record, state_vector, state_view
+from ..model.controller import NS, gains_record, gains_row, state_vector, state_view
 from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
 from ..model.limit_cycles import (
     FEATURES,
@@ -49,7 +49,6 @@ from ..model.limit_cycles import (
     STATUS_CODES,
     features_kernel,
 )
-from ..model.plants import THESIS
 from ..model.sensor import SensorParams, sensor_record
 from ..model.swingup import SWING_FIELDS, SwingUpRecord
 from ..runs import make_controller, make_sensor, run_ticks
@@ -204,7 +203,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
         if len(last_key) != len(key) or any(a is not b for a, b in zip(key, last_key, strict=True)):
             ctrl = make_controller(cfg)
             g, c = ctrl.record()
-            shared = (np.array(g, dtype=float),  # gains_record reads it back
+            shared = (gains_row(g),  # gains_record reads it back
                       friction_row(c),  # friction_view reads it back
                       state_vector(ctrl.init(cfg.sim.initial_angle)),  # state_view reads it
                       cfg.plant_row(),
@@ -218,7 +217,7 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
         fp.append(friction_row(resolve_drift(cfg.friction.record(), ticks * cfg.design.h)))
         x0[k] = cfg.sim.initial_angle
         nt[k] = ticks
-        pc[k] = THESIS.code
+        pc[k] = cfg.plant_model.code
         sub[k] = cfg.substeps
         rat[k] = cfg.pendulum_ratio
         h[k] = cfg.design.h

@@ -82,6 +82,9 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     controller : Controller, optional
         The balancing controller (default: the one ``cfg`` describes).
     """
+    if cfg.motor:
+        raise ValueError(f"the swing-up of the {cfg.plant_kind!r} plant within its voltage "
+                         "limit is not implemented yet")
     duration = cfg.sim.duration if duration is None else float(duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"duration must be > 0 s, got {duration}")

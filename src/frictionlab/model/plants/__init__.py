@@ -33,9 +33,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .._jit import jit_inline
-from . import thesis
+from . import furuta_dc, thesis
 
-__all__ = ["PLANTS", "THESIS", "PlantKind", "plant_step"]
+__all__ = ["FURUTA_DC", "PLANTS", "THESIS", "PlantKind", "plant_step"]
 
 
 @dataclass(frozen=True)
@@ -54,16 +54,24 @@ class PlantKind:
 THESIS = PlantKind("thesis", 0, thesis.PlantParams, "m/s^2",
                    "the thesis's rig, eq. (6): u is the arm tip's acceleration")
 
+#: The full Furuta pendulum driven by a DC motor (the QUBE-Servo 2 and 3):
+#: u is the motor voltage.
+FURUTA_DC = PlantKind("furuta-dc", 1, furuta_dc.FurutaDCParams, "V",
+                      "the Furuta pendulum driven by a DC motor: u is the motor voltage")
+
 #: Every plant by name.
-PLANTS = {THESIS.name: THESIS}
+PLANTS = {THESIS.name: THESIS, FURUTA_DC.name: FURUTA_DC}
 
 
 #: Each plant's step inlined into the closed loop (a call every tick cost about
 #: 10 % of a run): the same Python function, compiled in place.
 _thesis_tick = jit_inline(thesis.tick.py_func)
+_dc_tick = jit_inline(furuta_dc.tick.py_func)
 
 
 @jit_inline
 def plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp):
     """Advance the plant of code ``pcode`` over one sample (its module's ``tick``)."""
+    if pcode == 1:
+        return _dc_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
     return _thesis_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)

@@ -48,6 +48,7 @@ __all__ = [
     "DCDesign",
     "dc_design",
     "dc_observer_step",
+    "dc_observer_update",
     "dc_spec",
     "observer_row",
 ]
@@ -213,21 +214,33 @@ def observer_row(result: DCDesign) -> np.ndarray:
 
 
 @jit
+def dc_observer_update(x0, x1, x2, x3, theta_m, arm_m, arm_dot_m, u, o):
+    """:func:`dc_observer_step` on the estimate ``(x0, x1, x2, x3)`` given and
+    returned as four floats; ``o`` the row of :func:`observer_row` (an array
+    or a tuple of its 32 floats: the controller's gains carry it as one)."""
+    e0 = theta_m - x0
+    e1 = arm_m - x2
+    e2 = arm_dot_m - x3
+    n0 = (o[0] * x0 + o[1] * x1 + o[2] * x2 + o[3] * x3 + o[16] * u
+          + o[20] * e0 + o[21] * e1 + o[22] * e2)
+    n1 = (o[4] * x0 + o[5] * x1 + o[6] * x2 + o[7] * x3 + o[17] * u
+          + o[23] * e0 + o[24] * e1 + o[25] * e2)
+    n2 = (o[8] * x0 + o[9] * x1 + o[10] * x2 + o[11] * x3 + o[18] * u
+          + o[26] * e0 + o[27] * e1 + o[28] * e2)
+    n3 = (o[12] * x0 + o[13] * x1 + o[14] * x2 + o[15] * x3 + o[19] * u
+          + o[29] * e0 + o[30] * e1 + o[31] * e2)
+    return n0, n1, n2, n3
+
+
+@jit
 def dc_observer_step(xhat, theta_m, arm_m, arm_dot_m, u, obs_row):
     """One step of the predictor observer: ``xhat`` (4,) becomes the estimate
     for the next tick, in place, from this tick's measurements and the
     voltage u applied over it.
 
     ``xhat <- Phi xhat + Gamma u + K (y - C xhat)``, y = (theta_m, arm_m,
-    arm_dot_m); ``obs_row`` from :func:`observer_row`.
+    arm_dot_m); ``obs_row`` from :func:`observer_row`
+    (:func:`dc_observer_update` computes it).
     """
-    e0 = theta_m - xhat[0]
-    e1 = arm_m - xhat[2]
-    e2 = arm_dot_m - xhat[3]
-    x0, x1, x2, x3 = xhat[0], xhat[1], xhat[2], xhat[3]
-    for i in range(4):
-        p = 4 * i
-        kk = 20 + 3 * i
-        xhat[i] = (obs_row[p] * x0 + obs_row[p + 1] * x1 + obs_row[p + 2] * x2
-                   + obs_row[p + 3] * x3 + obs_row[16 + i] * u
-                   + obs_row[kk] * e0 + obs_row[kk + 1] * e1 + obs_row[kk + 2] * e2)
+    xhat[0], xhat[1], xhat[2], xhat[3] = dc_observer_update(
+        xhat[0], xhat[1], xhat[2], xhat[3], theta_m, arm_m, arm_dot_m, u, obs_row)

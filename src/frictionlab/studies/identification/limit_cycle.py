@@ -190,11 +190,13 @@ class LimitCycleProblem:
         workers: int | None = None,
         dask: str | None = None,
         stiction_above_coulomb: bool = True,
+        plant: str = "thesis",
     ):
         if not experiments:
             raise ConfigError("no experiments to fit")
         self.experiments = list(experiments)
-        self.keys = check_fit_keys(keys)
+        self.plant = plant
+        self.keys = check_fit_keys(keys, plant)
         self.duration, self.window = _run_length(duration, window)
         self.friction = friction
         self.workers, self.dask = workers, dask
@@ -227,7 +229,7 @@ class LimitCycleProblem:
                     raise ConfigError(f"experiment {exp.label!r} sets sim.duration: every run "
                                       f"of the fit lasts the fit's duration ({self.duration:g} s)")
             configs.append(build_config(design=exp.design, friction=friction,
-                                        sets=[*sets, *exp.sets.items()]))
+                                        sets=[*sets, *exp.sets.items()], plant=plant))
         self.configs = configs
         self.base = configs[0]
         base_flat = self.base.as_flat_dict()
@@ -251,8 +253,8 @@ class LimitCycleProblem:
                                        f"given for {k}, which is not fitted")
         lo, hi = [], []
         for k in self.keys:
-            b = given.get(k) or default_bounds(k, self.base.get(k))
-            check_bounds(k, float(b[0]), float(b[1]))
+            b = given.get(k) or default_bounds(k, self.base.get(k), plant)
+            check_bounds(k, float(b[0]), float(b[1]), plant)
             lo.append(float(b[0]))
             hi.append(float(b[1]))
         self.lo, self.hi = np.array(lo), np.array(hi)

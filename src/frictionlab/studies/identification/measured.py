@@ -168,17 +168,18 @@ def parse_experiments(obj: Any) -> list[Experiment]:
 
 
 
-def check_fit_keys(keys: Sequence[str]) -> list[str]:
-    """Validate the keys to fit: known, real-valued parameters, no repeats."""
+def check_fit_keys(keys: Sequence[str], plant: str = "thesis") -> list[str]:
+    """Validate the keys to fit: known (with the plant ``plant``), real-valued
+    parameters, no repeats."""
     if not keys:
         raise ConfigValueError("fit", "", "one or more parameter keys", "needs at least one key")
     out: list[str] = []
     for key in keys:
-        if key not in valid_keys():
+        if key not in valid_keys(plant):
             raise ConfigValueError("fit", key, "parameter keys", f"{key!r} is not a parameter key; "
                               "see 'frictionlab keys'")
         section = key.split(".")[0]
-        if section not in _FITTABLE_SECTIONS or key_metadata(key)["integer"]:
+        if section not in _FITTABLE_SECTIONS or key_metadata(key, plant)["integer"]:
             raise ConfigValueError("fit", key, "real-valued model parameters",
                                    f"{key!r} is not a real-valued model parameter "
                               f"(fittable sections: {', '.join(_FITTABLE_SECTIONS)})")
@@ -188,16 +189,17 @@ def check_fit_keys(keys: Sequence[str]) -> list[str]:
     return out
 
 
-def default_bounds(key: str, current: float | None) -> tuple[float, float]:
-    """Search bounds of ``key``: :data:`DEFAULT_BOUNDS`, else [v/2, 2v] around the
-    current value v, clipped to the key's allowed range."""
-    if key in DEFAULT_BOUNDS:
+def default_bounds(key: str, current: float | None, plant: str = "thesis") -> tuple[float, float]:
+    """Search bounds of ``key``: :data:`DEFAULT_BOUNDS` (the thesis plant's), else
+    [v/2, 2v] around the current value v, clipped to the key's allowed range
+    (a motor plant's levels are in volts: always [v/2, 2v])."""
+    if key in DEFAULT_BOUNDS and plant == "thesis":
         return DEFAULT_BOUNDS[key]
     if current is None or current <= 0:
         raise ConfigValueError("bounds", key, "LO:HI of each fitted key without default "
                                "bounds", f"no default search bounds for {key} (current value "
                                f"{current}); give its bounds")
-    meta = key_metadata(key)
+    meta = key_metadata(key, plant)
     lo, hi = 0.5 * current, 2.0 * current
     if meta["lo"] is not None:
         lo = max(lo, meta["lo"])
@@ -206,12 +208,12 @@ def default_bounds(key: str, current: float | None) -> tuple[float, float]:
     return lo, hi
 
 
-def check_bounds(key: str, lo: float, hi: float) -> None:
+def check_bounds(key: str, lo: float, hi: float, plant: str = "thesis") -> None:
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ConfigError(f"bounds of {key}: {lo}:{hi} must be finite")
     if not lo < hi:
         raise ConfigError(f"bounds of {key}: lower {lo:g} must be below upper {hi:g}")
-    meta = key_metadata(key)
+    meta = key_metadata(key, plant)
     if meta["lo"] is not None and (lo < meta["lo"] or (meta["lo_open"] and lo == meta["lo"])):
         raise ConfigError(f"bounds of {key}: lower {lo:g} is outside the key's allowed "
                           f"range (minimum {meta['lo']:g})")

@@ -49,8 +49,9 @@ def _tidy(v: float) -> float:
     return float(f"{v:.12g}")
 
 
-def parse_vary(text: str) -> tuple[str, list[float]]:
-    """Parse ``KEY=V1,V2,...`` or ``KEY=START:STOP:N`` (N evenly spaced values).
+def parse_vary(text: str, plant: str = "thesis") -> tuple[str, list[float]]:
+    """Parse ``KEY=V1,V2,...`` or ``KEY=START:STOP:N`` (N evenly spaced values),
+    KEY a key of the plant ``plant`` (a ``--plant`` name).
 
     ``START:STOP:N`` includes both ends (``N = 1`` gives ``START``); its
     values are rounded to 12 significant digits.
@@ -64,8 +65,8 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
     if "=" not in text:
         raise _vary_error(text, f"expected {VARY_FORMS}, got {text!r}")
     key, spec = (s.strip() for s in text.split("=", 1))
-    if key not in valid_keys():
-        raise UnknownKeyError(key, field="vary")
+    if key not in valid_keys(plant):
+        raise UnknownKeyError(key, field="vary", plant=plant)
     if not spec:
         raise _vary_error(key, f"{key}: empty list of values")
     if ":" in spec:
