@@ -467,7 +467,9 @@ def _push_trial(page, kick: float) -> tuple[float, float, float]:
         big = np.abs(theta) > limit
         if big.any():
             return float(t[np.argmax(big)])
-        assert t.size == 0 or t[-1] < t_mark + 3.0, "no excursion within 3 s of the push"
+        assert t.size == 0 or t[-1] < t_mark + 3.0, (
+            f"no excursion within 3 s of the push: |theta| up to {np.nanmax(np.abs(theta)):.4f} "
+            f"rad, limit {limit:.4f} (before {before:.4f})")
         return None
 
     t_big = wait_until(excursion, what="the push's excursion")
@@ -501,7 +503,7 @@ def test_push_disturbs_the_simulated_pendulum_and_the_loop_recovers(page):
     if button.get_attribute("aria-pressed") != "true":
         button.click()
         expect(button).to_have_text("Compensating")
-    before, peak, after = retry_host_stalls(lambda: _push_trial(page, 0.3),
+    before, peak, after = retry_host_stalls(lambda: _push_trial(page, 0.6),
                                             lambda: start_loop(page), "the push trial")
     assert peak > max(3.0 * before, before + 0.01), (before, peak)
     assert after <= max(2.0 * before, before + 0.005), (before, after)
