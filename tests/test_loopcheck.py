@@ -59,10 +59,17 @@ def _hand_loop(spec, plant: PlantParams) -> np.ndarray:
 
 @pytest.mark.parametrize("spec", [FAST, SLOW, dataclasses.replace(FAST, observer_omega1=50.0)])
 def test_loop_matrix_equals_the_hand_derived_one(spec):
+    """The check linearises the closed loop's own tick: the controller's rows are the
+    hand-derived ones to rounding, the plant's the exact ZOH of Sec. 2.2 to the
+    simulator's integration error (its pendulum steps are not the exact ZOH: 5e-5
+    measured), the arm's exactly (its steps are exact for a held u)."""
     plant = PlantParams(zeta=0.0)
     M, N, K, D = loop_matrices(Controller(design(spec, plant)), plant)
     want = _hand_loop(spec, plant)
-    np.testing.assert_allclose(M, want, atol=1e-7)
+    np.testing.assert_allclose(M[4:], want[4:], atol=1e-7)
+    np.testing.assert_allclose(M[2:4], want[2:4], atol=1e-7)
+    np.testing.assert_allclose(M[:2], want[:2], atol=1e-4)
+    assert np.abs(M[:2] - want[:2]).max() > 1e-7  # the tick's pendulum, not a copy of the ZOH
     d = design(spec, plant)
     np.testing.assert_allclose(K, [0, 0, 0, 0, *(-d.L * [1, spec.omega0, 1, 1])], atol=1e-7)
     np.testing.assert_allclose(D, 0.0, atol=1e-9)  # u comes from the predicted estimates
@@ -72,7 +79,7 @@ def test_loop_matrix_equals_the_hand_derived_one(spec):
     want_N[4:, 1] = want[4:, 2]
     np.testing.assert_allclose(N, want_N, atol=1e-7)
     ev = np.sort_complex(np.linalg.eigvals(M))
-    np.testing.assert_allclose(ev, np.sort_complex(np.linalg.eigvals(want)), atol=1e-7)
+    np.testing.assert_allclose(ev, np.sort_complex(np.linalg.eigvals(want)), atol=1e-4)
     # the arm observer's error is exactly decoupled: its poles (eq. 11) are loop poles
     arm_poles = design(spec, plant).observer.achieved_discrete[2:]
     for z in arm_poles:

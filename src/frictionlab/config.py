@@ -33,7 +33,6 @@ from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
 from .model.plants import FURUTA_DC, THESIS, PlantKind
 from .model.plants.furuta_dc import PRESET_FRICTION, linearization
-from .model.plants.furuta_dc import SUBSTEPS as DC_SUBSTEPS
 from .model.plants.furuta_dc import preset as dc_preset
 from .model.plants.furuta_dc_design import dc_spec
 from .model.plants.thesis import PlantParams
@@ -192,16 +191,6 @@ class ControllerLimits(Validated):
                                 "units of u", lo=0.0, lo_open=True, optional=True)
 
 
-#: Default arm/friction substeps per sampling period, by plant friction model
-#: (the cheapest counts that keep the limit-cycle features within 0.3 % of a
-#: run with 20 times as many, docs/model.md "Integration"): the static models
-#: switch discontinuously and the integration is first order in the substep;
-#: the smooth LuGre model, with the bristle update at the predicted midpoint
-#: velocity, is second order.
-DEFAULT_SUBSTEPS = {"lugre": 6}
-DEFAULT_SUBSTEPS_STATIC = 10
-
-
 @dataclass(frozen=True)
 class Config:
     """Everything a closed-loop run needs.
@@ -279,13 +268,14 @@ class Config:
     @property
     def substeps(self) -> int:
         """Arm/friction substeps per sampling period: ``sim.substeps``, or the
-        plant friction model's default (:data:`DEFAULT_SUBSTEPS`; a motor
-        plant's: :data:`frictionlab.model.plants.furuta_dc.SUBSTEPS`)."""
+        plant's default for its friction model (``PlantKind.substeps``: the
+        cheapest counts that keep the limit-cycle features within 0.3 % of a
+        run with 20 times as many, docs/model.md "Integration";
+        :data:`frictionlab.model.plants.thesis.SUBSTEPS`,
+        :data:`frictionlab.model.plants.furuta_dc.SUBSTEPS`)."""
         if self.sim.substeps is not None:
             return self.sim.substeps
-        if self.motor:
-            return DC_SUBSTEPS[self.friction_kind]
-        return DEFAULT_SUBSTEPS.get(self.friction_kind, DEFAULT_SUBSTEPS_STATIC)
+        return self.plant_model.substeps[self.friction_kind]
 
     @property
     def pendulum_ratio(self) -> int:

@@ -12,7 +12,9 @@ t = k h.
 :func:`run_loop` runs that tick for ``simulate``, the batch sweeps and fits
 (``studies.batch``), the swing-up simulation (``studies.swingup_sim``), and
 :func:`step_loop` is the same tick on a packed loop state for the periodic
-orbit (:mod:`frictionlab.model.periodic`).  The 200 Hz loop runs the same
+orbit (:mod:`frictionlab.model.periodic`), and :func:`tick_jacobian` that tick
+linearised (the periodic orbit's linear loop, the loop check of
+:mod:`frictionlab.model.loopcheck`).  The 200 Hz loop runs the same
 controller and swing-up steps on what a rig reports.
 
 Recorded columns
@@ -28,7 +30,13 @@ from __future__ import annotations
 import numpy as np
 
 from ._jit import jit, jit_inline, keep_alive
-from .controller import compensator_levels, controller_step, estimates
+from .controller import (
+    compensator_levels,
+    controller_step,
+    estimates,
+    state_record,
+    state_vector,
+)
 from .friction import FRICTION_DTYPE, copy_friction_into, drifted_params, is_drifting
 from .plants import plant_step
 from .sensor import ideal_reading, measure, reading
@@ -51,10 +59,12 @@ __all__ = [
     "NC",
     "OK",
     "SWING_STOPPED",
+    "TICK_INPUTS",
     "no_swing",
     "record_tick",
     "run_loop",
     "step_loop",
+    "tick_jacobian",
 ]
 
 #: The ten signals the thesis's controller saves (Sec. 7.1), in its order.
@@ -213,14 +223,92 @@ def no_swing() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @jit
-def step_loop(x, s, mem, x0, pcode, substeps, ratio, pp, fkind, fp, gp, cp, sp, du):
+def step_loop(x, s, mem, x0, pcode, substeps, ratio, pp, fkind, fp, gp, cp, sp, du, w_theta,
+              w_arm, w_arm_dot):
     """One tick of :func:`run_loop` (measure, controller, plant) on a plant state
     ``x`` and a controller state ``s`` (both updated in place), not the first
-    sample (the arm's zero ``x0`` is given), noise-free; the plant receives the
-    controller's u plus ``du`` (an input disturbance, for linearisations).
-    Returns (u, mem)."""
+    sample (the arm's zero ``x0`` is given), noise-free; the controller reads the
+    measurements plus the errors ``w_theta``, ``w_arm``, ``w_arm_dot`` and the
+    plant receives the controller's u plus ``du`` (an input disturbance): the
+    inputs of a linearisation (:func:`tick_jacobian`).  Returns (u, mem)."""
     th_m, arm_m, armd_m, _ = reading(sp, x[0], x[2], x[3], False, x0)
-    u, _u_fb, _f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
+    u, _u_fb, _f_hat = controller_step(s, gp, cp, th_m + w_theta, arm_m + w_arm,
+                                       armd_m + w_arm_dot)
     u_in = u + du if du != 0.0 else u
     _f, mem = plant_step(pcode, x, u_in, mem, substeps, ratio, gp.h, pp, fkind, fp)
     return u, mem
+
+
+#: The inputs of :func:`tick_jacobian`, in its columns' order: an input
+#: disturbance added to u, then errors on the three measured signals.
+TICK_INPUTS = ("du", "theta_m", "arm_m", "arm_dot_m")
+
+
+def tick_jacobian(x, s, mem, loop, plant_coords, state_coords, mem_coord=False, eps=1e-6):
+    r"""The closed-loop tick (:func:`step_loop`) linearised at a point, by central differences.
+
+    The loop's coordinates X are the plant state's entries ``plant_coords``
+    (of ``[theta, theta_dot, arm, arm_dot, z]``), the controller state's
+    entries ``state_coords`` (positions in
+    :func:`~frictionlab.model.controller.state_vector`) and, with
+    ``mem_coord``, the plant's friction memory; the other entries of the
+    controller state are held at the point's values (a discrete relay, an
+    adaptation frozen).  The tick, differenced, is
+
+    .. math::  \delta X^+ = M\,\delta X + G\,d, \qquad \delta u = K\,\delta X + D\,d
+
+    with the inputs d of :data:`TICK_INPUTS` (an input disturbance, errors on
+    the measured theta, arm angle and arm velocity).  The point need not be an
+    equilibrium (a sliding arm): the matrices are those of the tick there.
+
+    Parameters
+    ----------
+    x : ndarray (5,)
+        The plant state at the point.
+    s : record of :data:`~frictionlab.model.controller.STATE_DTYPE`
+        The controller state at the point.
+    mem : float
+        The plant's friction memory at the point.
+    loop : tuple
+        :func:`step_loop`'s arguments after ``mem``: ``(x0, pcode, substeps,
+        ratio, pp, fkind, fp, gp, cp, sp)``.
+    plant_coords, state_coords : sequence of int
+    mem_coord : bool
+    eps : float
+        Difference step, scaled by ``max(1, |coordinate|)``.
+
+    Returns
+    -------
+    M : ndarray (n, n)
+    G : ndarray (n, 4)
+    K : ndarray (n,)
+    D : ndarray (4,)
+    """
+    plant_coords = list(plant_coords)
+    state_coords = list(state_coords)
+    sv = state_vector(s)
+    X0 = np.concatenate([np.asarray(x, dtype=float)[plant_coords], sv[state_coords],
+                         [mem] if mem_coord else []])
+    n_p, n_s = len(plant_coords), len(state_coords)
+    n, n_in = len(X0), len(TICK_INPUTS)
+
+    def tick(X, d):
+        xe = np.array(x, dtype=float)
+        xe[plant_coords] = X[:n_p]
+        se = sv.copy()
+        se[state_coords] = X[n_p:n_p + n_s]
+        me = X[-1] if mem_coord else mem
+        u, me = step_loop(xe, state_record(se), me, *loop, *d)
+        out = np.concatenate([xe[plant_coords], se[state_coords], [me] if mem_coord else []])
+        return out, u
+
+    J = np.zeros((n, n + n_in))
+    row = np.zeros(n + n_in)
+    for j in range(n + n_in):
+        step = eps * max(1.0, abs(X0[j])) if j < n else eps
+        e = np.zeros(n + n_in)
+        e[j] = step
+        (a, ua), (b, ub) = tick(X0 + e[:n], e[n:]), tick(X0 - e[:n], -e[n:])
+        J[:, j] = (a - b) / (2 * step)
+        row[j] = (ua - ub) / (2 * step)
+    return J[:, :n], J[:, n:], row[:n], row[n:]

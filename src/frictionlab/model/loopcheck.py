@@ -2,7 +2,8 @@ r"""Will the sampled loop hold?  Controller settings checked against the model b
 
 :func:`check_loop` takes a :class:`~frictionlab.model.controller.Controller` (gains
 of Sec. 2.2-2.3, compensator of Sec. 6) and the plant it will drive
-(:class:`~frictionlab.model.plants.thesis.PlantParams`) and answers, from linear models of
+(:class:`~frictionlab.model.plants.thesis.PlantParams`, or a DC-motor plant's
+:class:`~frictionlab.model.plants.furuta_dc.FurutaDCParams`) and answers, from linear models of
 the sampled loop, whether applying it would hurt the motor.  The answer is a
 frozen :class:`LoopCheck` with its diagnostics, in the spirit of
 :func:`scipy.signal.place_poles`'s result object.
@@ -10,25 +11,37 @@ frozen :class:`LoopCheck` with its diagnostics, in the spirit of
 What is checked
 ---------------
 1. **The sampled closed loop at rest** (plant, observers, state feedback).
-   The plant of eq. (6) linearised upright (:func:`frictionlab.model.plants.thesis.linearize`,
-   with the plant's own :math:`\omega_0`, damping and input gain, which may
-   differ from the design's) and sampled with zero-order hold at h; the
-   controller is the compiled :func:`~frictionlab.model.controller.controller_step`
-   itself, linearised by central differences (no second copy of the observer
-   equations), without saturation.  State: the plant's four states and the
-   controller's four estimates, u from the predicted estimates as in the
-   loop.  The loop is *unstable* when an eigenvalue of this 8 x 8 matrix lies
-   outside the unit circle.
+   The closed loop's own compiled tick
+   (:func:`frictionlab.model.closedloop.step_loop`: the noise-free sensor, the
+   compiled :func:`~frictionlab.model.controller.controller_step`, the plant's
+   step :func:`frictionlab.model.plants.plant_step` between samples) linearised
+   at the upright rest by central differences
+   (:func:`~frictionlab.model.closedloop.tick_jacobian`), without saturation
+   and without friction; no second copy of the plant or the observer
+   equations.  The plant is the one the controller will drive (the thesis's
+   eq. (6) with its own :math:`\omega_0`, damping and input gain, which may
+   differ from the design's, or the DC-motor Furuta pendulum,
+   :mod:`frictionlab.model.plants`), integrated as the simulator integrates
+   it.  State: the plant's four states and the controller's four estimates,
+   u from the predicted estimates as in the loop.  The loop is *unstable*
+   when an eigenvalue of this 8 x 8 matrix lies outside the unit circle.
 
 2. **The friction compensator along the sliding motion.**  Near rest a
    friction-free linear model says nothing useful about a compensator (the
    arm is held by its own bristles or stiction), so the compensator is
-   checked where it acts: with the arm sliding at the speeds of
-   :data:`SLIDING_SPEEDS` (the compensated and uncompensated limit cycles'
-   arm speeds), the plant's friction being a static level there (its
-   bristles at their steady state), and the compensator's step linearised
-   at that speed (the LuGre observer's bristle :math:`\hat z` at the steady
-   state of eq. (18), the Coulomb relay switched to the sign of the speed).
+   checked where it acts: the same tick linearised with the arm sliding at
+   the speeds of :data:`SLIDING_SPEEDS` (the compensated and uncompensated
+   limit cycles' arm speeds), the plant's friction being the compensator's
+   own law and parameters (its premise: the model is right; the LuGre plant's
+   bristle, its observer gain k off, settled at the steady state of eq. (18),
+   the Coulomb relay switched to the sign of the speed), and the compensator
+   linearised there (the LuGre observer's bristle :math:`\hat z` at its
+   steady state, the relay at the sign of the speed).  The tick brings the
+   sliding arm's effect on the pendulum with it: the centripetal term
+   :math:`\dot\Omega^2\sin\theta\cos\theta` of eq. (6) raises the upright
+   pendulum's instability from :math:`\omega_0^2` to
+   :math:`\omega_0^2 + \dot\Omega^2` (docs/architecture.md, "The loop check
+   through the one tick").
    The compensator's own update needs no bound of its own: the bristle is
    integrated exactly over the sample (docs/compensation.md: the
    forward-Euler bound :math:`\sigma_0|v|h/s(v) < 2` does not apply to it).
@@ -46,7 +59,7 @@ What is checked
    does), plus three standard deviations of the u that measurement noise of
    ``noise`` (rad, rad, rad/s on the three measured signals) causes in steady
    state (discrete Lyapunov equation), plus the compensator's largest
-   friction level.
+   friction level (all in the units of u: m/s^2, or volts for a motor plant).
 
 The ``adaptive`` compensator is checked as the LuGre observer at its
 starting levels with the adaptation frozen (its own law is stable by the
@@ -61,25 +74,34 @@ loop's own safety stops (angle limit, non-finite u) stay the last line.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
+from .closedloop import tick_jacobian
 from .controller import (
+    COMPENSATOR_CODES,
     Controller,
     Gains,
-    compensator_force,
-    controller_step,
     new_state,
     state_index,
-    state_record,
     state_vector,
 )
-from .friction import steady_bristle, stribeck_curve
-from .plants.thesis import PlantParams, linearize, rhs, zoh
+from .friction import (
+    COULOMB,
+    LUGRE,
+    NONE,
+    copy_friction,
+    steady_bristle,
+    steady_state,
+)
+from .friction import KINDS as FRICTION_KINDS
+from .plants import plant_of
+from .plants.thesis import PlantParams
+from .rig import RigScaling
+from .sensor import sensor_params
 
 __all__ = [
     "DEFAULT_DISTURBANCE",
@@ -109,6 +131,10 @@ VERDICTS = ("unstable", "compensator_unstable", "saturating", "ok")
 _TOL = 1e-6
 #: Controller states that are linear dynamic states (the relay is discrete).
 _PEND_ARM = tuple(state_index(name) for name in ("x1", "x2", "arm", "arm_dot"))
+#: Pendulum steps per sample of the thesis plant's integrator (``sim.pendulum_steps``).
+_PENDULUM_STEPS = 2
+#: The noise-free sensor without a converter the check reads the plant with.
+_IDEAL_SENSOR = sensor_params(RigScaling(), quantization=0.0)
 
 
 @dataclass(frozen=True)
@@ -199,19 +225,22 @@ def _analysis_pack(controller: Controller, compensate: bool) -> tuple[Gains, np.
     return gp, cp
 
 
-def loop_matrices(controller: Controller, plant: PlantParams | None = None,
-                  arm_speed: float = 0.0, *, compensate: bool | None = None):
+def loop_matrices(controller: Controller, plant=None, arm_speed: float = 0.0, *,
+                  compensate: bool | None = None):
     """The sampled closed loop linearised: ``X+ = M X + N w``, ``u = K X + D w``.
+
+    The closed loop's tick (:func:`frictionlab.model.closedloop.tick_jacobian`)
+    at the upright rest or with the arm sliding (the module docstring).
 
     Parameters
     ----------
     controller : Controller
-    plant : PlantParams, optional
-        The plant the controller drives (default: the nominal plant).
+    plant : PlantParams or FurutaDCParams, optional
+        The plant the controller drives (default: the thesis's nominal plant).
     arm_speed : float
         Arm speed (rad/s) of the operating point: 0 is the upright rest;
         otherwise the arm slides at this speed (the compensator linearised
-        there, see the module docstring).
+        there, the plant's friction the compensator's own law).
     compensate : bool, optional
         Include the compensator (default: when the controller has one and
         ``arm_speed`` is not 0).
@@ -219,8 +248,9 @@ def loop_matrices(controller: Controller, plant: PlantParams | None = None,
     Returns
     -------
     M : ndarray (n, n)
-        State: the plant's (theta, theta_dot, Omega, Omega_dot), the
-        controller's (theta_hat, theta_dot_hat / omega0, Omega_hat,
+        State: the plant's (theta, theta_dot, Omega, Omega_dot), with a LuGre
+        plant friction its bristle z and the friction of its last substep;
+        then the controller's (theta_hat, theta_dot_hat / omega0, Omega_hat,
         Omega_dot_hat) and, with the LuGre compensator, its z_hat.
     N : ndarray (n, 3)
         Effect of additive errors w on the measured (theta, Omega, Omega_dot).
@@ -233,87 +263,45 @@ def loop_matrices(controller: Controller, plant: PlantParams | None = None,
     if compensate is None:
         compensate = controller.compensation != "none" and arm_speed != 0.0
     gp, cp = _analysis_pack(controller, compensate)
+    v = float(arm_speed)
     states = list(_PEND_ARM)
     if compensate and controller.compensation in ("lugre", "adaptive"):
         states.append(state_index("z_hat"))
-    # sliding: the arm's friction is the compensator's own steady-state friction (its
-    # premise), a static function of the speed; its slope enters the arm
-    slope = (_steady_slope(controller, cp, arm_speed) if compensate and arm_speed != 0.0
-             else 0.0)
-    Phi, gam = _sampled_plant(plant, controller.design.spec.h, float(slope))
-
-    v = float(arm_speed)
-    rec0 = new_state(arm_dot=arm_speed)
+    # sliding: the plant's friction is the compensator's own law (its premise), its
+    # bristle or relay settled at the speed; at rest: no friction
+    fkind, fp = _plant_friction(controller, cp) if compensate and v != 0.0 else (NONE, cp)
+    x = np.array([0.0, 0.0, 0.0, v, 0.0])
+    mem = 0.0
+    if fkind == LUGRE:
+        x[4] = steady_bristle(v, fp)
+        mem = steady_state(LUGRE, fp, v)
+    elif fkind == COULOMB:
+        mem = math.copysign(1.0, v)
+    s = new_state(arm_dot=v)
     if v != 0.0:
-        rec0.relay = math.copysign(1.0, v)
-        rec0.z_hat = steady_bristle(v, cp)
-    s0 = state_vector(rec0)
-    x0 = np.array([0.0, 0.0, 0.0, v])
-    c0 = s0[states]
-    n_x, n = 4, 4 + len(states)
-
-    def step(dx, dc, w):
-        s = s0.copy()
-        s[states] = c0 + dc
-        x = x0 + dx
-        u, _, _ = controller_step(state_record(s), gp, cp, x[0] + w[0], x[2] + w[1],
-                                  x[3] + w[2])
-        return np.concatenate([Phi @ dx + gam * u, s[states] - c0]), u
-
-    M = np.zeros((n, n))
-    K = np.zeros(n)
-    N = np.zeros((n, 3))
-    D = np.zeros(3)
-    zx, zc, zw = np.zeros(n_x), np.zeros(n - n_x), np.zeros(3)
-    for j in range(n + 3):
-        eps = 1e-6 * max(1.0, abs(c0[j - n_x]) if n_x <= j < n else 1.0)
-        e = np.zeros(n + 3)
-        e[j] = eps
-        (a, ua) = step(zx + e[:n_x], zc + e[n_x:n], zw + e[n:])
-        (b, ub) = step(zx - e[:n_x], zc - e[n_x:n], zw - e[n:])
-        col, dcol = (a - b) / (2 * eps), (ua - ub) / (2 * eps)
-        if j < n:
-            M[:, j], K[j] = col, dcol
-        else:
-            N[:, j - n], D[j - n] = col, dcol
-    return M, N, K, D
+        s.relay = math.copysign(1.0, v)
+        s.z_hat = steady_bristle(v, cp)
+    kind = plant_of(plant)
+    row = plant.record()
+    substeps = kind.substeps[FRICTION_KINDS[fkind]]
+    ratio = max(1, -(-substeps // _PENDULUM_STEPS))
+    M, G, K, D = tick_jacobian(
+        x, s, mem, (0.0, kind.code, substeps, ratio, row, fkind, fp, gp, cp, _IDEAL_SENSOR),
+        [0, 1, 2, 3, 4] if fkind == LUGRE else [0, 1, 2, 3], states, mem_coord=fkind == LUGRE)
+    return M, G[:, 1:], K, D[1:]
 
 
-@functools.lru_cache(maxsize=64)
-def _sampled_plant(plant: PlantParams, h: float, slope: float):
-    """ZOH of the plant linearised upright, with a friction slope dF/dv on the arm (cached:
-    a search over controller settings samples the same plant again and again)."""
-    A, B = linearize(plant)
-    if slope:
-        A = A + np.outer(_friction_input(plant), [0.0, 0.0, 0.0, slope])
-    Phi, Gam = zoh(A, B, h)
-    Phi.flags.writeable = False
-    gam = Gam[:, 0].copy()
-    gam.flags.writeable = False
-    return Phi, gam
-
-
-def _friction_input(plant: PlantParams) -> np.ndarray:
-    """d(rhs)/dF at rest: how the arm friction (units of u) enters eq. (6)."""
-    x0 = np.zeros(4)
-    return (rhs(0.0, x0, (0.0, 1.0), plant) - rhs(0.0, x0, (0.0, -1.0), plant)) / 2.0
-
-
-def _steady_slope(controller: Controller, cp: np.record, v: float) -> float:
-    """Slope dF/dv (m/s^2 per rad/s) of the compensator's steady-state estimate at ``v``.
-
-    LuGre: the Stribeck curve with viscous friction (where its exactly
-    integrated bristle settles in steady sliding); classical: the Stribeck
-    level outside the band; Coulomb: a constant level.
-    """
-    dv = 1e-6 * max(1.0, abs(v))
-    if controller.compensation in ("lugre", "adaptive"):
-        return (stribeck_curve(v + dv, cp) - stribeck_curve(v - dv, cp)) / (2 * dv)
-    code, h = controller.compensator_code, controller.design.spec.h
-    relay = math.copysign(1.0, v)
-    hi = compensator_force(code, new_state(relay=relay), cp, v + dv, 0.0, 0.0, h)
-    lo = compensator_force(code, new_state(relay=relay), cp, v - dv, 0.0, 0.0, h)
-    return (hi - lo) / (2 * dv)
+def _plant_friction(controller: Controller, cp: np.record) -> tuple[int, np.record]:
+    """The plant friction of the sliding check: the compensator's law (the classical
+    compensator's implementation form, the adaptive one's LuGre observer at its
+    starting levels) with its parameters, as a plant's: no observer gain k (eq. 19's
+    error is the compensator's), no relay hysteresis (a plant's relay follows the
+    velocity, docs/model.md)."""
+    code = COMPENSATOR_CODES[controller.compensation]
+    fp = copy_friction(cp)
+    fp.k = 0.0
+    fp.eps = 0.0 if code == COULOMB else fp.eps
+    return (LUGRE if controller.compensation == "adaptive" else code), fp
 
 
 def _radius(M: np.ndarray) -> float:
@@ -348,7 +336,7 @@ def _compensator_level(controller: Controller) -> float:
     return float(max(levels))
 
 
-def check_loop(controller: Controller, plant: PlantParams | None = None, *,
+def check_loop(controller: Controller, plant=None, *,
                noise: float = DEFAULT_NOISE, disturbance: float = DEFAULT_DISTURBANCE,
                speeds: tuple[float, ...] = SLIDING_SPEEDS, horizon: float = 4.0) -> LoopCheck:
     """Check a controller against the model of the plant it will drive.
@@ -357,9 +345,9 @@ def check_loop(controller: Controller, plant: PlantParams | None = None, *,
     ----------
     controller : Controller
         Gains and compensator to check (its ``u_max`` is the DAC limit).
-    plant : PlantParams, optional
-        The plant (default: nominal).  Its ``omega0`` may differ from the
-        design's, as on a real rig.
+    plant : PlantParams or FurutaDCParams, optional
+        The plant (default: the thesis's nominal plant).  Its parameters may
+        differ from the design's (a thesis plant's ``omega0``), as on a real rig.
     noise : float
         Measurement noise standard deviation on each measured signal (SI).
     disturbance : float
@@ -402,7 +390,8 @@ def check_loop(controller: Controller, plant: PlantParams | None = None, *,
     else:
         x_init = np.zeros(len(M))
         x_init[0] = disturbance
-        x_init[4] = disturbance  # the observer starts at the measured angle
+        # the observers start at the measured angle, as the controller does
+        x_init[4:] = state_vector(controller.init(disturbance))[list(_PEND_ARM)]
         peak_d = _peak_u(M, K, x_init, max(1, round(horizon / h)))
         if noise > 0:
             P = solve_discrete_lyapunov(M, noise * noise * (N @ N.T))

@@ -76,7 +76,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._jit import jit
-from .closedloop import NC, no_swing, run_loop, step_loop
+from .closedloop import NC, no_swing, run_loop, step_loop, tick_jacobian
 from .controller import (
     NS,
     state_index,
@@ -123,7 +123,7 @@ def loop_tick(X, pcode, gp, cp, sp, x0, substeps, ratio, h, pp, fkind, fp):
     :func:`frictionlab.model.simulation.simulate` does.
     """
     u, X[I_MEM] = step_loop(X[:NX_PLANT], state_view(X[I_S:I_MEM]), X[I_MEM], x0, pcode,
-                            substeps, ratio, pp, fkind, fp, gp, cp, sp, 0.0)
+                            substeps, ratio, pp, fkind, fp, gp, cp, sp, 0.0, 0.0, 0.0, 0.0)
     return u
 
 
@@ -292,15 +292,16 @@ class LinearLoop:
         return np.linalg.eigvals(self.Phi)
 
 
-#: Loop-state entries of the linear loop's state (plant, then observers).
-_LIN_IDX = np.array([0, 1, 2, 3, *_entries("x1", "x2", "arm", "arm_dot")])
+#: The controller-state entries of the linear loop's state (after the plant's four).
+_LIN_STATE = [state_index(name) for name in ("x1", "x2", "arm", "arm_dot")]
 
 
 def linear_loop(spec: LoopSpec, eps: float = 1e-7) -> LinearLoop:
     """The loop ``spec`` without friction, linearised at the upright equilibrium.
 
-    Central differences of one compiled tick (:func:`loop_tick` with the
-    friction switched off and no quantisation); the extra acceleration input
+    Central differences of one compiled tick
+    (:func:`frictionlab.model.closedloop.tick_jacobian` with the friction
+    switched off and no quantisation); the extra acceleration input
     ``w`` enters as ``w / k_u`` added to the controller's u, which the plant
     receives as ``k_u u + w``.  Saturation of u is outside the linear range
     and the compensator is not part of it.
@@ -317,30 +318,16 @@ def linear_loop(spec: LoopSpec, eps: float = 1e-7) -> LinearLoop:
     ku = getattr(spec.plant_params, "input_gain", 1.0)
     gp = loop.gp.linear()  # no compensator in the linear loop
     ideal = loop.sensor._replace(step=0.0)  # the true signals (no converter, no noise)
-
-    def tick(Xl: np.ndarray, w: float) -> np.ndarray:
-        X = np.zeros(NL)
-        X[_LIN_IDX] = Xl
-        # one tick with the input w added to the controller's u: run the
-        # controller, then the plant with u + w / k_u, through the same kernels
-        u, _ = step_loop(X[:NX_PLANT], state_record(X[I_S:I_MEM]), 0.0, 0.0, loop.pcode,
-                         loop.substeps, loop.ratio, loop.pp, NONE, loop.fp, gp, loop.cp, ideal,
-                         w / ku)
-        return X[_LIN_IDX].copy(), u
-
-    n = len(_LIN_IDX)
-    Phi = np.zeros((n, n))
-    C = np.zeros((3, n))
-    for j in range(n):
-        d = np.zeros(n)
-        d[j] = eps
-        (xp, up), (xm, um) = tick(d, 0.0), tick(-d, 0.0)
-        Phi[:, j] = (xp - xm) / (2 * eps)
-        C[2, j] = (up - um) / (2 * eps)
-    (xp, _), (xm, _) = tick(np.zeros(n), eps), tick(np.zeros(n), -eps)
-    Gamma = ((xp - xm) / (2 * eps)).reshape(n, 1)
+    # the closed loop's own tick, differenced (its input disturbance du is w / k_u)
+    Phi, G, K, _ = tick_jacobian(
+        np.zeros(NX_PLANT), state_record(np.zeros(NS)), 0.0,
+        (0.0, loop.pcode, loop.substeps, loop.ratio, loop.pp, NONE, loop.fp, gp, loop.cp, ideal),
+        range(4), _LIN_STATE, eps=eps)
+    Gamma = G[:, :1] / ku
+    C = np.zeros((3, len(K)))
     C[0, 3] = 1.0
     C[1, 0] = 1.0
+    C[2] = K
     return LinearLoop(Phi, Gamma, C, np.zeros((3, 1)), loop.h)
 
 

@@ -17,6 +17,9 @@ A plant module provides
 ``linearization(params) -> (A, B)``
     The continuous linearisation at upright, states (theta, theta_dot, arm,
     arm_dot), input u.
+``SUBSTEPS``
+    The step's default substeps per sample by friction law (``sim.substeps``
+    unset).
 
 Every plant is measured the same way (the pendulum angle, the arm angle and
 the arm velocity: :mod:`frictionlab.model.sensor`).  :func:`plant_step` is the
@@ -30,37 +33,50 @@ the configuration (docs/architecture.md, "Add a plant").
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from .._jit import jit_inline
 from . import furuta_dc, thesis
 
-__all__ = ["FURUTA_DC", "PLANTS", "THESIS", "PlantKind", "plant_step"]
+__all__ = ["FURUTA_DC", "PLANTS", "THESIS", "PlantKind", "plant_of", "plant_step"]
 
 
 @dataclass(frozen=True)
 class PlantKind:
     """One plant: its name, the code :func:`plant_step` dispatches on, its
-    parameter class and the unit of its input u."""
+    parameter class, the unit of its input u, and its step's default substeps
+    per sample by friction law (its module's ``SUBSTEPS``)."""
 
     name: str
     code: int
     params: type
     u_unit: str
     description: str
+    substeps: Mapping[str, int]
 
 
 #: The thesis's plant, eq. (6): an ideal arm-tip acceleration input.
 THESIS = PlantKind("thesis", 0, thesis.PlantParams, "m/s^2",
-                   "the thesis's rig, eq. (6): u is the arm tip's acceleration")
+                   "the thesis's rig, eq. (6): u is the arm tip's acceleration",
+                   thesis.SUBSTEPS)
 
 #: The full Furuta pendulum driven by a DC motor (the QUBE-Servo 2 and 3):
 #: u is the motor voltage.
 FURUTA_DC = PlantKind("furuta-dc", 1, furuta_dc.FurutaDCParams, "V",
-                      "the Furuta pendulum driven by a DC motor: u is the motor voltage")
+                      "the Furuta pendulum driven by a DC motor: u is the motor voltage",
+                      furuta_dc.SUBSTEPS)
 
 #: Every plant by name.
 PLANTS = {THESIS.name: THESIS, FURUTA_DC.name: FURUTA_DC}
+
+
+def plant_of(params) -> PlantKind:
+    """The plant whose parameter class ``params`` is an instance of."""
+    for kind in PLANTS.values():
+        if isinstance(params, kind.params):
+            return kind
+    raise TypeError(f"no plant takes {type(params).__name__} parameters")
 
 
 #: Each plant's step inlined into the closed loop (a call every tick cost about

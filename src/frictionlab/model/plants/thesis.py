@@ -95,6 +95,7 @@ __all__ = [
     "ARM",
     "ARM_DOT",
     "NX",
+    "SUBSTEPS",
     "THETA",
     "THETA_DOT",
     "PlantParams",
@@ -113,6 +114,12 @@ __all__ = [
 
 THETA, THETA_DOT, ARM, ARM_DOT, Z = 0, 1, 2, 3, 4
 NX = 5
+
+#: Default arm substeps per sample of :func:`tick` by friction law (``KINDS``
+#: names; the integration scheme above): 10 for the static laws, 6 for LuGre,
+#: whose bristle's velocity predictor makes it second order.
+SUBSTEPS: dict[str, int] = {"none": 10, "viscous": 10, "coulomb": 10, "classical": 10,
+                            "stribeck": 10, "lugre": 6}
 
 
 @dataclass(frozen=True)
