@@ -113,7 +113,7 @@ from gymnasium.vector.utils import batch_space
 
 from .config import PLANT_FRICTION_KINDS, Config, build_config
 from .model._jit import jit
-from .model.friction import KINDS, NP, friction_row, friction_view
+from .model.friction import KINDS, NP, friction_row, friction_view, plant_record
 from .model.plants import plant_step
 from .model.sensor import reading, wrap_angle
 from .model.simulation import plant_tick_rows
@@ -220,7 +220,7 @@ class _Plants:
         """Plant i at rest at ``theta0`` with the parameters of ``cfg``."""
         self.configs[i] = cfg
         self.pps[i] = cfg.plant_row()
-        self.fps[i] = friction_row(cfg.friction.record())
+        self.fps[i] = friction_row(plant_record(cfg.friction_kind, cfg.friction))
         self.fkinds[i] = KINDS.index(cfg.friction_kind)
         self.substeps[i] = cfg.substeps
         self.ratios[i] = cfg.pendulum_ratio

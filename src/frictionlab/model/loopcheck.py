@@ -74,6 +74,7 @@ loop's own safety stops (angle limit, non-finite u) stay the last line.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -82,6 +83,7 @@ from scipy.linalg import solve_discrete_lyapunov
 
 from .closedloop import tick_jacobian
 from .controller import (
+    ADAPTIVE,
     COMPENSATOR_CODES,
     Controller,
     Gains,
@@ -93,7 +95,7 @@ from .friction import (
     COULOMB,
     LUGRE,
     NONE,
-    copy_friction,
+    plant_record,
     steady_bristle,
     steady_state,
 )
@@ -269,7 +271,7 @@ def loop_matrices(controller: Controller, plant=None, arm_speed: float = 0.0, *,
         states.append(state_index("z_hat"))
     # sliding: the plant's friction is the compensator's own law (its premise), its
     # bristle or relay settled at the speed; at rest: no friction
-    fkind, fp = _plant_friction(controller, cp) if compensate and v != 0.0 else (NONE, cp)
+    fkind, fp = _plant_friction(controller) if compensate and v != 0.0 else (NONE, cp)
     x = np.array([0.0, 0.0, 0.0, v, 0.0])
     mem = 0.0
     if fkind == LUGRE:
@@ -291,17 +293,16 @@ def loop_matrices(controller: Controller, plant=None, arm_speed: float = 0.0, *,
     return M, G[:, 1:], K, D[1:]
 
 
-def _plant_friction(controller: Controller, cp: np.record) -> tuple[int, np.record]:
+def _plant_friction(controller: Controller) -> tuple[int, np.record]:
     """The plant friction of the sliding check: the compensator's law (the classical
     compensator's implementation form, the adaptive one's LuGre observer at its
-    starting levels) with its parameters, as a plant's: no observer gain k (eq. 19's
-    error is the compensator's), no relay hysteresis (a plant's relay follows the
-    velocity, docs/model.md)."""
+    starting levels) with its parameters, as a plant's
+    (:func:`~frictionlab.model.friction.plant_record`), without the observer gain k
+    (eq. 19's error is the compensator's)."""
     code = COMPENSATOR_CODES[controller.compensation]
-    fp = copy_friction(cp)
-    fp.k = 0.0
-    fp.eps = 0.0 if code == COULOMB else fp.eps
-    return (LUGRE if controller.compensation == "adaptive" else code), fp
+    code = LUGRE if code == ADAPTIVE else code
+    params = dataclasses.replace(controller.compensation_params, observer_gain=0.0)
+    return code, plant_record(FRICTION_KINDS[code], params)
 
 
 def _radius(M: np.ndarray) -> float:

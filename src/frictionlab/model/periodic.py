@@ -84,7 +84,7 @@ from .controller import (
     state_vector,
     state_view,
 )
-from .friction import KINDS, LUGRE, NONE, VISCOUS, without_drift
+from .friction import KINDS, LUGRE, NONE, VISCOUS, plant_record, without_drift
 from .limit_cycles import LimitCycleFeatures, crossings, features
 from .sensor import arm_zero
 from .simulation import STATUS, LoopSpec, Trajectory
@@ -193,7 +193,7 @@ class _Loop:
         self.pp = spec.plant_params.record()
         self.fkind = KINDS.index(spec.friction_kind)
         # periodic orbits of the plant at its starting levels
-        self.fp = without_drift(spec.friction.record())
+        self.fp = without_drift(plant_record(spec.friction_kind, spec.friction))
         self.sensor = spec.sensor._replace(noise=0.0)
         self.x0 = arm_zero(self.sensor)
         self.substeps, self.ratio = spec.substeps, spec.ratio

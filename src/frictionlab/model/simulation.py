@@ -33,6 +33,7 @@ from .friction import (
     friction_row,
     friction_view,
     is_drifting,
+    plant_record,
     resolve_drift,
 )
 from .plants import PlantKind, plant_step
@@ -255,7 +256,8 @@ class SimulatedPlant:
         # friction.drift: over friction.drift_time, else to the end of the run
         # (``duration``, default the spec's)
         # float rows: plant_tick_rows and drifted_rows view them as the record
-        fp = resolve_drift(spec.friction.record(), spec.duration if duration is None else duration)
+        fp = resolve_drift(plant_record(spec.friction_kind, spec.friction),
+                           spec.duration if duration is None else duration)
         self._drifting = bool(is_drifting(fp))
         self._fp = friction_row(fp)
         self._fpt = self._fp.copy()
@@ -360,7 +362,7 @@ def simulate(
     assert s.dtype == STATE_DTYPE
     out = np.zeros((n, NC)) if record else np.zeros((1, NC))
     fkind = KINDS.index(spec.friction_kind)
-    fp = resolve_drift(spec.friction.record(), n * h)
+    fp = resolve_drift(plant_record(spec.friction_kind, spec.friction), n * h)
     pp = spec.plant_params.record()
     # the swing-up supervisor's arguments, unused here (run_loop's swing is off)
     sup_row, wx, phase = no_swing()

@@ -39,7 +39,7 @@ from ..config import Config
 from ..model._jit import jit, jit_nogil
 from ..model.closedloop import NC, run_loop
 from ..model.controller import NS, gains_record, gains_row, state_vector, state_view
-from ..model.friction import KINDS, friction_row, friction_view, resolve_drift
+from ..model.friction import KINDS, friction_row, friction_view, plant_record, resolve_drift
 from ..model.limit_cycles import (
     FEATURES,
     KERNEL_VALUES,
@@ -214,7 +214,8 @@ def _pack(cfgs: Sequence[Config], durations: Sequence[int], window: float | None
         s0.append(shared[2])
         pp.append(shared[3])
         sens.append(shared[4])
-        fp.append(friction_row(resolve_drift(cfg.friction.record(), ticks * cfg.design.h)))
+        fp.append(friction_row(resolve_drift(plant_record(cfg.friction_kind, cfg.friction),
+                                             ticks * cfg.design.h)))
         x0[k] = cfg.sim.initial_angle
         nt[k] = ticks
         pc[k] = cfg.plant_model.code

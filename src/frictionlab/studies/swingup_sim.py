@@ -23,7 +23,7 @@ import numpy as np
 from ..config import Config
 from ..model.closedloop import FELL, NC, SWING_STOPPED, run_loop
 from ..model.controller import Controller
-from ..model.friction import KINDS, resolve_drift
+from ..model.friction import KINDS, plant_record, resolve_drift
 from ..model.limit_cycles import LimitCycleFeatures, trajectory_features
 from ..model.plants import THESIS
 from ..model.simulation import Trajectory
@@ -100,9 +100,9 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
+    fp = resolve_drift(plant_record(cfg.friction_kind, cfg.friction), n * h)
     done, status, _, _ = run_loop(x, 0.0, n, THESIS.code, cfg.substeps, cfg.pendulum_ratio,
-                                  cfg.plant_row(), KINDS.index(cfg.friction_kind),
-                                  resolve_drift(cfg.friction.record(), n * h), gp, cp, s,
+                                  cfg.plant_row(), KINDS.index(cfg.friction_kind), fp, gp, cp, s,
                                   make_sensor(cfg), 0, 0.0, cfg.sim.fall_angle, out, True, True,
                                   swingup_row(sp), wx, phase)
     phase = phase[:done]

@@ -160,6 +160,7 @@ from .params import (
     friction_record,
     friction_row,
     friction_view,
+    plant_record,
 )
 
 __all__ = [
@@ -201,6 +202,7 @@ __all__ = [
     "lugre_force",
     "lugre_step_exact",
     "make_model",
+    "plant_record",
     "resolve_drift",
     "steady_bristle",
     "steady_state",

@@ -158,19 +158,21 @@ class FrictionParams(Validated):
                                        observer_gain=7.0)
         return base
 
-    def record(self, zero_velocity_band: float | None = None) -> np.record:
+    def record(self, zero_velocity_band: float | None = None,
+               hysteresis: float | None = None) -> np.record:
         """The friction record (:data:`FRICTION_DTYPE`) the compiled force laws
         read, backed by its own array (compiled code may write it).
 
-        ``zero_velocity_band``, when given, replaces the field's value
-        without a validated copy (the compensators' 0,
-        :func:`frictionlab.model.controller.compensator_params`).
+        ``zero_velocity_band`` and ``hysteresis``, when given, replace the
+        field's value without a validated copy (the compensators' band 0,
+        :func:`frictionlab.model.controller.compensator_params`; a Coulomb
+        plant's hysteresis 0, :func:`plant_record`).
         """
         row = (  # in FRICTION_FIELDS order
             self.stiction, self.coulomb, self.viscous, self.stribeck_velocity, self.sigma0,
             self.sigma1, self.observer_gain,
             self.zero_velocity_band if zero_velocity_band is None else zero_velocity_band,
-            self.hysteresis,
+            self.hysteresis if hysteresis is None else hysteresis,
             self.stiction if self.stiction_negative is None else self.stiction_negative,
             self.coulomb if self.coulomb_negative is None else self.coulomb_negative,
             self.viscous if self.viscous_negative is None else self.viscous_negative,
@@ -181,6 +183,22 @@ class FrictionParams(Validated):
             self.adaptation_max_innovation, self.adaptation_min, self.adaptation_max,
             self.adaptation_distance)
         return friction_record(np.array(row, dtype=np.float64))
+
+
+def plant_record(kind: str, params: FrictionParams) -> np.record:
+    """The friction record a plant's step runs with (law ``kind``, a :data:`KINDS` name).
+
+    That of ``params``, except that a Coulomb plant's relay has no hysteresis:
+    the hysteresis is the compensator's device against noise (Sec. 6.1); as a
+    plant's friction it would keep pushing the arm along a reversed velocity
+    (friction doing positive work), so the plant's relay takes the velocity's
+    sign whenever the arm moves and ``friction.hysteresis`` does not change a
+    Coulomb plant (docs/model.md, "Coulomb friction as a plant").  The other
+    laws read the record as it is (the Stribeck-classical law's hysteresis is
+    its band).
+    """
+    # (not a replaced, re-validated copy: a sweep packs every set)
+    return params.record(hysteresis=0.0 if kind == "coulomb" else None)
 
 
 def friction_row(p) -> np.ndarray:

@@ -88,7 +88,7 @@ import numpy as np
 
 from .._jit import jit
 from ..actuator import actuator_accel
-from ..friction import COULOMB, LUGRE, NONE, friction_step
+from ..friction import LUGRE, NONE, friction_step
 from ..params import Validated, param
 
 __all__ = [
@@ -344,8 +344,8 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     pp : ndarray
         Plant parameters as the float row :meth:`PlantParams.record`.
     fkind, fp
-        Friction model code, friction record
-        (:meth:`frictionlab.model.friction.FrictionParams.record`), by reference.
+        Friction model code, the plant's friction record
+        (:func:`frictionlab.model.friction.plant_record`), by reference.
 
     Returns
     -------
@@ -395,12 +395,8 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
             elif fkind == NONE:
                 f = 0.0
             else:
-                if fkind == COULOMB and ad != 0.0:
-                    # a plant's relay follows the velocity's sign at once: kept
-                    # inside the hysteresis (the compensator's device, Sec. 6.1), the
-                    # old sign would push the arm along a reversed velocity
-                    # (docs/model.md, "Coulomb friction as a plant")
-                    mem = 1.0 if ad > 0.0 else -1.0
+                # (a Coulomb plant's record has no hysteresis: its relay follows
+                # the velocity's sign, :func:`frictionlab.model.friction.plant_record`)
                 f, mem = friction_step(fkind, fp, mem, ad, fe, dt, 0.0)
             f_sum += f
             a = fe - f
