@@ -86,6 +86,59 @@ def test_loop_matrix_equals_the_hand_derived_one(spec):
         assert np.min(np.abs(ev - z)) < 1e-6
 
 
+def test_the_dc_plant_is_checked_through_its_own_step():
+    """The loop check of a QUBE-Servo 2 controller: the plant's rows are the ZOH of
+    the DC plant's linearisation (its RK4 step), u = -L x_hat, the loop's eigenvalues
+    the design's poles and observer poles (separation), and its verdict passes."""
+    cfg = build_config("fast", "classical", plant="qube2")
+    ctrl = make_controller(cfg)
+    d = ctrl.design
+    M, N, K, D = loop_matrices(ctrl, cfg.plant)
+    np.testing.assert_allclose(K[:4], 0.0, atol=1e-9)  # u from the estimates only
+    np.testing.assert_allclose(K[4:], -d.L, rtol=1e-6)
+    np.testing.assert_allclose(D, 0.0, atol=1e-9)
+    # measurement errors enter the observer alone, through its gain (theta, arm, arm velocity)
+    np.testing.assert_allclose(N[:4], 0.0, atol=1e-9)
+    np.testing.assert_allclose(N[4:], d.K, atol=1e-7)
+    np.testing.assert_allclose(M[:4, :4], d.Phi, atol=1e-6)
+    np.testing.assert_allclose(M[:4, 4:], np.outer(d.Gamma[:, 0], K[4:]), atol=1e-5)
+    ev = np.linalg.eigvals(M)
+    for z in (*d.poles, *d.observer_poles):
+        assert np.min(np.abs(ev - z)) < 1e-4, (z, ev)
+    chk = check_loop(ctrl, cfg.plant)
+    assert chk.ok, chk.reasons
+    assert chk.spectral_radius == pytest.approx(max(np.abs([*d.poles, *d.observer_poles])),
+                                                abs=1e-4)
+
+
+def test_an_unstable_dc_design_is_refused_and_falls():
+    cfg = build_config("fast", "classical", plant="qube2")
+    d = make_controller(cfg).design
+    ctrl = Controller(dataclasses.replace(d, L=-d.L), u_max=cfg.u_limit)
+    chk = check_loop(ctrl, cfg.plant)
+    assert chk.verdict == "unstable" and chk.spectral_radius > 1
+    assert simulate_config(cfg, 3.0, controller=ctrl).status == "fell"
+
+
+def test_the_sliding_check_has_the_centripetal_term():
+    """Sliding at v, the tick's pendulum sees eq. (6)'s Omega_dot^2 sin(theta)cos(theta):
+    the upright pendulum's omega0^2 becomes omega0^2 + Omega_dot^2, so theta_dot's answer
+    to theta over a sample grows by h times the mean of Omega_dot^2 over it.  At the
+    operating point the arm speeds up from v by -l4 v / L1 per second (the feedback on
+    the estimated speed; the compensator cancels the plant's relay), so that mean is
+    v^2 (1 + c + c^2/3), c = -l4 h / L1."""
+    d = design(FAST)
+    ctrl = Controller(d, "coulomb", FrictionParams.defaults("coulomb", "compensation"))
+    rest = loop_matrices(ctrl, arm_speed=0.0, compensate=True)[0]
+    assert rest.shape == (8, 8)
+    c = -d.L[3] * FAST.h / PlantParams().arm_length
+    for v in (0.5, 1.0, 3.0):
+        sliding = loop_matrices(ctrl, arm_speed=v)[0]
+        gain = (sliding[1, 0] - rest[1, 0]) / (FAST.h * v * v)
+        assert gain == pytest.approx(1 + c + c * c / 3, rel=0.01), v
+    assert np.allclose(loop_matrices(ctrl, arm_speed=0.0)[0], rest)  # no v^2 at rest
+
+
 def test_presets_and_rig_settings_pass():
     for spec in (FAST, SLOW):
         for comp in ("none", "coulomb", "classical", "lugre"):
