@@ -479,12 +479,19 @@ QUBE2_WORKBOOK = dataclasses.replace(QUBE2, arm_damping=0.0015, pendulum_damping
 #: same rotary-pendulum module; damping as QUBE2, an estimate).
 QUBE3 = dataclasses.replace(QUBE2, resistance=7.5, torque_constant=0.0422,
                             emf_constant=0.0422)
-#: A home-built rig (Arduino, 12 V 30:1 gear motor with encoder, H-bridge, a
-#: pendulum on a bearing): an ESTIMATE (docs/model.md), not a measured rig.
+#: A home-built rig (docs/build-a-rig.md: an Arduino, a 12 V 30:1 gear motor on an
+#: H-bridge, 600-line encoders on both axes): an ESTIMATE, not a measured rig.  The
+#: motor is Pololu's 37D 30:1 12 V gear motor (items 4742/4752; "37D Metal Gearmotors"
+#: datasheet, Rev 1.2: 330 rpm and 0.2 A without load, 140 kg mm and 5.5 A stalled, at
+#: 12 V): R_m = 12 V / 5.5 A, k_m = (12 V - 0.2 A R_m) / 34.6 rad/s, k_t = 1.37 N m /
+#: (5.5 - 0.2) A at the output shaft (the gearbox's losses in it); the rotor's inertia
+#: through the gearbox is not in the datasheet (4e-4 kg m^2: a 10 ms mechanical time
+#: constant); links of a 0.15 m arm and a 0.25 m, 30 g rod (docs/model.md, "Presets").
 HOMEBUILT = FurutaDCParams(
-    resistance=2.4, torque_constant=0.2, emf_constant=0.3, arm_mass=0.06, arm_length=0.15,
-    rotor_inertia=4e-4, pendulum_mass=0.03, pendulum_length=0.25, arm_damping=0.002,
-    pendulum_damping=0.00005, voltage_limit=12.0, arm_counts=1920, pendulum_counts=2400)
+    resistance=2.2, torque_constant=0.26, emf_constant=0.335, arm_mass=0.06,
+    arm_length=0.15, rotor_inertia=4e-4, pendulum_mass=0.03, pendulum_length=0.25,
+    arm_damping=0.002, pendulum_damping=0.00005, voltage_limit=12.0, arm_counts=2400,
+    pendulum_counts=2400)
 
 #: The presets by name.
 PRESETS: dict[str, FurutaDCParams] = {
@@ -504,7 +511,8 @@ PRESET_FRICTION: dict[str, dict[str, float]] = {
     "qube2": dict(_QUBE_FRICTION),
     "qube2-workbook": dict(_QUBE_FRICTION),
     "qube3": dict(_QUBE_FRICTION),
-    "homebuilt": {"friction.stiction": 0.7, "friction.coulomb": 0.5, "friction.viscous": 0.0,
+    # the gear motor's no-load current times R_m (0.2 A x 2.2 ohm), stiction 1.3 times it
+    "homebuilt": {"friction.stiction": 0.57, "friction.coulomb": 0.44, "friction.viscous": 0.0,
                   "friction.zero_velocity_band": 0.02},
 }
 
