@@ -77,3 +77,32 @@ def test_the_home_built_design_balances_through_the_firmware_sensors():
         "omega1", "zeta1", "omega2", "zeta2", "observer_omega1", "observer_zeta1",
         "observer_omega2", "observer_zeta2")}
     assert homebuilt_loop.closed_loop(pattern, duration=4.0).get("fell_at", 99) < 2.0
+
+
+def test_the_documented_rig_toml_is_the_emulated_rigs_configuration(tmp_path):
+    """docs/build-a-rig.md's ``rig.toml`` (its indented block from ``[plant]``)
+    gives ``run --plant furuta-dc`` what firmware/test-hil gives it: the
+    emulated rig's plant, friction and design, and the controller's rig.*
+    scales for the firmware with u_DA = u / 12 V."""
+    from frictionlab.config import build_config
+
+    sys.path.insert(0, str(Path(rig.__file__).parent))
+    import test_hil  # firmware/hil/test_hil.py
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "build-a-rig.md").read_text()
+    lines = doc[doc.index("\n    [plant]\n") + 1:].splitlines()
+    block = []
+    for line in lines:
+        if line and not line.startswith("    "):
+            break
+        block.append(line[4:])
+    path = tmp_path / "rig.toml"
+    path.write_text("\n".join(block))
+    documented = build_config(plant="furuta-dc", config_file=path)
+    _, ctrl_args = test_hil.plant_sets("furuta-dc", None)
+    sets = [*test_hil.RIG_SETS, *(a for a in ctrl_args[3::2])]
+    assert ctrl_args[:2] == ["--plant", "furuta-dc"]
+    emulated = build_config(plant="furuta-dc", sets=sets)
+    for section in ("plant", "friction", "design", "rig"):
+        assert getattr(documented, section) == getattr(emulated, section), section
+    assert documented.rig.u_scale == pytest.approx(1 / 12)
