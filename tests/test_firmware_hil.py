@@ -1,6 +1,6 @@
 """The rig firmware's AVR build in the simavr emulator (firmware/hil): against
-the real controller (``firmware/test-hil``), the encoders at high speed, and
-the AVR's hardware watchdog.  Needs avr-gcc, avr-libc and libsimavr-dev
+the real controller (``firmware/test-hil``: the home-built rig), the encoders
+at high speed, and the AVR's hardware watchdog.  Needs avr-gcc, avr-libc and libsimavr-dev
 (scripts/install-system-deps).  The portable core's unit tests:
 tests/test_firmware.py."""
 
@@ -46,11 +46,13 @@ test_hil.__test__ = False  # a helper, not a test
 
 
 def test_the_controller_balances_the_emulated_rig_and_a_stall_zeroes_the_motor(tmp_path):
-    """The two acceptance runs in one (CI time): the controller balances the
-    emulated rig for 5 s (at most 1 % missed deadlines, |theta| < 0.2 rad over
-    the 3 s before the stall), then is stopped with SIGSTOP: the duty is zero
-    within the advertised watchdog time plus 2 periods.  (A run that ends by its
-    duration: firmware/test-hil --duration 10, docs/performance.md.)"""
+    """The two acceptance runs in one (CI time): ``run --plant furuta-dc``
+    balances the emulated home-built rig (the DC-motor plant with the HOMEBUILT
+    preset, driven by the duty times 12 V) for 5 s (at most 1 % missed
+    deadlines, |theta| < 0.2 rad over the 3 s before the stall), then is
+    stopped with SIGSTOP: the duty is zero within the advertised watchdog time
+    plus 2 periods.  (A run that ends by its duration: firmware/test-hil
+    --duration 10, docs/performance.md.)"""
     for attempt in range(3):
         out = test_hil("--duration", "10", "--stall-at", "5", "--keep",
                        str(tmp_path / str(attempt)))
