@@ -20,7 +20,11 @@ locked; it runs at wall-clock speed.
 The encoders are those of docs/build-a-rig.md: ``COUNTS`` per turn, the
 pendulum counting from hanging down (its position at power-up), the arm from
 its position at power-up.  The plant law is frictionlab's own.  Plants
-(``--plant``): ``thesis`` (the thesis's rig,
+(``--plant``): ``furuta-dc`` (the default: the home-built rig of
+docs/build-a-rig.md, frictionlab's DC-motor plant with the
+:data:`frictionlab.model.plants.furuta_dc.HOMEBUILT` preset and its friction,
+:func:`homebuilt_keys`, driven by the H-bridge's voltage V = duty x
+plant.voltage_limit, the 12 V supply), ``thesis`` (the thesis's rig,
 :class:`frictionlab.model.simulation.SimulatedPlant` of
 :func:`frictionlab.runs.simulated_plant`: u = duty / rig.u_scale
 in m/s^2) and ``spin`` (no dynamics: the hand turns the arm and the pendulum
@@ -168,7 +172,8 @@ def main(argv=None) -> int:
     p.add_argument("--design", default="fast", help="--plant thesis: its design preset")
     p.add_argument("--friction", default="classical")
     p.add_argument("--set", action="append", type=_set, default=[], metavar="KEY=VALUE",
-                   help="configuration keys of the plant (rig.u_scale, plant.*, friction.*)")
+                   help="configuration keys of the plant, after its own (plant.*, "
+                        "friction.*; thesis: rig.u_scale)")
     p.add_argument("--theta0", type=float, default=0.05, help="start angle (rad)")
     p.add_argument("--spin-speed", type=float, default=100.0, help="rad/s (--plant spin)")
     p.add_argument("--spin-time", type=float, default=0.5, help="s (--plant spin)")
