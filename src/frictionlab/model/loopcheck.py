@@ -79,6 +79,8 @@ from .controller import (
     state_vector,
 )
 from .friction import steady_bristle, stribeck_curve
+from .plants.furuta_dc import FurutaDCParams
+from .plants.furuta_dc import linearization as dc_linearization
 from .plants.thesis import PlantParams, linearize, rhs, zoh
 
 __all__ = [
@@ -282,8 +284,10 @@ def loop_matrices(controller: Controller, plant: PlantParams | None = None,
 @functools.lru_cache(maxsize=64)
 def _sampled_plant(plant: PlantParams, h: float, slope: float):
     """ZOH of the plant linearised upright, with a friction slope dF/dv on the arm (cached:
-    a search over controller settings samples the same plant again and again)."""
-    A, B = linearize(plant)
+    a search over controller settings samples the same plant again and again).  A
+    motor plant (:class:`~frictionlab.model.plants.furuta_dc.FurutaDCParams`): its
+    linearisation in volts."""
+    A, B = dc_linearization(plant) if isinstance(plant, FurutaDCParams) else linearize(plant)
     if slope:
         A = A + np.outer(_friction_input(plant), [0.0, 0.0, 0.0, slope])
     Phi, Gam = zoh(A, B, h)
@@ -294,7 +298,10 @@ def _sampled_plant(plant: PlantParams, h: float, slope: float):
 
 
 def _friction_input(plant: PlantParams) -> np.ndarray:
-    """d(rhs)/dF at rest: how the arm friction (units of u) enters eq. (6)."""
+    """d(rhs)/dF at rest: how the arm friction (units of u) enters eq. (6); on a motor
+    plant as the opposite of the voltage (u - F)."""
+    if isinstance(plant, FurutaDCParams):
+        return -dc_linearization(plant)[1][:, 0]
     x0 = np.zeros(4)
     return (rhs(0.0, x0, (0.0, 1.0), plant) - rhs(0.0, x0, (0.0, -1.0), plant)) / 2.0
 
@@ -419,7 +426,8 @@ def check_loop(controller: Controller, plant: PlantParams | None = None, *,
                        f"with the arm sliding at {comp_speed:g} rad/s (spectral radius "
                        f"{comp_rho:.4g} > 1)")
     if math.isfinite(peak) and peak > u_max:
-        reasons.append(f"u would saturate: predicted peak |u| {peak:.3g} m/s^2 > the DAC "
+        unit = "V" if isinstance(plant, FurutaDCParams) else "m/s^2"
+        reasons.append(f"u would saturate: predicted peak |u| {peak:.3g} {unit} > the DAC "
                        f"limit {u_max:.3g} (recovering from {disturbance:g} rad: "
                        f"{peak_d:.3g}; noise {noise:g}: {NOISE_SIGMAS:g} x {sigma_u:.3g}; "
                        f"compensator: {level:.3g})")
