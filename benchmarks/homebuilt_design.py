@@ -11,6 +11,11 @@ readings, frictionlab's controller step, in simulated time) from theta =
 run and the largest |u|, or when the pendulum fell, with the encoders and
 with ideal sensors, then the default design on rigs that differ from the
 model (``robustness``).  The last line is a JSON object.
+
+``--plot PNG [--hil-log CSV]`` draws the default design's cycle and the
+thesis pattern's fall instead (docs/figures/homebuilt_limit_cycle.png), with
+the log of an emulated run (``firmware/test-hil --keep DIR``: DIR/runs/*.csv)
+over them when given.
 """
 
 from __future__ import annotations
@@ -88,11 +93,61 @@ def robustness() -> list[tuple[str, dict]]:
     ]
 
 
+def plot(path: str, hil_log: str | None = None, seconds: float = 8.0) -> None:
+    """theta and u of the default design through the encoders and of the
+    thesis's fast pattern (simulated), and of an emulated run's log."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5))
+    if hil_log:
+        from frictionlab.io.logs import read_log
+
+        log = read_log(hil_log)
+        keep = log["t"] <= seconds
+        for ax, col in zip(axes, ("theta_m", "u"), strict=True):
+            ax.plot(log["t"][keep], log[col][keep], color="0.6", lw=2.5,
+                    label="the firmware in simavr, run --plant furuta-dc (test-hil)")
+    for label, design, style in (
+            ("default design, simulated through the encoders", None, "C0"),
+            ("the thesis's fast pattern, simulated (falls)", spec_keys("fast"), "C3")):
+        trace: list = []
+        res = closed_loop(design, seconds, trace=trace)
+        if trace:
+            t, theta, u = trace[0]
+        else:  # fell: run it again up to the fall for its trace
+            trace_fall: list = []
+            closed_loop(design, res["fell_at"] - 0.005, trace=trace_fall)
+            t, theta, u = trace_fall[0]
+        axes[0].plot(t, theta, style, lw=1, label=label)
+        axes[1].plot(t, u, style, lw=1, label=label)
+    axes[0].set_ylabel("theta (rad)")
+    axes[0].set_ylim(-0.3, 0.3)
+    axes[1].set_ylabel("u (V)")
+    axes[1].set_ylim(-2.0, 2.0)
+    axes[1].set_xlabel("t (s)")
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[0].set_title("Home-built rig (12 V gear motor, F_S 0.57 V, F_C 0.44 V), "
+                      "600-line encoders")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    print(f"wrote {path}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--json", action="store_true", help="only the JSON line")
+    ap.add_argument("--plot", metavar="PNG", help="draw the cycles instead")
+    ap.add_argument("--hil-log", metavar="CSV", help="with --plot: an emulated run's log")
     args = ap.parse_args()
+    if args.plot:
+        plot(args.plot, args.hil_log)
+        return
     out: dict = {"designs": {}, "robustness": {}}
     for label, sets in variants():
         res = {"encoders": closed_loop(sets, args.duration),
