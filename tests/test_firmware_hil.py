@@ -58,9 +58,12 @@ def test_the_controller_balances_the_emulated_rig_and_a_stall_zeroes_the_motor(t
                        str(tmp_path / str(attempt)))
         log = read_log(out["run"]["log"])
         t, theta = log["t"], log["theta_m"]
-        # the ticks before the stall (its 1 s is the longest gap of the loop's time axis)
-        end = int(np.argmax(np.diff(t))) + 1
-        reached = np.diff(t).max() > 0.5 and t[end - 1] > 4.5  # the loop ran up to the stall
+        # the ticks before the stall: up to its 1 s gap in the loop's time axis when
+        # the loop woke up after it, or all of them when the stall caught the loop
+        # waiting for a reply (it stops in that tick: "reply taken 1000 ms late")
+        gaps = np.diff(t)
+        end = int(np.argmax(gaps)) + 1 if gaps.max() > 0.5 else len(t)
+        reached = t[end - 1] > 4.5  # the loop ran up to the stall
         t, theta = t[:end], theta[:end]
         missed = np.sum(np.round(np.diff(t) / (PERIOD_MS / 1e3)) - 1)
         silent = out["run"]["stop_reason"] == "rig_silent"
