@@ -20,7 +20,7 @@ import numpy as np
 
 from ..io.jsonsafe import json_safe
 from ..plotting import axis_label, plt, save_figure, series_style
-from .plant_study import COMPENSATORS, TABLE_COLUMNS, PlantResults, count_runs
+from .plant_study import TABLE_COLUMNS, PlantResults, count_runs
 
 __all__ = ["FIGURES", "counts", "degrees", "findings", "write_report"]
 
@@ -294,7 +294,8 @@ def _plot_tables(results: PlantResults, path: str) -> str:
         axes[row_i, 0].secondary_yaxis(
             "right", functions=(lambda x: x * per / (2 * np.pi), lambda c: c * 2 * np.pi / per)
         ).set_ylabel(axis_label("encoder", "counts"))
-        axes[row_i, 2].legend(fontsize=7, loc="upper left")
+        if tabs:
+            axes[row_i, 2].legend(fontsize=7, loc="upper left")
     fig.suptitle(f"{st.plant}: the limit cycle against the friction levels (Tables 2-9; "
                  "x on the axis: the pendulum fell)", fontsize=10)
     return save_figure(fig, path)
@@ -343,7 +344,8 @@ def _plot_predictions(results: PlantResults, path: str) -> str:
         for ax in axes[:, col]:
             ax.set_xlabel(axis_label(sym, "V"))
             ax.grid(alpha=0.3)
-        axes[0, col].legend(fontsize=7, loc="upper right")
+        if axes[0, col].get_legend_handles_labels()[0]:
+            axes[0, col].legend(fontsize=7, loc="upper right")
     k = {"color": "k", "lw": 1.0}
     axes[0, 0].legend(handles=[
         *axes[0, 0].get_legend_handles_labels()[0],
@@ -383,7 +385,7 @@ def _plot_compensators(results: PlantResults, path: str) -> str:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")
     for j, friction in enumerate(st.compensator_frictions):
-        for i, comp in enumerate(COMPENSATORS):
+        for i, comp in enumerate(st.compensators):
             rs = [r for r in results.compensators if r["design"] == "fast"
                   and r["friction"] == friction and r["compensation"] == comp]
             x = [r["coulomb"] for r in rs]

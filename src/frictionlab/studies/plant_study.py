@@ -137,7 +137,8 @@ class PlantStudy:
     compensator_frictions : tuple of str
         Plant friction models of the compensator runs.
     slow_base : tuple of (key, value)
-        The slow design's compensator runs' levels (where it balances).
+        The slow design's compensator runs' levels (where it balances); empty:
+        no slow-design compensator runs.
     figure_fc : float
         The F_C of the figures' runs (the preset's).
     duration : float
@@ -327,7 +328,7 @@ def _compensator_jobs(st: PlantStudy) -> list[tuple[PlantSetting, dict[str, Any]
                              {"design": "fast", "friction": friction, "coulomb": fc,
                               "stiction": fs, "compensation": comp}))
     base = dict(st.slow_base)
-    for comp in ("none", *st.compensators):
+    for comp in ("none", *st.compensators) if st.slow_base else ():
         sets = st.slow_base + ((("compensation.stiction", base["friction.stiction"]),
                                 ("compensation.coulomb", base["friction.coulomb"]))
                                if comp != "none" else ())
