@@ -108,7 +108,7 @@ def test_compensator_shrinks_the_cycle(report):
 def test_report_files(report):
     result, out, _ = report
     names = [Path(p).name for p in result["figures"]]
-    assert names == ["qube2_limit_cycle.png", "qube2_tables.png", "qube2_predictions.png",
+    assert names == ["qube2_cycle.png", "qube2_tables.png", "qube2_predictions.png",
                      "qube2_compensators.png"]
     for p in result["figures"]:
         assert Path(p).stat().st_size > 10_000

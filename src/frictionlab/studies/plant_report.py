@@ -3,7 +3,7 @@ and the figures (``frictionlab reproduce --plant NAME``).
 
 The runs are :mod:`frictionlab.studies.plant_study`'s; this module turns them
 into tables, checked findings and four figures, each named after the plant
-(``qube2_limit_cycle.png``, ``qube2_tables.png``, ``qube2_predictions.png``,
+(``qube2_cycle.png``, ``qube2_tables.png``, ``qube2_predictions.png``,
 ``qube2_compensators.png``).
 """
 
@@ -25,7 +25,7 @@ from .plant_study import TABLE_COLUMNS, PlantResults, count_runs
 __all__ = ["FIGURES", "counts", "degrees", "findings", "write_report"]
 
 #: The figures, by file-name suffix, in the order written.
-FIGURES = ("limit_cycle", "tables", "predictions", "compensators")
+FIGURES = ("cycle", "tables", "predictions", "compensators")
 
 
 def degrees(rad: float | None) -> float | None:
@@ -423,7 +423,7 @@ def write_report(results: PlantResults, out: str, seconds: float,
         The figure paths, in the order of :data:`FIGURES`.
     """
     plant = results.study.plant
-    plots = {"limit_cycle": _plot_limit_cycle, "tables": _plot_tables,
+    plots = {"cycle": _plot_limit_cycle, "tables": _plot_tables,
              "predictions": _plot_predictions, "compensators": _plot_compensators}
     if not results.study.predict:
         del plots["predictions"]
