@@ -339,10 +339,15 @@ def _compensator_jobs(st: PlantStudy) -> list[tuple[PlantSetting, dict[str, Any]
     return jobs
 
 
+def _table_configs(st: PlantStudy) -> set[tuple[PlantSetting, Config]]:
+    return {(t.setting, t.setting.config({key: v})) for t in st.tables
+            for key, values in t.varies for v in values}
+
+
 def count_runs(st: PlantStudy) -> int:
-    """Number of closed-loop runs :func:`run` makes for ``st``."""
-    rows = sum(len(v) for t in st.tables for _k, v in t.varies)
-    return rows + len(_compensator_jobs(st))
+    """Number of closed-loop runs :func:`run` makes for ``st`` (a configuration two
+    tables share runs once)."""
+    return len(_table_configs(st)) + len(_compensator_jobs(st))
 
 
 def run(st: PlantStudy, workers: int | None = None, dask: str | None = None,
@@ -383,15 +388,33 @@ def run(st: PlantStudy, workers: int | None = None, dask: str | None = None,
         done += len(points)
         return rows
 
+    # the tables' runs: one engine call per setting, each distinct configuration once
+    # (Table 2's preset F_C is Table 3's preset F_S)
+    by_setting: dict[PlantSetting, list[dict[str, float]]] = {}
+    seen: dict[tuple[PlantSetting, Config], int] = {}
+    for table in st.tables:
+        for key, values in table.varies:
+            for v in values:
+                ident = (table.setting, table.setting.config({key: v}))
+                if ident not in seen:
+                    points = by_setting.setdefault(table.setting, [])
+                    seen[ident] = len(points)
+                    points.append({key: v})
+    results = {setting: evaluate(setting, points, reduce)
+               for setting, points in by_setting.items()}
     tables: dict[str, list[dict[str, Any]]] = {}
     for table in st.tables:
-        points = [{key: v} for key, values in table.varies for v in values]
-        rows = evaluate(table.setting, points, reduce)
-        tables[table.number] = [
-            {"key": key, "value": p[key], **{k: v for k, v in row.items() if k not in p},
-             "command": table.setting.command(p)}
-            for p, row, key in zip(points, rows,
-                                   [k for k, vals in table.varies for _ in vals], strict=True)]
+        rows = []
+        for key, values in table.varies:
+            for v in values:
+                point = {key: v}
+                i = seen[(table.setting, table.setting.config(point))]
+                own = by_setting[table.setting][i]
+                row = results[table.setting][i]
+                rows.append({"key": key, "value": v,
+                             **{k: x for k, x in row.items() if k not in own},
+                             "command": table.setting.command(point)})
+        tables[table.number] = rows
     # the compensator runs: one engine call per base (the compensator kind is not a key);
     # each job's levels are its point
     jobs = _compensator_jobs(st)
