@@ -132,5 +132,6 @@ def register_cli(sub) -> None:
     add_engine_args(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--json", action="store_true",
-                   help='print one JSON object {"out", "seconds", "figures", "tables"}')
+                   help='print one JSON object {"out", "seconds", "figures", "tables"} (with '
+                        'a motor --plant also "plant" and "compensators")')
     p.set_defaults(func=cmd_reproduce)
