@@ -163,10 +163,13 @@ from .controller import (
 )
 from .friction import friction_view
 from .params import Validated, param
+from .plants.furuta_dc import DCRecord, FurutaDCParams, arm_voltage, dc_accelerations
+from .plants.furuta_dc_design import DCDesign, dc_predicted_peak
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 from .sensor import wrap_angle
 
 __all__ = [
+    "DC_PLANT",
     "PHASES",
     "STOP_CODES",
     "SWING_DTYPE",
@@ -175,6 +178,7 @@ __all__ = [
     "SwingUpParams",
     "SwingUpRecord",
     "copy_swing_state",
+    "dc_omega0",
     "energy",
     "new_swing_state",
     "predicted_peak",
@@ -268,6 +272,15 @@ class SwingUpRecord(NamedTuple):
         :math:`F_m` (m/s^2), :math:`k_b` (m/s^2 per rad/s) and the fade exponent b.
     adapt, apex_cos : float
         Gain of the target's correction and cos(catch_angle / 2).
+    plant : float
+        The plant the law drives: 0 the thesis's (u an arm-tip acceleration),
+        1 the DC-motor plant (u a voltage: :data:`DC_PLANT`).
+    arm_length : float
+        The DC plant's arm length L_r (m): the law's arm-tip acceleration over
+        it is the arm's angular acceleration (0 for the thesis plant).
+    dc_j_p, dc_j_0, dc_b, dc_c, dc_kv, dc_k_m, dc_d_r, dc_d_p : float
+        The DC plant's model (:class:`~frictionlab.model.plants.furuta_dc.DCRecord`)
+        that the observer and the voltage law use (zeros for the thesis plant).
     """
 
     gain: float
@@ -294,6 +307,16 @@ class SwingUpRecord(NamedTuple):
     apex_cos: float
     blend: float
     horizon_ticks: float
+    plant: float = 0.0
+    arm_length: float = 0.0
+    dc_j_p: float = 0.0
+    dc_j_0: float = 0.0
+    dc_b: float = 0.0
+    dc_c: float = 0.0
+    dc_kv: float = 0.0
+    dc_k_m: float = 0.0
+    dc_d_r: float = 0.0
+    dc_d_p: float = 0.0
 
 
 @jit
@@ -302,7 +325,20 @@ def swingup_record(row):
     return SwingUpRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7],
                          row[8], row[9], row[10], row[11], row[12], row[13], row[14], row[15],
                          row[16], row[17], row[18], row[19], row[20], row[21],
-                         row[22], row[23])
+                         row[22], row[23], row[24], row[25], row[26], row[27], row[28],
+                         row[29], row[30], row[31], row[32], row[33])
+
+
+#: :attr:`SwingUpRecord.plant` of the DC-motor plant (the thesis plant's is 0).
+DC_PLANT = 1.0
+
+
+@jit_inline
+def dc_model(sp):
+    """The DC plant's :class:`~frictionlab.model.plants.furuta_dc.DCRecord` that
+    the swing-up record ``sp`` carries."""
+    return DCRecord(sp.dc_j_p, sp.dc_j_0, sp.dc_b, sp.dc_c, sp.dc_kv, sp.dc_k_m, sp.dc_d_r,
+                    sp.dc_d_p)
 
 
 def swingup_row(rec: SwingUpRecord) -> np.ndarray:
@@ -364,9 +400,21 @@ class SwingUpParams(Validated):
                                 "into the upper half that falls short of or passes over the "
                                 "catch region (0 = a fixed target)", "1", lo=0.0, hi=2.0)
 
-    def record(self, omega0: float, g: float, h: float) -> SwingUpRecord:
-        """The :class:`SwingUpRecord` for :func:`swingup_step` (design omega_0, g and h)."""
+    def record(self, omega0: float, g: float, h: float,
+               dc: FurutaDCParams | None = None) -> SwingUpRecord:
+        """The :class:`SwingUpRecord` for :func:`swingup_step` (design omega_0, g and h).
+
+        With ``dc`` (the DC-motor plant's parameters as the design knows them)
+        the law drives that plant in volts (module docstring, "The DC-motor
+        plant"); ``omega0`` and ``g`` are then the pendulum's own
+        :func:`dc_omega0` and the plant's g.
+        """
         pole = math.exp(-self.observer_omega * h)
+        extra = {}
+        if dc is not None:
+            extra = dict(zip(("dc_j_p", "dc_j_0", "dc_b", "dc_c", "dc_kv", "dc_k_m", "dc_d_r",
+                              "dc_d_p"), (float(v) for v in dc.record()), strict=True))
+            extra.update(plant=DC_PLANT, arm_length=float(dc.arm_length))
         return SwingUpRecord(
             gain=float(self.gain),
             max_acceleration=float(self.max_acceleration),
@@ -392,7 +440,15 @@ class SwingUpParams(Validated):
             apex_cos=math.cos(0.5 * self.catch_angle),
             blend=float(self.blend),
             horizon_ticks=float(max(1, round(self.catch_horizon / h))),
+            **extra,
         )
+
+
+def dc_omega0(p: FurutaDCParams) -> float:
+    r"""The DC plant's pendulum frequency with the arm held,
+    :math:`\sqrt{c/J_p} = \sqrt{m_p g l_p/J_p}` (rad/s; 10.68 for the
+    QUBE-Servo 2): the omega_0 of the swing-up's normalised energy."""
+    return math.sqrt(p.pendulum_mass * p.g * 0.5 * p.pendulum_length / p.j_p)
 
 
 @jit
@@ -430,6 +486,31 @@ def predicted_peak(gp, theta, theta_dot, arm_dot, n):
             x4 += hs * u * il
             x3 += hs * x4
     return peak
+
+
+@jit_inline
+def catch_peak(gp, dc, theta, theta_dot, arm_dot, n):
+    """The hand-over test's predicted peak |u| (:func:`predicted_peak`; on the
+    DC plant its design's discretised linearisation,
+    :func:`~frictionlab.model.plants.furuta_dc_design.dc_predicted_peak`)."""
+    if dc:
+        return dc_predicted_peak(gp.l1, gp.l2, gp.l3, gp.l4, gp.obs, theta, theta_dot,
+                                 arm_dot, n)
+    return predicted_peak(gp, theta, theta_dot, arm_dot, n)
+
+
+@jit
+def dc_swing_voltage(sp, a_e, f_m, th, thd, arm_m, arm_dot_m, up):
+    """The DC plant's swing-up voltage: the arm-tip acceleration of the law
+    (the faded energy term ``a_e`` with the arm-centring and brake terms,
+    within ``swingup.max_acceleration``) made a voltage by the plant's inverse
+    arm dynamics (:func:`~frictionlab.model.plants.furuta_dc.arm_voltage`),
+    plus the faded friction margin ``f_m`` (V) in the energy term's direction."""
+    a = a_e - (sp.arm_stiffness * arm_m + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
+    a = min(max(a, -sp.max_acceleration), sp.max_acceleration)
+    v = arm_voltage(math.sin(th), math.cos(th), thd, arm_dot_m, a / sp.arm_length,
+                    dc_model(sp))
+    return v + f_m
 
 
 @jit
@@ -493,7 +574,11 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     thd = w.theta_dot_hat
     sn = math.sin(th)
     cs = math.cos(th)
-    acc = w0 * w0 * sn - sp.g_inv * w.u * cs + arm_dot_m * arm_dot_m * sn * cs
+    dc = sp.plant == DC_PLANT
+    if dc:  # the coupled links at the voltage applied (friction unknown: none)
+        acc = dc_accelerations(sn, cs, thd, arm_dot_m, w.u, dc_model(sp))[0]
+    else:
+        acc = w0 * w0 * sn - sp.g_inv * w.u * cs + arm_dot_m * arm_dot_m * sn * cs
     thp = th + h * (thd + 0.5 * h * acc)
     thdp = thd + h * acc
     err = wrap_angle(th_m - thp)
@@ -525,8 +610,8 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == CAUGHT and abs(th_m) > sp.release_angle:
         phase = SWINGING
         w.phase_ticks = 0.0
-    if phase == SWINGING and abs(th_m) < sp.catch_angle and predicted_peak(
-            gp, th_m, thd, arm_dot_m, sp.horizon_ticks) <= sp.catch_fraction * gp.u_max:
+    if phase == SWINGING and abs(th_m) < sp.catch_angle and catch_peak(
+            gp, dc, th_m, thd, arm_dot_m, sp.horizon_ticks) <= sp.catch_fraction * gp.u_max:
         phase = CAUGHT
         w.phase_ticks = 0.0
         w.catch_tick = w.tick - 1.0
@@ -547,11 +632,19 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == SWINGING:
         up = max(math.cos(th), 0.0)  # 0 in the lower half, 1 upright
         u = energy_law(th, thd, e, sp.gain, w.target, sp.max_acceleration)
+        fm = 0.0
         if u != 0.0:
             fm = sp.friction_margin if gp.compensator == 0 else max(sp.friction_margin, cp.fc)
-            u += fm if u > 0.0 else -fm
-        u = ((1.0 - up) ** sp.blend) * u - (sp.arm_stiffness * arm_m
-                                           + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
+            if u < 0.0:
+                fm = -fm
+        fade = (1.0 - up) ** sp.blend
+        if dc:
+            u = dc_swing_voltage(sp, fade * u, fade * fm, th, thd, arm_m, arm_dot_m, up)
+            u = min(max(u, -gp.u_max), gp.u_max)  # controller.u_max, the voltage limit
+            w.u = u
+            return u, u, 0.0
+        u = fade * (u + fm) - (sp.arm_stiffness * arm_m
+                               + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
         umax = min(sp.max_acceleration, gp.u_max)  # and the DAC range
         u = min(max(u, -umax), umax)
         w.u = u
@@ -593,6 +686,9 @@ class SwingUp:
         """(gains, compensator parameters, swing-up record) for the compiled step."""
         gp, cp = self.controller.record()
         d = self.controller.design
+        if isinstance(d, DCDesign):
+            p = d.params
+            return gp, cp, self.params.record(dc_omega0(p), p.g, d.spec.h, dc=p)
         return gp, cp, self.params.record(d.spec.omega0, d.g, d.spec.h)
 
     def init(self, theta0: float = math.pi) -> tuple[np.record, np.record]:
