@@ -137,7 +137,7 @@ def run_one(values: dict, duration: float, noise: float, design_omega0: float,
             "u_limit": cfg.u_limit}
 
 
-def plot(rows: list[dict], path: str) -> None:
+def plot(rows: list[dict], path: str, plant: str = "thesis") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -149,10 +149,12 @@ def plot(rows: list[dict], path: str) -> None:
     ok = np.array([r["success"] for r in rows])
     tc = np.array([np.nan if r["swing_up_time"] is None else r["swing_up_time"]
                    for r in rows])
+    unit = "m/s$^2$" if plant == "thesis" else "V"
+    rate = "omega0" if plant == "thesis" else "unstable rate"
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
     fig.subplots_adjust(bottom=0.22, top=0.88, right=0.82)
-    for ax, x, xl in ((axes[0], fc, "plant Coulomb level F_C (m/s$^2$)"),
-                      (axes[1], mis, f"plant omega0 mismatch vs the design's "
+    for ax, x, xl in ((axes[0], fc, f"plant Coulomb level F_C ({unit})"),
+                      (axes[1], mis, f"plant {rate} mismatch vs the design's "
                                      f"{rows[0]['design.omega0']:g} rad/s (%)")):
         sc = ax.scatter(x[ok], fs[ok] - fc[ok], c=tc[ok], cmap="viridis", marker="o", s=28,
                         label="caught and balancing (colour: swing_up_time)")
@@ -160,13 +162,14 @@ def plot(rows: list[dict], path: str) -> None:
             ax.scatter(x[~ok], fs[~ok] - fc[~ok], c="red", marker="x", s=50,
                        label="failed")
         ax.set_xlabel(xl)
-        ax.set_ylabel("F_S - F_C (m/s$^2$)")
+        ax.set_ylabel(f"F_S - F_C ({unit})")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=9)
     cb = fig.colorbar(sc, cax=fig.add_axes((0.85, 0.22, 0.02, 0.66)))
     cb.set_label("swing_up_time (s)")
-    fig.suptitle(f"Swing-up from hanging, fast design (omega0 {rows[0]['design.omega0']:g} "
-                 f"rad/s), |u| <= {rows[0]['u_limit']:.3g} m/s$^2$, classical friction, "
+    fig.suptitle(f"Swing-up from hanging, {plant}, fast design ({rate} "
+                 f"{rows[0]['design.omega0']:.3g} rad/s), |u| <= {rows[0]['u_limit']:.3g} "
+                 f"{unit}, classical friction, "
                  f"noise 0.002: {ok.sum()}/{len(ok)} caught and balancing")
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -248,7 +251,7 @@ def main() -> None:
     print(f"largest |u| while swinging {summary['max_u_swinging']:.2f} {unit}, "
           f"overall {summary['max_u']:.2f} {unit}; {seconds:.1f} s", file=sys.stderr)
     if args.plot:
-        plot(rows, args.plot)
+        plot(rows, args.plot, args.plant)
         summary["plot"] = args.plot
         print(f"figure: {args.plot}")
     print(json.dumps(summary))

@@ -99,6 +99,32 @@ back in the direction the law asks for, and the target correction makes up
 for what is left (and for the pendulum's damping).  docs/swingup.md maps the
 success rate over friction levels and plant mismatch on a 10 m/s^2 actuator.
 
+The DC-motor plant
+------------------
+On the DC-motor plant (:mod:`frictionlab.model.plants.furuta_dc`, u in volts)
+the same law runs on the arm tip's acceleration and the motor voltage
+realises it: the command above, before the friction margin, is the arm tip's
+acceleration a (m/s^2, within ``swingup.max_acceleration``), and the voltage
+is the plant's inverse arm dynamics at the current state
+(:func:`~frictionlab.model.plants.furuta_dc.arm_voltage` with
+:math:`\ddot\phi = a/L_r`: back-EMF, the coupling and the pendulum's
+reaction included), plus the faded margin :math:`F_m` in volts, saturated
+at the controller's limit (``controller.u_max`` within
+``plant.voltage_limit``).  The pendulum's equation of the full model,
+:math:`J_p\ddot\theta = c\sin\theta - b\cos\theta\,\ddot\phi + \dots`,
+is eq. (6)'s with :math:`\omega_0^2 = c/J_p` and :math:`a = L_r\ddot\phi`,
+so E is the pendulum's energy normalised by :math:`c` with that
+:math:`\omega_0` (:func:`dc_omega0`; 10.68 rad/s for the QUBE-Servo 2) and
+:math:`\dot E = -(a/g)\dot\theta\cos\theta` as above, up to the
+centrifugal term :math:`J_p\sin\theta\cos\theta\dot\phi^2`.  The
+swing-up observer predicts with the coupled model at the applied voltage
+(:func:`~frictionlab.model.plants.furuta_dc.dc_accelerations`), and the
+hand-over test with the design's discretised linearisation
+(:func:`~frictionlab.model.plants.furuta_dc_design.dc_predicted_peak`).
+Where the voltage cannot give the acceleration asked for (the QUBE's
+:math:`a_{max}/g` = 0.81 < 4/3) it saturates, and the pendulum gains its
+energy over several swings.
+
 Safety (the same checks in the simulator and the loop)
 ------------------------------------------------------
 Every tick checks ``|Omega| <= swingup.arm_limit`` (stop code
@@ -610,8 +636,11 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == CAUGHT and abs(th_m) > sp.release_angle:
         phase = SWINGING
         w.phase_ticks = 0.0
+    # the compensator may add up to its stiction level to the feedback's command
+    share = 0.0 if gp.compensator == 0 else max(cp.fs, cp.fc)
     if phase == SWINGING and abs(th_m) < sp.catch_angle and catch_peak(
-            gp, dc, th_m, thd, arm_dot_m, sp.horizon_ticks) <= sp.catch_fraction * gp.u_max:
+            gp, dc, th_m, thd, arm_dot_m, sp.horizon_ticks) + share <= (
+                sp.catch_fraction * gp.u_max):
         phase = CAUGHT
         w.phase_ticks = 0.0
         w.catch_tick = w.tick - 1.0
