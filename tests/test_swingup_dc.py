@@ -30,6 +30,7 @@ VARIED = ("arm_mass", "arm_length", "pendulum_mass", "pendulum_length", "resista
           "torque_constant", "emf_constant")
 
 
+@pytest.mark.slow
 def test_the_voltage_law_gives_the_arm_the_acceleration_asked_for():
     rng = np.random.default_rng(3)
     for p in (QUBE2, QUBE3, dataclasses.replace(QUBE2, arm_length=0.1, pendulum_mass=0.03)):
@@ -52,6 +53,7 @@ def _swingup(cfg):
     return sw, sw.init(math.pi)
 
 
+@pytest.mark.slow
 def test_the_friction_margin_is_added_in_volts_in_the_energy_laws_direction():
     # a small gain keeps the law off its limits; hanging, so the fade is 1
     base = [HANGING, ("swingup.gain", 0.5), ("swingup.arm_stiffness", 0.0),
@@ -77,6 +79,7 @@ def test_the_energy_is_the_pendulums_own_with_the_arm_held():
     assert energy(math.pi, 0.0, dc_omega0(QUBE2)) == pytest.approx(-2.0)
 
 
+@pytest.mark.slow
 def test_the_hand_over_predicts_the_balancing_command_on_the_designs_model():
     cfg = build_config(plant="qube2", sets=[HANGING])
     sw = SwingUp(make_controller(cfg), cfg.swingup)

@@ -80,7 +80,10 @@ region (``|theta| < swingup.catch_angle``) and its command, predicted on the
 linearised plant (eq. 7, no friction) under its state feedback from the
 current state (:func:`predicted_peak`), stays within
 ``swingup.catch_fraction`` of its saturation for ``swingup.catch_horizon``:
-a pendulum arriving fast, or with the arm moving, goes on swinging.  The
+a pendulum arriving fast, or with the arm moving, goes on swinging.  With a
+compensator on, its stiction level (or Coulomb level, if larger) is added to
+the prediction: at the arm's breakaway after the catch the compensator adds
+about that much (its LuGre observer more) to the feedback's command.  The
 balancing observers start from the current measurement (theta, the swing-up
 observer's theta_dot, the arm at its current position with the measured
 velocity).  The arm's reference is the position where it was caught (an
