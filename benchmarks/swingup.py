@@ -152,10 +152,10 @@ def plot(rows: list[dict], path: str, plant: str = "thesis") -> None:
     unit = "m/s$^2$" if plant == "thesis" else "V"
     rate = "omega0" if plant == "thesis" else "unstable rate"
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
-    fig.subplots_adjust(bottom=0.22, top=0.88, right=0.82)
+    fig.subplots_adjust(bottom=0.22, top=0.86, right=0.82)
     for ax, x, xl in ((axes[0], fc, f"plant Coulomb level F_C ({unit})"),
                       (axes[1], mis, f"plant {rate} mismatch vs the design's "
-                                     f"{rows[0]['design.omega0']:g} rad/s (%)")):
+                                     f"{rows[0]['design.omega0']:.3g} rad/s (%)")):
         sc = ax.scatter(x[ok], fs[ok] - fc[ok], c=tc[ok], cmap="viridis", marker="o", s=28,
                         label="caught and balancing (colour: swing_up_time)")
         if (~ok).any():
@@ -169,7 +169,7 @@ def plot(rows: list[dict], path: str, plant: str = "thesis") -> None:
     cb.set_label("swing_up_time (s)")
     fig.suptitle(f"Swing-up from hanging, {plant}, fast design ({rate} "
                  f"{rows[0]['design.omega0']:.3g} rad/s), |u| <= {rows[0]['u_limit']:.3g} "
-                 f"{unit}, classical friction, "
+                 f"{unit},\nclassical friction, "
                  f"noise 0.002: {ok.sum()}/{len(ok)} caught and balancing")
     fig.savefig(path, dpi=110)
     plt.close(fig)
