@@ -92,12 +92,14 @@ __all__ = [
     "HOMEBUILT",
     "PRESETS",
     "PRESET_FRICTION",
+    "PRESET_SWINGUP",
     "QUBE2",
     "QUBE2_WORKBOOK",
     "QUBE3",
     "SUBSTEPS",
     "DCRecord",
     "FurutaDCParams",
+    "arm_voltage",
     "dc_accelerations",
     "dc_mass_forcing",
     "dc_record",
@@ -266,6 +268,36 @@ def dc_accelerations(sn, cs, thd, ad, volts, r):
     inv = 1.0 / (m11 * m22 - m12 * m12)
     return ((m22 * f1 - m12 * f2) * inv, (m11 * f2 - m12 * f1) * inv,
             -m12 * r.kv * inv, m11 * r.kv * inv)
+
+
+@jit
+def arm_voltage(sn, cs, thd, ad, arm_dd, r):
+    r"""The voltage that gives the arm the angular acceleration ``arm_dd`` (rad/s^2)
+    in the state (theta, theta', arm') with no friction: the coupled equations
+    solved for u (the swing-up's inverse of the arm's dynamics).
+
+    Eliminating :math:`\ddot\theta` with the pendulum's row,
+
+    .. math::
+
+        k_v u = \Bigl(m_{22} - \frac{m_{12}^2}{m_{11}}\Bigr)\ddot\phi
+                + \frac{m_{12}}{m_{11}} f_1 - f_2\big|_{u=0},
+
+    :math:`k_v = k_t/R_m` (the forcing is linear in u: :func:`dc_mass_forcing`).
+
+    Parameters
+    ----------
+    sn, cs : float
+        :math:`\sin\theta, \cos\theta`.
+    thd, ad : float
+        :math:`\dot\theta, \dot\phi` (rad/s).
+    arm_dd : float
+        The arm's angular acceleration asked for (rad/s^2).
+    r : DCRecord
+    """
+    m11, m12, m22, f1, f2 = dc_mass_forcing(sn, cs, thd, ad, 0.0, r)
+    q = m12 / m11
+    return ((m22 - q * m12) * arm_dd + q * f1 - f2) / r.kv
 
 
 def _record(params: FurutaDCParams) -> DCRecord:
@@ -515,6 +547,14 @@ PRESET_FRICTION: dict[str, dict[str, float]] = {
     "homebuilt": {"friction.stiction": 0.57, "friction.coulomb": 0.44, "friction.viscous": 0.0,
                   "friction.zero_velocity_band": 0.02},
 }
+
+
+#: The swing-up's defaults on a motor plant (``swingup.*`` keys that differ
+#: from the thesis plant's; docs/swingup.md, "The DC-motor plant"): the
+#: friction margin in volts (the QUBE's F_C is estimated at 0.15 V; 0.3 V
+#: covers the range the Monte Carlo draws), the arm travel the cable to the
+#: pendulum module allows (about half a turn either way: 3 rad).
+PRESET_SWINGUP: dict[str, float] = {"swingup.friction_margin": 0.3, "swingup.arm_limit": 3.0}
 
 
 def preset(name: str) -> FurutaDCParams:
