@@ -357,15 +357,6 @@ def test_the_real_time_commands_refuse_a_motor_plant_before_starting(cli, comman
     assert "thesis plant only" in res.stderr and res.stdout == ""
 
 
-def test_a_swing_up_of_a_motor_plant_is_refused_not_run_on_the_wrong_plant(cli):
-    from frictionlab.studies.swingup_sim import simulate_swingup
-
-    with pytest.raises(ValueError, match="not implemented"):
-        simulate_swingup(build_config(plant="qube2"), 1.0)
-    res = cli("simulate", "--plant", "qube2", "--swing-up")
-    assert res.returncode == 2 and "not implemented" in res.stderr
-
-
 def test_a_motor_plants_figure_title_names_the_plant_and_its_own_design_preset():
     from frictionlab.plotting import config_title
 

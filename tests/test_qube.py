@@ -471,7 +471,7 @@ def test_a_program_that_dies_with_the_motor_on_still_stops_and_closes(tmp_path):
                          text=True, timeout=120)
     assert res.returncode == 1 and "died with the motor" in res.stderr
     calls = read_record(tmp_path / "b.jsonl")
-    assert any(v == 4.0 for _i, _m, v in voltages(calls))
+    assert any(v == pytest.approx(4.0) for _i, _m, v in voltages(calls))  # u_DA / 0.1 V
     check_safe_sequence(calls)
 
 

@@ -32,11 +32,12 @@ from .model.design import DesignSpec, preset
 from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
 from .model.plants import FURUTA_DC, THESIS, PlantKind
-from .model.plants.furuta_dc import PRESET_FRICTION, linearization
+from .model.plants.furuta_dc import PRESET_FRICTION, PRESET_SWINGUP, linearization
 from .model.plants.furuta_dc import preset as dc_preset
 from .model.plants.furuta_dc_design import dc_spec
 from .model.plants.thesis import PlantParams
-from .model.rig import RigScaling
+from .model.rig import RigScaling, motor_rig
+from .model.sensor import ADC_STEP, encoder_step
 from .model.swingup import SwingUpParams
 
 __all__ = [
@@ -260,10 +261,20 @@ class Config:
     def u_limit(self) -> float:
         """The bound on every controller command (units of u): ``controller.u_max``
         within the DAC's range (``rig.u_max``, the harder bound the loop applies to
-        u_DA as well; a motor plant's ``plant.voltage_limit``)."""
-        # a motor plant's: its amplifier's voltage limit
-        dac = self.plant.voltage_limit if self.motor else self.rig.u_max
+        u_DA as well; for a motor plant also ``plant.voltage_limit``)."""
+        # a motor plant's: its amplifier's voltage limit, within the DAC's range too
+        dac = min(self.plant.voltage_limit, self.rig.u_max) if self.motor else self.rig.u_max
         return dac if self.controller.u_max is None else min(self.controller.u_max, dac)
+
+    @property
+    def sensor_step(self) -> float:
+        """The raw grid of the rig's converters with ``sim.quantization`` = 1 (and of
+        the emulated rig): the thesis rig's 12 bits (App. B), a motor rig's pendulum
+        encoder, one count of ``plant.pendulum_counts`` per turn
+        (:func:`frictionlab.model.sensor.encoder_step`)."""
+        if self.motor:
+            return encoder_step(self.plant.pendulum_counts, self.rig.theta_scale)
+        return ADC_STEP
 
     @property
     def substeps(self) -> int:
@@ -419,7 +430,7 @@ def describe_keys(plant: str = "thesis") -> list[tuple[str, str, str, str]]:
         for name, doc, unit, rng in _class(section, plant).describe():
             if f"{section}.{name}" not in keys:
                 continue
-            if motor and section in ("friction", "compensation"):
+            if motor and section in ("friction", "compensation", "rig"):
                 unit = _VOLT_UNITS.get((name, unit), _VOLT_UNITS.get(("", unit), unit))
             out.append((f"{section}.{name}", doc, unit, rng))
     return out
@@ -432,6 +443,7 @@ _VOLT_UNITS = {
     ("", "m/s^2/(rad/s)"): "V/(rad/s)",
     ("sigma0", "1/s^2"): "V/rad",
     ("sigma1", "1/s"): "V/(rad/s)",
+    ("u_scale", "1/(m/s^2)"): "1/V",
 }
 
 
@@ -618,7 +630,8 @@ def build_config(
         The plant (:data:`PLANT_NAMES`): its preset's parameters, and for a
         motor plant its friction levels (volts) as the ``friction.*`` defaults
         and the compensators' defaults scaled to them
-        (:func:`motor_friction_defaults`).
+        (:func:`motor_friction_defaults`), and a motor rig's ``rig.*``
+        (:func:`frictionlab.model.rig.motor_rig`: u in volts, encoders).
     """
     try:
         spec = preset(design) if design else DesignSpec()
@@ -633,8 +646,14 @@ def build_config(
             # the Sec. 2.4 pattern on this plant (omega0 and the pendulum's
             # frequencies scaled to its unstable rate): the design.* defaults
             spec = dc_spec(design or "fast", params)
+        # a motor rig's converters: u in volts, encoders (model.rig.motor_rig)
+        rig = motor_rig(params.voltage_limit) if kind is not THESIS else RigScaling()
+        # a motor plant's swing-up defaults (its friction margin in volts, its arm travel)
+        swing = (SwingUpParams() if kind is THESIS else SwingUpParams(
+            **{k.split(".", 1)[1]: v for k, v in PRESET_SWINGUP.items()}))
         cfg = Config(plant=params, design=spec, friction_kind=friction, friction=fr,
-                     compensation_kind=compensation, compensation=comp, plant_kind=plant)
+                     compensation_kind=compensation, compensation=comp, plant_kind=plant,
+                     rig=rig, swingup=swing)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     items: list[tuple[str, Any]] = []

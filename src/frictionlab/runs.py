@@ -45,9 +45,11 @@ __all__ = [
 
 
 def make_sensor(cfg: Config) -> SensorParams:
-    """The sensor a configuration describes (``rig.*``, ``sim.quantization``,
+    """The sensor a configuration describes (``rig.*``, ``sim.quantization`` on the grid
+    ``Config.sensor_step``,
     ``sim.noise``, ``sim.seed``; the arm's raw zero :data:`~frictionlab.model.sensor.ARM_START`)."""
-    return sensor_params(cfg.rig, cfg.sim.quantization, cfg.sim.noise, cfg.sim.seed)
+    return sensor_params(cfg.rig, cfg.sim.quantization, cfg.sim.noise, cfg.sim.seed,
+                         step=cfg.sensor_step)
 
 
 def plant_design(cfg: Config, method: str = "closed_form"):

@@ -205,20 +205,50 @@ def emit_json(obj) -> None:
     sys.stdout.flush()
 
 
-def add_plant_arg(p: argparse.ArgumentParser) -> None:
-    """``--plant NAME``: the plant simulated and designed for (docs/cli.md)."""
-    p.add_argument("--plant", choices=PLANT_NAMES, default="thesis",
+def add_plant_arg(p: argparse.ArgumentParser, backend: bool = False) -> None:
+    """``--plant NAME``: the plant simulated and designed for (docs/cli.md);
+    ``backend``: its default is the plant ``--backend`` implies
+    (:func:`plant_from_args`)."""
+    default = ("the plant of --backend: qube2 for qube2://, qube3 for qube3://, else "
+               "thesis" if backend else "%(default)s")
+    p.add_argument("--plant", choices=PLANT_NAMES, default=None if backend else "thesis",
                    help="the plant: 'thesis' (eq. 6, u the arm's acceleration), "
                         "'furuta-dc' or 'qube2' (the QUBE-Servo 2: a DC motor, u in volts, "
                         "friction in volts), 'qube3' (the QUBE-Servo 3); its presets are "
-                        "the plant.* and friction.* defaults (default: %(default)s)")
+                        f"the plant.*, friction.* and rig.* defaults (default: {default})")
 
 
-def add_config_args(p: argparse.ArgumentParser, friction: bool = True) -> None:
+#: The plant a ``--backend`` scheme implies (a QUBE-Servo board is its own plant).
+BACKEND_PLANTS = {"qube2": "qube2", "qube3": "qube3"}
+
+
+def plant_from_args(args) -> str:
+    """The run's plant: ``--plant``, else the one ``--backend`` implies
+    (:data:`BACKEND_PLANTS`; for a parser whose ``--plant`` defaults to None,
+    :func:`add_plant_arg`), else ``thesis``.  Another motor plant than the
+    board's is run as asked, with a note (e.g. ``furuta-dc`` with a rig's own
+    ``plant.*``); ``thesis`` too (its controller's u taken as volts through
+    ``rig.u_scale``: the identification experiments' way, docs/qube.md)."""
+    plant = getattr(args, "plant", "thesis")
+    spec = getattr(args, "backend", None)
+    scheme = spec.partition(":")[0] if isinstance(spec, str) else ""
+    implied = BACKEND_PLANTS.get(scheme)
+    if implied is None:
+        return plant or "thesis"
+    if plant is None:
+        return implied
+    if plant not in ("thesis", implied):
+        note(args, f"frictionlab: note: --plant {plant} on a {implied} board ({spec}): its "
+                   "model and controller, the board's channels")
+    return plant
+
+
+def add_config_args(p: argparse.ArgumentParser, friction: bool = True,
+                    backend: bool = False) -> None:
     p.add_argument("--design", choices=("fast", "slow"), default="fast",
                    help="design preset of Sec. 2.4 (eqs. 13-16), applied before --set "
                         "(default: %(default)s)")
-    add_plant_arg(p)
+    add_plant_arg(p, backend)
     if friction:
         p.add_argument("--friction", choices=PLANT_FRICTION_KINDS, default="classical",
                        help="friction model of the simulated plant (default: %(default)s)")
@@ -254,7 +284,7 @@ def config_from_args(args) -> Config:
     friction model or compensator ignores."""
     from ..config import inert_keys, load_toml
 
-    plant = getattr(args, "plant", "thesis")
+    plant = plant_from_args(args)
     items = [*backend_rig_items(args), *(load_toml(args.config, plant) if args.config else []),
              *parse_sets(args.sets)]
     cfg = build_config(

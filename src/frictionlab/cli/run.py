@@ -100,7 +100,7 @@ def register_cli(sub) -> None:
                    help="csv: the .dat/.csv pair and the JSON sidecar (default); parquet: "
                         "also a .parquet table of the CSV's columns for the run and every "
                         "recording, written when each ends (docs/logs.md)")
-    add_config_args(p)
+    add_config_args(p, backend=True)
     p.add_argument("--angle-limit", type=float, default=0.35, metavar="RAD",
                    help="stop when |theta| exceeds this (default 0.35 rad)")
     p.add_argument("--start-tolerance", type=float, default=0.15, metavar="RAD",
@@ -187,7 +187,12 @@ def _cmd_run(args) -> int:
         raise UsageError("--json needs --headless: the console prints its address, not one "
                          "JSON object (use --headless --duration S --json)")
     cfg = hanging_start(args, config_from_args(args))
-    refuse_motor_plant(cfg, "run")
+    if args.swing_up:
+        from ..realtime.api import swing_up_refusal
+
+        refusal = swing_up_refusal(cfg)
+        if refusal:
+            raise UsageError(f"--swing-up: {refusal}")
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise UsageError(f"--duration must be > 0, got {args.duration}")
     if not 0 <= args.prewarm_us < cfg.design.h * 1e6 / 2:
@@ -359,22 +364,10 @@ def _report(st: dict, args) -> int:
     return 1
 
 
-def refuse_motor_plant(cfg, command: str) -> None:
-    """A motor plant is simulated and designed for, not yet run by the 200 Hz
-    loop or emulated behind the rig protocol (its converters, the loop's
-    checks): exit status 2 saying so."""
-    if cfg.motor:
-        raise UsageError(f"{command} --plant {cfg.plant_kind}: the real-time loop and the "
-                         "emulated rig run the thesis plant only so far; simulate, sweep, "
-                         "predict, identify limit-cycle and compensate take a motor plant "
-                         "(docs/qube.md)")
-
-
 def cmd_rig_sim(args) -> int:
     from ..realtime.rigsim import FAULTS, run_rig_sim
 
     cfg = config_from_args(args)
-    refuse_motor_plant(cfg, "rig-sim")
     if args.hanging:
         cfg = cfg.with_values({"sim.initial_angle": math.pi})
     if not 0 <= args.port < 65536:

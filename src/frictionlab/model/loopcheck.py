@@ -409,7 +409,8 @@ def check_loop(controller: Controller, plant=None, *,
                        f"with the arm sliding at {comp_speed:g} rad/s (spectral radius "
                        f"{comp_rho:.4g} > 1)")
     if math.isfinite(peak) and peak > u_max:
-        reasons.append(f"u would saturate: predicted peak |u| {peak:.3g} m/s^2 > the DAC "
+        unit = plant_of(plant).u_unit  # m/s^2, or V for a motor plant
+        reasons.append(f"u would saturate: predicted peak |u| {peak:.3g} {unit} > the DAC "
                        f"limit {u_max:.3g} (recovering from {disturbance:g} rad: "
                        f"{peak_d:.3g}; noise {noise:g}: {NOISE_SIGMAS:g} x {sigma_u:.3g}; "
                        f"compensator: {level:.3g})")

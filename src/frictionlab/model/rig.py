@@ -45,7 +45,9 @@ from .sensor import ADC_BITS, ADC_STEP, quantize
 
 __all__ = [
     "ADC_BITS",
+    "MOTOR_VELOCITY_SCALE",
     "RigScaling",
+    "motor_rig",
     "quantize",
     "unwrap_raw",
     "wrap_raw",
@@ -155,6 +157,32 @@ class RigScaling(Validated):
         """SI size of one ADC step for (theta, Omega, Omega_dot)."""
         q = ADC_STEP
         return self.theta_scale * q, self.arm_scale * q, self.velocity_scale * q
+
+
+#: ``rig.velocity_scale`` of a motor rig: the tachometer channel's full scale (rad/s).
+MOTOR_VELOCITY_SCALE = 50.0
+
+
+def motor_rig(voltage_limit: float) -> RigScaling:
+    r"""The ``rig.*`` defaults of a motor plant (an encoder rig: the QUBE-Servo, a
+    home-built rig): u in volts, the angles from encoders.
+
+    * The DAC: :math:`u_{DA} = \mathrm{sat}(u / V_{max})`, ``u_scale`` =
+      1/``voltage_limit`` (0.1 per volt on a QUBE: u_DA = 1 is the amplifier's
+      full 10 V; at most 1 per volt).
+    * The angles: ``theta_scale`` = ``arm_scale`` = :math:`\pi`: the raw
+      channel spans one turn; ``theta_bias`` 0.5 puts its wrap a quarter turn
+      from both upright (y = -0.5) and hanging (y = 0.5): the pendulum angle is
+      read in :math:`[-\pi/2, 3\pi/2)`, continuous through both (a swing about
+      hanging, the free oscillation of App. A, does not wrap).  The converter
+      is the encoder (:func:`frictionlab.model.sensor.encoder_step`,
+      ``Config.sensor_step``).
+    * The arm rate (the QUBE's tachometer): ``velocity_scale`` =
+      :data:`MOTOR_VELOCITY_SCALE` rad/s full scale, no bias.
+    """
+    return RigScaling(theta_scale=math.pi, theta_bias=0.5, arm_scale=math.pi,
+                      velocity_scale=MOTOR_VELOCITY_SCALE, velocity_bias=0.0,
+                      u_scale=min(1.0, 1.0 / float(voltage_limit)))
 
 
 def _elementwise(law, values, u_scale):

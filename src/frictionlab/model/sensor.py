@@ -77,6 +77,7 @@ __all__ = [
     "arm_to_raw",
     "arm_zero",
     "dac",
+    "encoder_step",
     "from_raw",
     "ideal_reading",
     "measure",
@@ -142,13 +143,23 @@ def sensor_record(row):
 
 
 def sensor_params(rig, quantization: float = 1.0, noise: float = 0.0, seed: int = 0,
-                  arm_offset: float = ARM_START) -> SensorParams:
+                  arm_offset: float = ARM_START, step: float = ADC_STEP) -> SensorParams:
     """The :class:`SensorParams` of a rig (``rig`` a :class:`~frictionlab.model.rig.RigScaling`),
-    ``quantization`` 1 (12-bit grid) or 0 (ideal), ``sim.noise`` and ``sim.seed``."""
+    ``quantization`` 1 (the converter's grid ``step``: the 12-bit :data:`ADC_STEP`, or
+    an encoder's, :func:`encoder_step`) or 0 (ideal), ``sim.noise`` and ``sim.seed``."""
     return SensorParams(float(rig.theta_scale), float(rig.theta_bias), float(rig.arm_scale),
                         float(rig.velocity_scale), float(rig.velocity_bias),
-                        float(arm_offset), ADC_STEP if quantization else 0.0, float(noise),
+                        float(arm_offset), float(step) if quantization else 0.0, float(noise),
                         int(seed))
+
+
+def encoder_step(counts: int, scale: float) -> float:
+    r"""The raw grid of an encoder of ``counts`` per turn read on a channel of
+    ``scale`` rad per raw unit (``rig.theta_scale``): one count,
+    :math:`2\pi/(counts\cdot scale)` (2/2048 for a QUBE's 2048 counts at
+    :math:`\pi`).  A motor rig's converter: the grid of its three raw channels
+    (the tachometer's step is then ``rig.velocity_scale`` times it)."""
+    return 2.0 * math.pi / (int(counts) * float(scale))
 
 
 # --- App. B.5 both ways (plain arithmetic: scalars and arrays) ---------------------

@@ -55,7 +55,8 @@ from ..model.design import PRESETS, Design, DesignSpec, design, gain_path, prese
 from ..model.friction import FrictionParams, friction_row
 from ..model.loopcheck import DEFAULT_DISTURBANCE, DEFAULT_NOISE, LoopCheck, check_loop
 from ..model.params import ParamError
-from ..runs import simulate_config
+from ..model.plants.furuta_dc_design import dc_spec
+from ..runs import plant_design, simulate_config
 
 __all__ = [
     "CHANGE_KEYS",
@@ -190,7 +191,7 @@ class ControlParams:
         cfg = dataclasses.replace(cfg, design=spec,
                                   compensation_kind=kind if enabled else "none",
                                   compensation=params[kind])
-        d = design(spec, cfg.plant)
+        d = plant_design(cfg)
         ctrl = Controller(d, kind if enabled else "none", params[kind],
                           error_signal=error_signal, u_max=cfg.u_limit)
         gp, rec = ctrl.record()
@@ -218,7 +219,7 @@ class ControlParams:
         error_signal = self.error_signal
 
         if "design" in changes:
-            spec = _design_spec(changes["design"], spec)
+            spec = _design_spec(changes["design"], spec, self.presets)
         if "compensation" in changes:
             c = changes["compensation"]
             if c == "none":
@@ -345,7 +346,9 @@ class ControlParams:
         settings replace; None: L does not change).  Computed once, outside the loop
         (:meth:`~.api.RealtimeController.submit`)."""
         prev = self.previous_spec
-        if prev is None or prev == self.cfg.design:
+        if prev is None or prev == self.cfg.design or self.cfg.motor:
+            # a motor plant's L moves in a straight line (its observer, a predictor
+            # on the same model, is switched at once)
             return None
         return gain_path(prev, self.cfg.design, self.cfg.plant)
 
@@ -477,27 +480,43 @@ class ControlParams:
         stalled the loop; afterwards a preset or a model switch costs well
         under 1 ms and a new custom design about 1 ms.
         """
-        for spec in PRESETS.values():
-            design(spec, self.cfg.plant)
+        if not self.cfg.motor:
+            for spec in PRESETS.values():
+                design(spec, self.cfg.plant)
         for kind in COMPENSATOR_MODELS:
             # also loads the loop check's compiled code for each compensator
             _ = self.apply({"compensation": kind}).loop_check
         _ = self.loop_check
 
+    @functools.cached_property
+    def presets(self) -> dict[str, DesignSpec]:
+        """The ``fast`` and ``slow`` designs of Sec. 2.4 on this plant (a motor
+        plant's: :func:`~frictionlab.model.plants.furuta_dc_design.dc_spec`, the
+        pattern scaled to its unstable rate, at the run's h)."""
+        if not self.cfg.motor:
+            return PRESETS
+        h = self.cfg.design.h
+        return {name: dc_spec(name, self.cfg.plant, h) for name in PRESETS}
+
     @property
     def preset(self) -> str | None:
         """``fast``/``slow`` if the current spec is that preset, else None."""
-        for name, spec in PRESETS.items():
+        for name, spec in self.presets.items():
             if spec == self.cfg.design:
                 return name
         return None
 
     def describe(self) -> dict:
-        """JSON-ready summary: design (spec, L, K) and compensation."""
+        """JSON-ready summary: design (spec, L, K: the thesis's four observer gains, a
+        motor plant's 4 x 3 observer matrix row by row) and compensation, and the plant
+        (``plant``: its ``--plant`` name; ``u_unit``: u's and the friction levels'
+        unit, ``m/s^2`` or ``V``)."""
         return {
+            "plant": self.cfg.plant_kind,
+            "u_unit": self.cfg.plant_model.u_unit,
             "design": {"preset": self.preset, "spec": dataclasses.asdict(self.cfg.design),
                        "L": [float(v) for v in self.design.L],
-                       "K": [float(v) for v in self.design.K]},
+                       "K": np.asarray(self.design.K, dtype=float).tolist()},
             "compensation": {"enabled": self.comp_enabled, "kind": self.comp_kind,
                              "params": dataclasses.asdict(self.comp_params[self.comp_kind]),
                              "error_signal": self.error_signal},
@@ -551,12 +570,14 @@ def _round_toward(value: float, toward: float) -> float:
     return float(f"{rounded:.3g}")
 
 
-def _design_spec(value, current: DesignSpec) -> DesignSpec:
+def _design_spec(value, current: DesignSpec, presets: dict[str, DesignSpec]) -> DesignSpec:
     if isinstance(value, DesignSpec):
         return value
     if isinstance(value, str):
+        if value in presets:
+            return presets[value]
         try:
-            return preset(value)
+            return preset(value)  # its error names the presets
         except ValueError as exc:
             raise ChangeError(str(exc), ["design"]) from None
     if isinstance(value, dict):

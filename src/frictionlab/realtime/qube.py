@@ -34,8 +34,10 @@ the other way) the project's angles are
 
 so that, as in eq. (6), a positive u accelerates the arm positively and the
 upright pendulum negatively (theta from upright; hanging is +-pi).  The
-voltage is :math:`V = 10\,u_{DA}` (``rig.u_scale`` = 0.1 per volt: u in volts),
-clipped to :data:`V_MAX`; a motor wired the other way is ``rig.u_scale = -0.1``.
+voltage is the sensor module's inverse DAC law, :math:`V = u_{DA}/k_u`
+(:func:`frictionlab.model.sensor.u_from_dac`; ``rig.u_scale`` :math:`k_u` = 0.1
+per volt: u in volts, u_DA = 1 is 10 V), clipped to :data:`V_MAX`; a motor wired
+the other way is ``rig.u_scale = -0.1``.
 
 These SI signals are handed to the loop as its raw channels through the
 sensor module's inverse laws with the run's own ``rig.*`` factors
@@ -77,6 +79,7 @@ stays red after the board is closed.
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -87,6 +90,7 @@ import numpy as np
 from ..config import Config
 from ..model import sensor
 from ..model.params import ParamError
+from ..model.rig import motor_rig
 from .protocol import SensorReading
 from .rigbase import BadReading, Rig, RigError
 
@@ -110,9 +114,12 @@ WAIT_UPRIGHT = 0.1
 QUBE3_OPTIONS = ("deadband_compensation=0;pwm_en=0;enc0_velocity=3.0;enc1_velocity=3.0;"
                  "min_diode_compensation=0.3;max_diode_compensation=1.5")
 
-#: The ``rig.*`` values the backend implies (u in volts; see the module docstring).
-QUBE_RIG = {"rig.theta_scale": math.pi, "rig.theta_bias": 0.5, "rig.arm_scale": math.pi,
-            "rig.velocity_scale": 300.0, "rig.velocity_bias": 0.0, "rig.u_scale": 1.0 / V_MAX}
+#: The ``rig.*`` values the backend implies: a motor rig's
+#: (:func:`frictionlab.model.rig.motor_rig`) at the QUBE's 10 V, u in volts (see the
+#: module docstring).
+QUBE_RIG = {f"rig.{k}": v for k, v in dataclasses.asdict(motor_rig(V_MAX)).items()
+            if k in ("theta_scale", "theta_bias", "arm_scale", "velocity_scale",
+                     "velocity_bias", "u_scale")}
 
 INSTALL_HINT = ("the {scheme} backend needs Quanser's HIL API for Python (module "
                 "quanser.hardware), which is not installed: install the Quanser SDK (Linux: "
@@ -212,6 +219,9 @@ class QubeRig(Rig):
         self._as, self._vs, self._vb = sc.arm_scale, sc.velocity_scale, sc.velocity_bias
         self._k_arm = sc.arm_sign * _TWO_PI / COUNTS
         self._k_pend = sc.pendulum_sign * _TWO_PI / COUNTS
+        self._us = sc.u_scale
+        self._dac = sensor.dac.py_func
+        self._u_from_dac = sensor.u_from_dac.py_func
         self.card = None
         self.hw = None
         self._reset()
@@ -244,6 +254,8 @@ class QubeRig(Rig):
         hw = _hil_module(self.scheme)
         self.hw = hw
         self._reset()
+        # compile (or load) the DAC law now: the first write must not wait for it
+        self._u_from_dac(0.0, 1.0)
         h = self.cfg.design.h if h is None else h
         self.timeout = self.options.get("watchdog", WATCHDOG_PERIODS * h)
         if self.timeout < 2 * h:
@@ -379,8 +391,11 @@ class QubeRig(Rig):
     def write(self, k: int, u_da: float) -> None:
         if self.fault is not None or self.card is None:
             return  # after a board fault nothing but the stop (stop_motor) is written
-        u_da = min(max(u_da, -1.0), 1.0) if u_da == u_da else 0.0
-        volts = V_MAX * u_da
+        # the DAC law of the sensor module and its inverse: u_DA saturated, the
+        # voltage u = u_DA / rig.u_scale, clipped to the QUBE's rating
+        u_da = self._dac(u_da, 1.0)
+        volts = self._u_from_dac(u_da, self._us)
+        volts = V_MAX if volts > V_MAX else (-V_MAX if volts < -V_MAX else volts)
         self.u_da = u_da
         enable = self.enabled or (volts != 0.0 and self.armed)
         if not enable:

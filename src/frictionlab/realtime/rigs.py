@@ -62,7 +62,7 @@ from urllib.parse import parse_qs, urlsplit
 from ..config import Config
 from ..model.params import ParamError
 from ..model.rig import RigScaling
-from ..model.sensor import ARM_START, adc, dac, sensor_params, u_from_dac
+from ..model.sensor import ADC_STEP, ARM_START, adc, dac, sensor_params, u_from_dac
 from ..runs import simulated_plant
 from . import protocol as P
 from .protocol import Frame, FrameError, SensorReading
@@ -108,7 +108,10 @@ class AdcModel:
     arm_offset : float
         Raw arm reading at Omega = 0 (the bias x_0 the loop captures).
     quantize : bool
-        Round to the 12-bit grid (2/4096 per step over [-1, 1)).
+        Round to the converter's grid ``step``.
+    step : float
+        The grid in raw units: the thesis rig's 12 bits (2/4096 per step over
+        [-1, 1)), or a motor rig's encoder (``Config.sensor_step``).
     noise : float
         Standard deviation of Gaussian noise added to each signal in its SI
         unit before conversion (``sim.noise``).
@@ -117,8 +120,10 @@ class AdcModel:
     """
 
     def __init__(self, scaling: RigScaling, arm_offset: float = ARM_START,
-                 quantize: bool = True, noise: float = 0.0, seed: int = 0):
-        self.sensor = sensor_params(scaling, 1.0 if quantize else 0.0, noise, seed, arm_offset)
+                 quantize: bool = True, noise: float = 0.0, seed: int = 0,
+                 step: float = ADC_STEP):
+        self.sensor = sensor_params(scaling, 1.0 if quantize else 0.0, noise, seed, arm_offset,
+                                    step)
         self.arm_offset = float(arm_offset)
         self.noise = float(noise)
         self.n = 0
@@ -175,7 +180,7 @@ class SimRig(Rig):
     def open(self, h: float | None = None, cancel: Callable[[], bool] | None = None) -> None:
         cfg = self.cfg
         self.adc = AdcModel(self.scaling, self._arm_offset, bool(cfg.sim.quantization),
-                            cfg.sim.noise, cfg.sim.seed)
+                            cfg.sim.noise, cfg.sim.seed, cfg.sensor_step)
         self.state = self.plant.init()
         self.plant.step(self.state, 0.0)  # compile before the loop starts
         u_from_dac.py_func(0.0, 1.0)  # and the DAC law (it calls the compiled dac)

@@ -158,7 +158,9 @@ class RigEmulator:
         self._ratio = cfg.pendulum_ratio
         self._chunk_max = max(1, 1_000_000_000 // self.dt_ns)   # <= 1 s per call
         self._plants: dict[int, SimulatedPlant] = {}
-        self.adc = AdcModel(self.scaling, arm_offset, True, cfg.sim.noise, cfg.sim.seed)
+        # the rig's converters: 12 bits, or a motor rig's encoders (Config.sensor_step)
+        self.adc = AdcModel(self.scaling, arm_offset, True, cfg.sim.noise, cfg.sim.seed,
+                            cfg.sensor_step)
         self.watchdog_ns = int(watchdog * 1e9)
         self.max_catchup_ns = 2_000_000_000
         self._lock = threading.Lock()
