@@ -86,6 +86,7 @@ def test_loop_matrix_equals_the_hand_derived_one(spec):
         assert np.min(np.abs(ev - z)) < 1e-6
 
 
+@pytest.mark.slow
 def test_the_dc_plant_is_checked_through_its_own_step():
     """The loop check of a QUBE-Servo 2 controller: the plant's rows are the ZOH of
     the DC plant's linearisation (its RK4 step), u = -L x_hat, the loop's eigenvalues
