@@ -572,6 +572,8 @@ class RealtimeController:
             "backend": self.backend_name,
             "sim_lockstep": self.sim_lockstep,
             "h": self.cfg.design.h,
+            "plant": self.cfg.plant_kind,
+            "u_unit": self.cfg.plant_model.u_unit,
             "t0_monotonic_ns": None if loop is None else loop.t0_ns,
             "x0": None if loop is None else loop.x0,
             "config": self.cfg.as_flat_dict(),
