@@ -51,23 +51,27 @@ def test_the_controller_balances_the_emulated_rig_and_a_stall_zeroes_the_motor(t
     the 3 s before the stall), then is stopped with SIGSTOP: the duty is zero
     within the advertised watchdog time plus 2 periods.  (A run that ends by its
     duration: firmware/test-hil --duration 10, docs/performance.md.)"""
-    for attempt in range(2):
+    for attempt in range(3):
         out = test_hil("--duration", "10", "--stall-at", "5", "--keep",
                        str(tmp_path / str(attempt)))
         log = read_log(out["run"]["log"])
         t, theta = log["t"], log["theta_m"]
         # the ticks before the stall (its 1 s is the longest gap of the loop's time axis)
         end = int(np.argmax(np.diff(t))) + 1
+        reached = np.diff(t).max() > 0.5 and t[end - 1] > 4.5  # the loop ran up to the stall
         t, theta = t[:end], theta[:end]
         missed = np.sum(np.round(np.diff(t) / (PERIOD_MS / 1e3)) - 1)
         silent = out["run"]["stop_reason"] == "rig_silent"
-        if missed <= 0.01 * len(t) and not silent:
+        if missed <= 0.01 * len(t) and not silent and reached:
             break
-        # a timing statistic, or the loop's stop for a stalled host: run once more
-        # (docs/development.md, "A busy machine")
+        # a timing statistic, or the loop's own stop for a host that held it (reason
+        # paused or rig_silent before the stall): run once more (docs/development.md,
+        # "A busy machine"); the stop itself zeroed the motor, which other tests check
         warnings.warn(f"test-hil: {missed:.0f} deadlines missed before the stall in "
-                      f"{len(t)} ticks, stop {out['run']['stop_reason']}, on a busy host; "
-                      "running it again", stacklevel=1)
+                      f"{len(t)} ticks (up to t = {t[-1]:.2f} s), stop "
+                      f"{out['run']['stop_reason']}, on a busy host; running it again",
+                      stacklevel=1)
+    assert reached, out
     assert missed <= 0.01 * len(t), (missed, out)
     run = out["run"]
     assert out["flash_bytes"] <= 32 * 1024 and out["ram_bytes"] <= 1536
