@@ -8,7 +8,8 @@ fast as the host can (no real-time pacing), prints:
 * flash and static RAM of the ATmega328P build;
 * the reply time in emulated time: from a SAMPLE's last byte into the UART to
   the SENSOR's last byte out (mean over 200 requests);
-* the host's CPU per emulated millisecond, the plant held and stepping;
+* the host's CPU per emulated millisecond, the plant (the home-built rig,
+  ``--plant furuta-dc``) held and stepping;
 * lost encoder counts with both encoders turning at a given speed for 0.3 s
   (``--plant spin``), for a few speeds.
 """
@@ -40,7 +41,7 @@ LIB = FW / "build" / "host" / "libhil.so"
 
 
 class Args:
-    design, friction, set, theta0 = "fast", "classical", [("rig.u_scale", "-0.022")], 0.05
+    design, friction, set, theta0 = "fast", "classical", [], 0.05
     spin_speed, spin_time = 100.0, 0.3
 
 
@@ -73,7 +74,7 @@ def run_ms(lib, plant, n: int, stepping: bool = True) -> None:
 
 
 def measure_reply_and_cpu() -> dict:
-    plant = R.ThesisPlant(Args)
+    plant = R.PLANTS["furuta-dc"](Args)  # the home-built rig, test-hil's default
     lib, fd = session(plant)
     os.write(fd, P.encode(P.MSG_HELLO, 0))
     run_ms(lib, plant, 20)

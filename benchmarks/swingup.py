@@ -20,9 +20,15 @@ hand-over, failed ones included) the largest |u| of the next 0.5 s is
 recorded; the targets are at least 995 of 1,000 successes and that |u| below
 80 % of the limit in 99 % of the catches.
 
-``--plant qube2`` is the hook for the QUBE-Servo 2 (masses, lengths and motor
-constants each within +-20 %, F_C in [0, 0.3] V, |V| <= 10 V): it needs the
-DC-motor plant, which this version does not have yet, and says so.
+``--plant qube2``: the QUBE-Servo 2 driven by its motor voltage (``--plant
+qube2`` of frictionlab).  Each plant draws its arm and pendulum masses and
+lengths and the motor's R_m, k_t and k_m, each uniform within +-20 % of the
+preset (:data:`QUBE_VARIED`), its Coulomb level F_C uniform in [0, 0.3] V,
+its stiction F_S uniform in [F_C, F_C + 0.1] V (the preset's F_S - F_C is
+0.05 V), and a noise seed; the controller and the swing-up are designed for
+the NOMINAL QUBE-Servo 2 (they do not know the draw), classical friction,
+noise 0.002, |V| <= 10 V (``--u-max``, V; the amplifier's limit), the
+swing-up's defaults for the plant.
 
 Prints one line per failure, the figures, and a JSON object as the last line;
 ``--plot PATH`` writes the map figure (success and catch time over F_C, F_S
@@ -46,6 +52,7 @@ import numpy as np
 
 from frictionlab.config import build_config
 from frictionlab.model.swingup import CAUGHT, SWINGING
+from frictionlab.runs import make_controller
 from frictionlab.studies.swingup_sim import simulate_swingup, swingup_outcome
 
 #: The omega0 the plants' natural frequencies are drawn around (and the default design's).
@@ -58,17 +65,30 @@ DESIGN_OMEGA0 = 6.2
 U_MAX = 10.0
 #: The window after a catch over which the largest |u| is taken (s).
 AFTER_CATCH = 0.5
-#: The plants this benchmark draws; ``qube2`` waits for the DC-motor plant.
+#: The plants this benchmark draws.
 PLANTS = ("thesis", "qube2")
+#: The QUBE-Servo 2's parameters drawn within +-20 % of the preset (``plant.*``).
+QUBE_VARIED = ("arm_mass", "arm_length", "pendulum_mass", "pendulum_length", "resistance",
+               "torque_constant", "emf_constant")
+#: The relative spread of :data:`QUBE_VARIED`.
+QUBE_SPREAD = 0.2
 
 
 def draw(n: int, seed: int, plant: str = "thesis") -> list[dict]:
     """The randomised plants (key -> value), reproducible from ``seed``."""
-    if plant != "thesis":
-        raise SystemExit(f"benchmarks/swingup.py: --plant {plant} needs the DC-motor plant "
-                         "(frictionlab --plant qube2), which this version does not have yet")
     rng = np.random.default_rng(seed)
     out = []
+    if plant == "qube2":
+        nominal = build_config(plant="qube2").plant
+        for i in range(n):
+            v = {f"plant.{f}": getattr(nominal, f) * rng.uniform(1 - QUBE_SPREAD,
+                                                                 1 + QUBE_SPREAD)
+                 for f in QUBE_VARIED}
+            fc = rng.uniform(0.0, 0.3)
+            v.update({"friction.coulomb": fc, "friction.stiction": fc + rng.uniform(0.0, 0.1),
+                      "sim.seed": i})
+            out.append(v)
+        return out
     for i in range(n):
         fc = rng.uniform(0.5, 3.0)
         out.append({"friction.coulomb": fc, "friction.stiction": fc + rng.uniform(0.0, 1.0),
@@ -85,17 +105,30 @@ def after_catch(phase: np.ndarray, u: np.ndarray, h: float) -> list[float]:
 
 
 def run_one(values: dict, duration: float, noise: float, design_omega0: float,
-            u_max: float = U_MAX, compensation: str = "none") -> dict:
-    sets = [("sim.initial_angle", math.pi), ("sim.noise", noise),
-            ("design.omega0", design_omega0), *values.items()]
+            u_max: float = U_MAX, compensation: str = "none", plant: str = "thesis",
+            swingup: tuple = (), known_plant: bool = False) -> dict:
+    common = [("sim.initial_angle", math.pi), ("sim.noise", noise), *swingup]
     if u_max > 0:
-        sets.append(("controller.u_max", u_max))
-    cfg = build_config("fast", "classical", compensation, sets=sets)
-    res = simulate_swingup(cfg, duration)
+        common.append(("controller.u_max", u_max))
+    controller = None
+    if plant == "thesis":
+        common.append(("design.omega0", design_omega0))
+    elif not known_plant:
+        # the controller of the nominal plant (it does not know the draw)
+        controller = make_controller(build_config("fast", "classical", compensation,
+                                                  sets=common, plant=plant))
+    cfg = build_config("fast", "classical", compensation, sets=[*common, *values.items()],
+                       plant=plant)
+    res = simulate_swingup(cfg, duration, controller=controller)
+    if controller is None:
+        controller = make_controller(cfg)
     status, _ = swingup_outcome(res)
     ok = status in ("limit_cycle", "settled")
     traj = res.trajectory
-    return {**values, "design.omega0": design_omega0, "status": status, "success": ok,
+    omega = (cfg.plant.omega0, design_omega0 if plant == "thesis"
+             else controller.design.spec.omega0)
+    return {**values, "plant.omega0": omega[0], "design.omega0": omega[1],
+            "status": status, "success": ok,
             "swing_up_time": res.swing_up_time,
             "catches": res.catches, "stop_reason": res.stop_reason,
             "max_u_swinging": res.max_u_swinging,
@@ -104,7 +137,7 @@ def run_one(values: dict, duration: float, noise: float, design_omega0: float,
             "u_limit": cfg.u_limit}
 
 
-def plot(rows: list[dict], path: str) -> None:
+def plot(rows: list[dict], path: str, plant: str = "thesis") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -116,24 +149,27 @@ def plot(rows: list[dict], path: str) -> None:
     ok = np.array([r["success"] for r in rows])
     tc = np.array([np.nan if r["swing_up_time"] is None else r["swing_up_time"]
                    for r in rows])
+    unit = "m/s$^2$" if plant == "thesis" else "V"
+    rate = "omega0" if plant == "thesis" else "unstable rate"
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
-    fig.subplots_adjust(bottom=0.22, top=0.88, right=0.82)
-    for ax, x, xl in ((axes[0], fc, "plant Coulomb level F_C (m/s$^2$)"),
-                      (axes[1], mis, f"plant omega0 mismatch vs the design's "
-                                     f"{rows[0]['design.omega0']:g} rad/s (%)")):
+    fig.subplots_adjust(bottom=0.22, top=0.86, right=0.82)
+    for ax, x, xl in ((axes[0], fc, f"plant Coulomb level F_C ({unit})"),
+                      (axes[1], mis, f"plant {rate} mismatch vs the design's "
+                                     f"{rows[0]['design.omega0']:.3g} rad/s (%)")):
         sc = ax.scatter(x[ok], fs[ok] - fc[ok], c=tc[ok], cmap="viridis", marker="o", s=28,
                         label="caught and balancing (colour: swing_up_time)")
         if (~ok).any():
             ax.scatter(x[~ok], fs[~ok] - fc[~ok], c="red", marker="x", s=50,
                        label="failed")
         ax.set_xlabel(xl)
-        ax.set_ylabel("F_S - F_C (m/s$^2$)")
+        ax.set_ylabel(f"F_S - F_C ({unit})")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=9)
     cb = fig.colorbar(sc, cax=fig.add_axes((0.85, 0.22, 0.02, 0.66)))
     cb.set_label("swing_up_time (s)")
-    fig.suptitle(f"Swing-up from hanging, fast design (omega0 {rows[0]['design.omega0']:g} "
-                 f"rad/s), |u| <= {rows[0]['u_limit']:.3g} m/s$^2$, classical friction, "
+    fig.suptitle(f"Swing-up from hanging, {plant}, fast design ({rate} "
+                 f"{rows[0]['design.omega0']:.3g} rad/s), |u| <= {rows[0]['u_limit']:.3g} "
+                 f"{unit},\nclassical friction, "
                  f"noise 0.002: {ok.sum()}/{len(ok)} caught and balancing")
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -174,14 +210,23 @@ def main() -> None:
     ap.add_argument("--noise", type=float, default=0.002)
     ap.add_argument("--design-omega0", type=float, default=DESIGN_OMEGA0)
     ap.add_argument("--u-max", type=float, default=U_MAX,
-                    help="controller.u_max in m/s^2 (0: only the DAC's range)")
+                    help="controller.u_max in units of u: m/s^2 for the thesis plant, V "
+                         "for qube2 (0: only the DAC's range or the voltage limit)")
     ap.add_argument("--compensation", default="none")
+    ap.add_argument("--set", action="append", default=[], metavar="swingup.KEY=VALUE",
+                    help="a swing-up setting for every plant (repeatable)")
+    ap.add_argument("--known-plant", action="store_true",
+                    help="qube2: design the controller and the swing-up for each drawn "
+                         "plant (default: for the nominal QUBE-Servo 2)")
     ap.add_argument("--plot", metavar="PATH")
     args = ap.parse_args()
     plants = draw(args.n, args.seed, args.plant)
+    sets = tuple((k, float(v)) for k, v in (a.split("=", 1) for a in args.set))
+    unit = "V" if args.plant != "thesis" else "m/s^2"
     t0 = time.perf_counter()
     rows = [run_one(v, args.duration, args.noise, args.design_omega0, args.u_max,
-                    args.compensation) for v in plants]
+                    args.compensation, args.plant, sets, args.known_plant)
+            for v in plants]
     seconds = time.perf_counter() - t0
     for r in rows:
         if not r["success"]:
@@ -190,7 +235,8 @@ def main() -> None:
                   f"{r['stop_reason']} catches {r['catches']}")
     summary = summarise(rows, seconds)
     summary.update(plant=args.plant, compensation=args.compensation,
-                   design_omega0=args.design_omega0)
+                   design_omega0=rows[0]["design.omega0"], unit=unit,
+                   settings=dict(sets), known_plant=args.known_plant)
     tc, ua = summary["swing_up_time_s"], summary["u_after_catch"]
     print(f"{summary['successes']}/{summary['plants']} plants caught and balancing "
           f"({100 * summary['success_rate']:.1f} %)")
@@ -199,13 +245,13 @@ def main() -> None:
               f"{tc['p90']:.2f} s, max {tc['max']:.2f} s")
     if ua["max"] is not None:
         print(f"largest |u| in the {AFTER_CATCH:g} s after each of {summary['catches']} "
-              f"catches: below 80 % of the limit {summary['u_limit']:.3g} m/s^2 in "
+              f"catches: below 80 % of the limit {summary['u_limit']:.3g} {unit} in "
               f"{100 * ua['below_80_percent']:.1f} %, 99th percentile {ua['p99']:.2f}, "
-              f"max {ua['max']:.2f} m/s^2")
-    print(f"largest |u| while swinging {summary['max_u_swinging']:.2f} m/s^2, "
-          f"overall {summary['max_u']:.2f} m/s^2; {seconds:.1f} s", file=sys.stderr)
+              f"max {ua['max']:.2f} {unit}")
+    print(f"largest |u| while swinging {summary['max_u_swinging']:.2f} {unit}, "
+          f"overall {summary['max_u']:.2f} {unit}; {seconds:.1f} s", file=sys.stderr)
     if args.plot:
-        plot(rows, args.plot)
+        plot(rows, args.plot, args.plant)
         summary["plot"] = args.plot
         print(f"figure: {args.plot}")
     print(json.dumps(summary))

@@ -350,15 +350,6 @@ def test_compensate_compare_runs_the_compensator_in_volts_on_the_qube2(cli):
     assert out["reduction"] > 1.5
 
 
-def test_a_swing_up_of_a_motor_plant_is_refused_not_run_on_the_wrong_plant(cli):
-    from frictionlab.studies.swingup_sim import simulate_swingup
-
-    with pytest.raises(ValueError, match="not implemented"):
-        simulate_swingup(build_config(plant="qube2"), 1.0)
-    res = cli("simulate", "--plant", "qube2", "--swing-up")
-    assert res.returncode == 2 and "not implemented" in res.stderr
-
-
 def test_a_motor_plants_figure_title_names_the_plant_and_its_own_design_preset():
     from frictionlab.plotting import config_title
 

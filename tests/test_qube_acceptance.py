@@ -14,16 +14,10 @@ every call) first on its ``PYTHONPATH``:
   motor while it is stopped, and after SIGCONT the controller stops within
   2 s without enabling the amplifier again.
 
-The balancing runs use the QUBE-Servo 2 plant's own controller (``--plant
-qube2``, which ``qube2://`` implies) from a start by hand: ``?wait=upright`` and
-the emulated operator lifting the pendulum (``lift_at``).  The swing-up run
-waits for the motor plant's swing-up within 10 V (``run --swing-up`` refuses a
-motor plant until then): it uses the thesis's controller and swing-up tuned to
-the QUBE's pendulum (:data:`STAND_IN`: ``--plant thesis``, its natural
-frequency sqrt(3 g / 2 L_p) = 10.68 rad/s, its arm length), with u in volts
-(the backend's ``rig.u_scale`` 0.1): on the emulated board that swings up in
-about 1.7 s and balances within one encoder count.  When the DC swing-up lands,
-:data:`STAND_IN` becomes ``[]``.
+Every run uses the QUBE-Servo 2 plant's own controller and swing-up within 10 V
+(``--plant qube2``, which ``qube2://`` implies): the swing-up run from hanging;
+the others from a start by hand (``?wait=upright`` and the emulated operator
+lifting the pendulum, ``lift_at``).
 """
 
 from __future__ import annotations
@@ -51,10 +45,6 @@ from qube_helpers import (
     voltages,
 )
 
-#: The swing-up's controller until the motor plant's swing-up exists (see the module
-#: docstring).
-STAND_IN = ["--plant", "thesis", "--set", "plant.omega0=10.68", "--set",
-            "design.omega0=10.68", "--set", "plant.arm_length=0.085"]
 #: The operator lifts the pendulum this long after the board opens (board time, s).
 LIFT_AT = 0.3
 #: Slack for a loaded machine where the stop itself is not under test (docs/development.md):
@@ -64,9 +54,9 @@ SLACK = ["--max-pause", "0.5", "--silent-periods", "100"]
 
 def start(tmp_path: Path, backend: str, duration: float, *extra: str, faults=None,
           swing_up: bool = True):
-    """``frictionlab run --backend ... --headless --json`` in a process of its own: with
-    the swing-up (the stand-in controller), or the ``qube2`` plant started by hand
-    (``?wait=upright`` and the emulated hand's ``lift_at``)."""
+    """``frictionlab run --backend ... --headless --json`` in a process of its own (the
+    ``qube2`` plant): with the swing-up, or started by hand (``?wait=upright`` and the
+    emulated hand's ``lift_at``)."""
     if not swing_up:
         faults = {"lift_at": LIFT_AT, **(faults or {})}
         backend += "&wait=upright" if "?" in backend else "?wait=upright"
@@ -81,7 +71,7 @@ def start(tmp_path: Path, backend: str, duration: float, *extra: str, faults=Non
         env["FAKE_QUANSER_FAULTS"] = json.dumps(faults)
     else:
         env.pop("FAKE_QUANSER_FAULTS", None)
-    how = ["--swing-up", *STAND_IN] if swing_up else []
+    how = ["--swing-up"] if swing_up else []
     cmd = [sys.executable, "-m", "frictionlab", "run", "--backend", backend, *how,
            "--headless", "--duration", str(duration), "--json", "--log-dir",
            str(tmp_path / "logs"), *extra]

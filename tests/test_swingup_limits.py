@@ -96,6 +96,33 @@ def test_hand_over_waits_for_a_state_the_limit_can_hold():
         assert out.phase == phase
 
 
+def test_hand_over_leaves_room_for_the_compensators_share():
+    """With a compensator the predicted feedback command plus the compensator's
+    largest level (its stiction) must stay within the catch fraction: a state the
+    uncompensated controller catches is left swinging with the classical one."""
+    for comp in ("none", "classical"):
+        cfg = build_config("fast", "classical", comp, sets=[LIMITED])
+        ctrl = make_controller(cfg)
+        gp, cp = ctrl.record()
+        n = round(cfg.swingup.catch_horizon / cfg.design.h)
+        limit = cfg.swingup.catch_fraction * cfg.u_limit
+        fs = cfg.compensation.stiction
+        # an arrival whose feedback command fits, but not with the compensator's share
+        # (half the share's width from either side: the observer's correction moves it)
+        theta_dot = min(np.linspace(-1.0, -5.0, 161), key=lambda t: abs(
+            predicted_peak(gp, 0.2, t, 0.0, n) - (limit - 0.5 * fs)))
+        sw = SwingUp(ctrl, cfg.swingup)
+        w, s = sw.init(0.2)
+        w.theta_dot_hat = theta_dot
+        # measured where the swing-up observer predicts it (eq. 6, u = 0): no correction
+        h, w0 = cfg.design.h, cfg.design.omega0
+        theta_m = 0.2 + h * theta_dot + 0.5 * h * h * w0 * w0 * math.sin(0.2)
+        out, _ = sw.step((w, s), theta_m, 0.0, 0.0)
+        assert out.theta_dot_hat == pytest.approx(theta_dot, abs=0.05)
+        assert out.phase == ("caught" if comp == "none" else "swinging")
+        assert cp.fs == pytest.approx(fs)
+
+
 def test_a_limited_actuator_catches_gently_with_noise():
     """The thesis's plant, |u| <= 10 m/s^2, noise: caught, balancing, and the command in
     the 0.5 s after the catch below 80 % of the limit."""

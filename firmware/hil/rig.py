@@ -20,7 +20,11 @@ locked; it runs at wall-clock speed.
 The encoders are those of docs/build-a-rig.md: ``COUNTS`` per turn, the
 pendulum counting from hanging down (its position at power-up), the arm from
 its position at power-up.  The plant law is frictionlab's own.  Plants
-(``--plant``): ``thesis`` (the thesis's rig,
+(``--plant``): ``furuta-dc`` (the default: the home-built rig of
+docs/build-a-rig.md, frictionlab's DC-motor plant with the
+:data:`frictionlab.model.plants.furuta_dc.HOMEBUILT` preset and its friction,
+:func:`homebuilt_keys`, driven by the H-bridge's voltage V = duty x
+plant.voltage_limit, the 12 V supply), ``thesis`` (the thesis's rig,
 :class:`frictionlab.model.simulation.SimulatedPlant` of
 :func:`frictionlab.runs.simulated_plant`: u = duty / rig.u_scale
 in m/s^2) and ``spin`` (no dynamics: the hand turns the arm and the pendulum
@@ -49,25 +53,45 @@ def counts(theta: float, arm: float) -> tuple[int, int]:
 
 
 class ThesisPlant:
-    """The thesis's plant (frictionlab's SimulatedPlant) driven by the duty."""
+    """The thesis's plant (frictionlab's SimulatedPlant) driven by the duty:
+    u = duty / rig.u_scale (m/s^2)."""
 
     def __init__(self, args):
         from frictionlab.config import build_config
-        from frictionlab.runs import simulated_plant
 
         cfg = build_config(design=args.design, friction=args.friction,
                            sets=[("design.h", DT), ("sim.substeps", 2),
                                  ("sim.pendulum_steps", 1), *args.set])
-        self.u_scale = cfg.rig.u_scale
+        self._start(cfg, 1.0 / cfg.rig.u_scale, args.theta0)
+
+    def _start(self, cfg, u_per_duty: float, theta0: float) -> None:
+        from frictionlab.runs import simulated_plant
+
+        self.u_per_duty = u_per_duty
         self.plant = simulated_plant(cfg)
-        self.state = self.plant.init(args.theta0)
+        self.state = self.plant.init(theta0)
         self.plant.step(self.state, 0.0)  # compiled now, not in the real-time loop
 
     def angles(self) -> tuple[float, float]:
         return float(self.state.x[0]), float(self.state.x[2])
 
     def step(self, duty: float) -> None:
-        self.state = self.plant.step(self.state, duty / self.u_scale)
+        self.state = self.plant.step(self.state, duty * self.u_per_duty)
+
+
+class FurutaDCPlant(ThesisPlant):
+    """The home-built rig (``--plant furuta-dc``): frictionlab's DC-motor plant
+    with :data:`frictionlab.model.plants.furuta_dc.HOMEBUILT`'s parameters and
+    friction (:func:`homebuilt_keys`), the H-bridge's output voltage the duty
+    times the supply, V = duty * plant.voltage_limit (12 V)."""
+
+    def __init__(self, args):
+        from frictionlab.config import build_config
+
+        cfg = build_config(plant="furuta-dc", friction=args.friction,
+                           sets=[*homebuilt_keys(), ("design.h", DT), ("sim.substeps", 2),
+                                 *args.set])
+        self._start(cfg, cfg.plant.voltage_limit, args.theta0)
 
 
 class SpinPlant:
@@ -85,10 +109,40 @@ class SpinPlant:
         self.t += DT
 
 
-#: The plants of ``--plant``.  The DC-motor plant of a home-built rig
-#: (``frictionlab.model.plants.furuta_dc``, preset HOMEBUILT, driven by the duty as a
-#: fraction of the supply voltage) is one more entry, a class like ThesisPlant.
-PLANTS = {"thesis": ThesisPlant, "spin": SpinPlant}
+#: The plants of ``--plant``.  Another plant is one more entry: a class like
+#: ThesisPlant (``angles()``, ``step(duty)``).
+PLANTS = {"furuta-dc": FurutaDCPlant, "thesis": ThesisPlant, "spin": SpinPlant}
+
+#: The home-built rig's balancing design: ``design.*`` keys over the
+#: furuta-dc plant's defaults (docs/build-a-rig.md, "The balancing design";
+#: benchmarks/homebuilt_design.py compares it with the others).
+#: The thesis's fast pattern would put the pendulum pair at omega0 (7.9 rad/s) and
+#: the observer at 23 and 10 rad/s: with the gear motor's stiction (0.57 V) that
+#: falls.  All four observer poles at 60 rad/s follow the encoders closely enough
+#: that the stuck arm does not corrupt the estimates; a pendulum pair at 16 rad/s
+#: narrows the cycle the friction's dead zone leaves.
+HOMEBUILT_DESIGN: dict[str, float] = {
+    "design.omega1": 16.0, "design.zeta1": 0.7, "design.omega2": 6.0, "design.zeta2": 0.7,
+    "design.observer_omega1": 60.0, "design.observer_zeta1": 0.7,
+    "design.observer_omega2": 60.0, "design.observer_zeta2": 0.7}
+
+
+def homebuilt_keys(design: dict[str, float] | None = None) -> list[tuple[str, float]]:
+    """The configuration keys of the home-built rig for ``--plant furuta-dc``
+    (whose defaults are the QUBE-Servo 2's): every ``plant.*`` field of
+    :data:`~frictionlab.model.plants.furuta_dc.HOMEBUILT`, its friction
+    (``PRESET_FRICTION["homebuilt"]``) and its design (``design``, default
+    :data:`HOMEBUILT_DESIGN`).  The emulated rig's plant and ``test-hil``'s
+    controller both take them."""
+    import dataclasses
+
+    from frictionlab.model.plants.furuta_dc import HOMEBUILT, PRESET_FRICTION
+
+    keys = [(f"plant.{f.name}", getattr(HOMEBUILT, f.name))
+            for f in dataclasses.fields(HOMEBUILT) if getattr(HOMEBUILT, f.name) is not None]
+    keys += list(PRESET_FRICTION["homebuilt"].items())
+    keys += list((HOMEBUILT_DESIGN if design is None else design).items())
+    return keys
 
 
 def _set(text: str) -> tuple[str, str]:
@@ -114,11 +168,12 @@ def main(argv=None) -> int:
     p.add_argument("--lib", required=True, help="libhil.so")
     p.add_argument("--elf", required=True, help="the firmware")
     p.add_argument("--mcu", default="atmega328p")
-    p.add_argument("--plant", choices=sorted(PLANTS), default="thesis")
-    p.add_argument("--design", default="fast")
+    p.add_argument("--plant", choices=sorted(PLANTS), default="furuta-dc")
+    p.add_argument("--design", default="fast", help="--plant thesis: its design preset")
     p.add_argument("--friction", default="classical")
     p.add_argument("--set", action="append", type=_set, default=[], metavar="KEY=VALUE",
-                   help="configuration keys of the plant (rig.u_scale, plant.*, friction.*)")
+                   help="configuration keys of the plant, after its own (plant.*, "
+                        "friction.*; thesis: rig.u_scale)")
     p.add_argument("--theta0", type=float, default=0.05, help="start angle (rad)")
     p.add_argument("--spin-speed", type=float, default=100.0, help="rad/s (--plant spin)")
     p.add_argument("--spin-time", type=float, default=0.5, help="s (--plant spin)")

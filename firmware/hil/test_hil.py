@@ -5,6 +5,13 @@ rig (firmware/hil/rig.py) and ``frictionlab run --backend serial://PTY
     {"run": <the run's JSON>, "pwm_zero_after_stall_ms": MS | null,
      "watchdog_ms": MS, "flash_bytes": N, "ram_bytes": N, "harness": {...}}
 
+``--plant furuta-dc`` (the default): the home-built rig of docs/build-a-rig.md
+(frictionlab's DC-motor plant with the HOMEBUILT preset, V = duty x 12 V),
+and the controller ``frictionlab run --plant furuta-dc`` with that rig's
+``plant.*``, ``friction.*`` and ``design.*`` keys (rig.py: ``homebuilt_keys``)
+and ``rig.u_scale`` = 1/12 duty per volt.  ``--plant thesis``: the thesis's
+plant, u = duty / rig.u_scale m/s^2, rig.u_scale = -0.022 on both sides.
+
 ``--stall-at S``: S seconds into the run (after its first command) the
 controller is stopped with
 SIGSTOP (and continued 1 s later, when it stops itself as ``paused``);
@@ -31,9 +38,27 @@ HERE = Path(__file__).resolve().parent
 FIRMWARE = HERE.parent
 MCU = "atmega328p"
 #: The controller's calibration for the firmware's readings (docs/build-a-rig.md,
-#: "Scales for the controller"), with the thesis plant's u_scale.
+#: "Scales for the controller"); rig.u_scale is the plant's (:func:`plant_sets`).
 RIG_SETS = ("rig.theta_scale=3.141592653589793", "rig.theta_bias=0.5",
             "rig.arm_scale=3.141592653589793", "rig.velocity_scale=40", "rig.velocity_bias=0")
+
+
+def plant_sets(plant: str, u_scale: float | None) -> tuple[list[str], list[str]]:
+    """(the emulated rig's ``--set`` arguments, the controller's ``run`` arguments)
+    for ``--plant``: the plant's own keys and ``rig.u_scale`` (duty per unit of
+    u; default 1/12 V for furuta-dc, the thesis's -0.022 for thesis)."""
+    if plant == "furuta-dc":
+        from rig import homebuilt_keys
+
+        supply = dict(homebuilt_keys())["plant.voltage_limit"]
+        scale = 1.0 / supply if u_scale is None else u_scale
+        # the rig: V = duty x supply (rig.py); the controller: u_DA = u x rig.u_scale
+        ctrl = ["--plant", "furuta-dc"]
+        for key, value in homebuilt_keys():
+            ctrl += ["--set", f"{key}={value}"]
+        return [], [*ctrl, "--set", f"rig.u_scale={scale!r}"]
+    scale = -0.022 if u_scale is None else u_scale
+    return ["--set", f"rig.u_scale={scale!r}"], ["--set", f"rig.u_scale={scale!r}"]
 
 
 def sizes(elf: Path) -> tuple[int, int]:
@@ -54,9 +79,12 @@ def main(argv=None) -> int:
     p.add_argument("--duration", type=float, default=10.0, help="the run's --duration (s)")
     p.add_argument("--stall-at", type=float, default=None, metavar="S",
                    help="SIGSTOP the controller S seconds into the run")
-    p.add_argument("--plant", default="thesis", help="the plant of firmware/hil/rig.py")
-    p.add_argument("--u-scale", type=float, default=-0.022,
-                   help="rig.u_scale: duty per m/s^2 (the plant's and the controller's)")
+    p.add_argument("--plant", default="furuta-dc",
+                   help="the plant of firmware/hil/rig.py (furuta-dc: the home-built rig)")
+    p.add_argument("--u-scale", type=float, default=None,
+                   help="the controller's rig.u_scale: duty per unit of u (default the "
+                        "plant's: 1/12 per volt for furuta-dc, -0.022 per m/s^2 for thesis, "
+                        "which the thesis plant takes too)")
     p.add_argument("--strict", action="store_true",
                    help="the controller's own safety limits; by default the run gets the test "
                         "suite's slack for a busy host (--silent-periods 100 --max-pause 0.5)")
@@ -73,10 +101,10 @@ def main(argv=None) -> int:
     flash, ram = sizes(elf)
     tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="test-hil-"))
     tmp.mkdir(parents=True, exist_ok=True)
-    u_set = f"rig.u_scale={args.u_scale}"
+    rig_args, ctrl_args = plant_sets(args.plant, args.u_scale)
     rig = subprocess.Popen(
         [sys.executable, str(HERE / "rig.py"), "--lib", str(build / "host" / "libhil.so"),
-         "--elf", str(elf), "--mcu", MCU, "--plant", args.plant, "--set", u_set],
+         "--elf", str(elf), "--mcu", MCU, "--plant", args.plant, *rig_args],
         stdout=subprocess.PIPE, stderr=open(tmp / "rig.err", "w"), text=True,
         process_group=0)
     ctrl = None
@@ -91,8 +119,9 @@ def main(argv=None) -> int:
                "--log-dir", str(log_dir)]
         if not args.strict:
             cmd += ["--silent-periods", "100", "--max-pause", "0.5"]
-        for s in (*RIG_SETS, u_set):
+        for s in RIG_SETS:
             cmd += ["--set", s]
+        cmd += ctrl_args
         ctrl = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=open(tmp / "run.err", "w"),
                                 text=True, process_group=0)
         if args.stall_at is not None:

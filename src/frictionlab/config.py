@@ -32,7 +32,7 @@ from .model.design import DesignSpec, preset
 from .model.friction import KINDS, FrictionParams
 from .model.params import ParamError, Validated, param
 from .model.plants import FURUTA_DC, THESIS, PlantKind
-from .model.plants.furuta_dc import PRESET_FRICTION, linearization
+from .model.plants.furuta_dc import PRESET_FRICTION, PRESET_SWINGUP, linearization
 from .model.plants.furuta_dc import SUBSTEPS as DC_SUBSTEPS
 from .model.plants.furuta_dc import preset as dc_preset
 from .model.plants.furuta_dc_design import dc_spec
@@ -659,9 +659,12 @@ def build_config(
             spec = dc_spec(design or "fast", params)
         # a motor rig's converters: u in volts, encoders (model.rig.motor_rig)
         rig = motor_rig(params.voltage_limit) if kind is not THESIS else RigScaling()
+        # a motor plant's swing-up defaults (its friction margin in volts, its arm travel)
+        swing = (SwingUpParams() if kind is THESIS else SwingUpParams(
+            **{k.split(".", 1)[1]: v for k, v in PRESET_SWINGUP.items()}))
         cfg = Config(plant=params, design=spec, friction_kind=friction, friction=fr,
                      compensation_kind=compensation, compensation=comp, plant_kind=plant,
-                     rig=rig)
+                     rig=rig, swingup=swing)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     items: list[tuple[str, Any]] = []

@@ -47,9 +47,6 @@ def cmd_simulate(args) -> int:
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
     if args.open_loop and args.swing_up:
         raise UsageError("--open-loop holds u at 0: it cannot be given with --swing-up")
-    if args.swing_up and cfg.motor:
-        raise UsageError(f"--swing-up: the swing-up of the {cfg.plant_kind!r} plant within "
-                         "its voltage limit is not implemented yet (docs/qube.md)")
     if (not args.swing_up and not args.open_loop
             and abs(cfg.sim.initial_angle) > cfg.sim.fall_angle):
         note(args, f"frictionlab simulate: note: sim.initial_angle = "

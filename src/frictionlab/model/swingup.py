@@ -80,7 +80,10 @@ region (``|theta| < swingup.catch_angle``) and its command, predicted on the
 linearised plant (eq. 7, no friction) under its state feedback from the
 current state (:func:`predicted_peak`), stays within
 ``swingup.catch_fraction`` of its saturation for ``swingup.catch_horizon``:
-a pendulum arriving fast, or with the arm moving, goes on swinging.  The
+a pendulum arriving fast, or with the arm moving, goes on swinging.  With a
+compensator on, its stiction level (or Coulomb level, if larger) is added to
+the prediction: at the arm's breakaway after the catch the compensator adds
+about that much (its LuGre observer more) to the feedback's command.  The
 balancing observers start from the current measurement (theta, the swing-up
 observer's theta_dot, the arm at its current position with the measured
 velocity).  The arm's reference is the position where it was caught (an
@@ -98,6 +101,32 @@ the net acceleration :math:`a = u - F`; the margin :math:`F_m` puts a level
 back in the direction the law asks for, and the target correction makes up
 for what is left (and for the pendulum's damping).  docs/swingup.md maps the
 success rate over friction levels and plant mismatch on a 10 m/s^2 actuator.
+
+The DC-motor plant
+------------------
+On the DC-motor plant (:mod:`frictionlab.model.plants.furuta_dc`, u in volts)
+the same law runs on the arm tip's acceleration and the motor voltage
+realises it: the command above, before the friction margin, is the arm tip's
+acceleration a (m/s^2, within ``swingup.max_acceleration``), and the voltage
+is the plant's inverse arm dynamics at the current state
+(:func:`~frictionlab.model.plants.furuta_dc.arm_voltage` with
+:math:`\ddot\phi = a/L_r`: back-EMF, the coupling and the pendulum's
+reaction included), plus the faded margin :math:`F_m` in volts, saturated
+at the controller's limit (``controller.u_max`` within
+``plant.voltage_limit``).  The pendulum's equation of the full model,
+:math:`J_p\ddot\theta = c\sin\theta - b\cos\theta\,\ddot\phi + \dots`,
+is eq. (6)'s with :math:`\omega_0^2 = c/J_p` and :math:`a = L_r\ddot\phi`,
+so E is the pendulum's energy normalised by :math:`c` with that
+:math:`\omega_0` (:func:`dc_omega0`; 10.68 rad/s for the QUBE-Servo 2) and
+:math:`\dot E = -(a/g)\dot\theta\cos\theta` as above, up to the
+centrifugal term :math:`J_p\sin\theta\cos\theta\dot\phi^2`.  The
+swing-up observer predicts with the coupled model at the applied voltage
+(:func:`~frictionlab.model.plants.furuta_dc.dc_accelerations`), and the
+hand-over test with the design's discretised linearisation
+(:func:`~frictionlab.model.plants.furuta_dc_design.dc_predicted_peak`).
+Where the voltage cannot give the acceleration asked for (the QUBE's
+:math:`a_{max}/g` = 0.81 < 4/3) it saturates, and the pendulum gains its
+energy over several swings.
 
 Safety (the same checks in the simulator and the loop)
 ------------------------------------------------------
@@ -163,10 +192,13 @@ from .controller import (
 )
 from .friction import friction_view
 from .params import Validated, param
+from .plants.furuta_dc import DCRecord, FurutaDCParams, arm_voltage, dc_accelerations
+from .plants.furuta_dc_design import DCDesign, dc_predicted_peak
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 from .sensor import wrap_angle
 
 __all__ = [
+    "DC_PLANT",
     "PHASES",
     "STOP_CODES",
     "SWING_DTYPE",
@@ -175,6 +207,7 @@ __all__ = [
     "SwingUpParams",
     "SwingUpRecord",
     "copy_swing_state",
+    "dc_omega0",
     "energy",
     "new_swing_state",
     "predicted_peak",
@@ -268,6 +301,15 @@ class SwingUpRecord(NamedTuple):
         :math:`F_m` (m/s^2), :math:`k_b` (m/s^2 per rad/s) and the fade exponent b.
     adapt, apex_cos : float
         Gain of the target's correction and cos(catch_angle / 2).
+    plant : float
+        The plant the law drives: 0 the thesis's (u an arm-tip acceleration),
+        1 the DC-motor plant (u a voltage: :data:`DC_PLANT`).
+    arm_length : float
+        The DC plant's arm length L_r (m): the law's arm-tip acceleration over
+        it is the arm's angular acceleration (0 for the thesis plant).
+    dc_j_p, dc_j_0, dc_b, dc_c, dc_kv, dc_k_m, dc_d_r, dc_d_p : float
+        The DC plant's model (:class:`~frictionlab.model.plants.furuta_dc.DCRecord`)
+        that the observer and the voltage law use (zeros for the thesis plant).
     """
 
     gain: float
@@ -294,6 +336,16 @@ class SwingUpRecord(NamedTuple):
     apex_cos: float
     blend: float
     horizon_ticks: float
+    plant: float = 0.0
+    arm_length: float = 0.0
+    dc_j_p: float = 0.0
+    dc_j_0: float = 0.0
+    dc_b: float = 0.0
+    dc_c: float = 0.0
+    dc_kv: float = 0.0
+    dc_k_m: float = 0.0
+    dc_d_r: float = 0.0
+    dc_d_p: float = 0.0
 
 
 @jit
@@ -302,7 +354,20 @@ def swingup_record(row):
     return SwingUpRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7],
                          row[8], row[9], row[10], row[11], row[12], row[13], row[14], row[15],
                          row[16], row[17], row[18], row[19], row[20], row[21],
-                         row[22], row[23])
+                         row[22], row[23], row[24], row[25], row[26], row[27], row[28],
+                         row[29], row[30], row[31], row[32], row[33])
+
+
+#: :attr:`SwingUpRecord.plant` of the DC-motor plant (the thesis plant's is 0).
+DC_PLANT = 1.0
+
+
+@jit_inline
+def dc_model(sp):
+    """The DC plant's :class:`~frictionlab.model.plants.furuta_dc.DCRecord` that
+    the swing-up record ``sp`` carries."""
+    return DCRecord(sp.dc_j_p, sp.dc_j_0, sp.dc_b, sp.dc_c, sp.dc_kv, sp.dc_k_m, sp.dc_d_r,
+                    sp.dc_d_p)
 
 
 def swingup_row(rec: SwingUpRecord) -> np.ndarray:
@@ -364,9 +429,21 @@ class SwingUpParams(Validated):
                                 "into the upper half that falls short of or passes over the "
                                 "catch region (0 = a fixed target)", "1", lo=0.0, hi=2.0)
 
-    def record(self, omega0: float, g: float, h: float) -> SwingUpRecord:
-        """The :class:`SwingUpRecord` for :func:`swingup_step` (design omega_0, g and h)."""
+    def record(self, omega0: float, g: float, h: float,
+               dc: FurutaDCParams | None = None) -> SwingUpRecord:
+        """The :class:`SwingUpRecord` for :func:`swingup_step` (design omega_0, g and h).
+
+        With ``dc`` (the DC-motor plant's parameters as the design knows them)
+        the law drives that plant in volts (module docstring, "The DC-motor
+        plant"); ``omega0`` and ``g`` are then the pendulum's own
+        :func:`dc_omega0` and the plant's g.
+        """
         pole = math.exp(-self.observer_omega * h)
+        extra = {}
+        if dc is not None:
+            extra = dict(zip(("dc_j_p", "dc_j_0", "dc_b", "dc_c", "dc_kv", "dc_k_m", "dc_d_r",
+                              "dc_d_p"), (float(v) for v in dc.record()), strict=True))
+            extra.update(plant=DC_PLANT, arm_length=float(dc.arm_length))
         return SwingUpRecord(
             gain=float(self.gain),
             max_acceleration=float(self.max_acceleration),
@@ -392,7 +469,15 @@ class SwingUpParams(Validated):
             apex_cos=math.cos(0.5 * self.catch_angle),
             blend=float(self.blend),
             horizon_ticks=float(max(1, round(self.catch_horizon / h))),
+            **extra,
         )
+
+
+def dc_omega0(p: FurutaDCParams) -> float:
+    r"""The DC plant's pendulum frequency with the arm held,
+    :math:`\sqrt{c/J_p} = \sqrt{m_p g l_p/J_p}` (rad/s; 10.68 for the
+    QUBE-Servo 2): the omega_0 of the swing-up's normalised energy."""
+    return math.sqrt(p.pendulum_mass * p.g * 0.5 * p.pendulum_length / p.j_p)
 
 
 @jit
@@ -430,6 +515,31 @@ def predicted_peak(gp, theta, theta_dot, arm_dot, n):
             x4 += hs * u * il
             x3 += hs * x4
     return peak
+
+
+@jit_inline
+def catch_peak(gp, dc, theta, theta_dot, arm_dot, n):
+    """The hand-over test's predicted peak |u| (:func:`predicted_peak`; on the
+    DC plant its design's discretised linearisation,
+    :func:`~frictionlab.model.plants.furuta_dc_design.dc_predicted_peak`)."""
+    if dc:
+        return dc_predicted_peak(gp.l1, gp.l2, gp.l3, gp.l4, gp.obs, theta, theta_dot,
+                                 arm_dot, n)
+    return predicted_peak(gp, theta, theta_dot, arm_dot, n)
+
+
+@jit
+def dc_swing_voltage(sp, a_e, f_m, th, thd, arm_m, arm_dot_m, up):
+    """The DC plant's swing-up voltage: the arm-tip acceleration of the law
+    (the faded energy term ``a_e`` with the arm-centring and brake terms,
+    within ``swingup.max_acceleration``) made a voltage by the plant's inverse
+    arm dynamics (:func:`~frictionlab.model.plants.furuta_dc.arm_voltage`),
+    plus the faded friction margin ``f_m`` (V) in the energy term's direction."""
+    a = a_e - (sp.arm_stiffness * arm_m + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
+    a = min(max(a, -sp.max_acceleration), sp.max_acceleration)
+    v = arm_voltage(math.sin(th), math.cos(th), thd, arm_dot_m, a / sp.arm_length,
+                    dc_model(sp))
+    return v + f_m
 
 
 @jit
@@ -493,7 +603,11 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     thd = w.theta_dot_hat
     sn = math.sin(th)
     cs = math.cos(th)
-    acc = w0 * w0 * sn - sp.g_inv * w.u * cs + arm_dot_m * arm_dot_m * sn * cs
+    dc = sp.plant == DC_PLANT
+    if dc:  # the coupled links at the voltage applied (friction unknown: none)
+        acc = dc_accelerations(sn, cs, thd, arm_dot_m, w.u, dc_model(sp))[0]
+    else:
+        acc = w0 * w0 * sn - sp.g_inv * w.u * cs + arm_dot_m * arm_dot_m * sn * cs
     thp = th + h * (thd + 0.5 * h * acc)
     thdp = thd + h * acc
     err = wrap_angle(th_m - thp)
@@ -525,8 +639,11 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == CAUGHT and abs(th_m) > sp.release_angle:
         phase = SWINGING
         w.phase_ticks = 0.0
-    if phase == SWINGING and abs(th_m) < sp.catch_angle and predicted_peak(
-            gp, th_m, thd, arm_dot_m, sp.horizon_ticks) <= sp.catch_fraction * gp.u_max:
+    # the compensator may add up to its stiction level to the feedback's command
+    share = 0.0 if gp.compensator == 0 else max(cp.fs, cp.fc)
+    if phase == SWINGING and abs(th_m) < sp.catch_angle and catch_peak(
+            gp, dc, th_m, thd, arm_dot_m, sp.horizon_ticks) + share <= (
+                sp.catch_fraction * gp.u_max):
         phase = CAUGHT
         w.phase_ticks = 0.0
         w.catch_tick = w.tick - 1.0
@@ -547,11 +664,19 @@ def swingup_step(w, s, gp, cp, sp, theta_m, arm_m, arm_dot_m):
     if phase == SWINGING:
         up = max(math.cos(th), 0.0)  # 0 in the lower half, 1 upright
         u = energy_law(th, thd, e, sp.gain, w.target, sp.max_acceleration)
+        fm = 0.0
         if u != 0.0:
             fm = sp.friction_margin if gp.compensator == 0 else max(sp.friction_margin, cp.fc)
-            u += fm if u > 0.0 else -fm
-        u = ((1.0 - up) ** sp.blend) * u - (sp.arm_stiffness * arm_m
-                                           + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
+            if u < 0.0:
+                fm = -fm
+        fade = (1.0 - up) ** sp.blend
+        if dc:
+            u = dc_swing_voltage(sp, fade * u, fade * fm, th, thd, arm_m, arm_dot_m, up)
+            u = min(max(u, -gp.u_max), gp.u_max)  # controller.u_max, the voltage limit
+            w.u = u
+            return u, u, 0.0
+        u = fade * (u + fm) - (sp.arm_stiffness * arm_m
+                               + (sp.arm_damping + sp.arm_brake * up) * arm_dot_m)
         umax = min(sp.max_acceleration, gp.u_max)  # and the DAC range
         u = min(max(u, -umax), umax)
         w.u = u
@@ -593,6 +718,9 @@ class SwingUp:
         """(gains, compensator parameters, swing-up record) for the compiled step."""
         gp, cp = self.controller.record()
         d = self.controller.design
+        if isinstance(d, DCDesign):
+            p = d.params
+            return gp, cp, self.params.record(dc_omega0(p), p.g, d.spec.h, dc=p)
         return gp, cp, self.params.record(d.spec.omega0, d.g, d.spec.h)
 
     def init(self, theta0: float = math.pi) -> tuple[np.record, np.record]:

@@ -25,7 +25,6 @@ from ..model.closedloop import FELL, NC, SWING_STOPPED, run_loop
 from ..model.controller import Controller
 from ..model.friction import KINDS, resolve_drift
 from ..model.limit_cycles import LimitCycleFeatures, trajectory_features
-from ..model.plants import THESIS
 from ..model.simulation import Trajectory
 from ..model.swingup import (
     BALANCING,
@@ -58,7 +57,7 @@ class SwingUpResult:
     catches : int
         Number of hand-overs (failed catches return to swinging).
     max_u_swinging : float
-        Largest |u| while swinging (m/s^2).
+        Largest |u| while swinging (units of u: m/s^2, or V for a motor plant).
     """
 
     trajectory: Trajectory
@@ -82,9 +81,6 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     controller : Controller, optional
         The balancing controller (default: the one ``cfg`` describes).
     """
-    if cfg.motor:
-        raise ValueError(f"the swing-up of the {cfg.plant_kind!r} plant within its voltage "
-                         "limit is not implemented yet")
     duration = cfg.sim.duration if duration is None else float(duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"duration must be > 0 s, got {duration}")
@@ -100,7 +96,7 @@ def simulate_swingup(cfg: Config, duration: float | None = None, *,
     x[0] = cfg.sim.initial_angle
     out = np.zeros((n, NC))
     phase = np.zeros(n)
-    done, status, _, _ = run_loop(x, 0.0, n, THESIS.code, cfg.substeps, cfg.pendulum_ratio,
+    done, status, _, _ = run_loop(x, 0.0, n, cfg.plant_model.code, cfg.substeps, cfg.pendulum_ratio,
                                   cfg.plant_row(), KINDS.index(cfg.friction_kind),
                                   resolve_drift(cfg.friction.record(), n * h), gp, cp, s,
                                   make_sensor(cfg), 0, 0.0, cfg.sim.fall_angle, out, True, True,

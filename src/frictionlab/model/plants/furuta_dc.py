@@ -92,12 +92,14 @@ __all__ = [
     "HOMEBUILT",
     "PRESETS",
     "PRESET_FRICTION",
+    "PRESET_SWINGUP",
     "QUBE2",
     "QUBE2_WORKBOOK",
     "QUBE3",
     "SUBSTEPS",
     "DCRecord",
     "FurutaDCParams",
+    "arm_voltage",
     "dc_accelerations",
     "dc_mass_forcing",
     "dc_record",
@@ -266,6 +268,36 @@ def dc_accelerations(sn, cs, thd, ad, volts, r):
     inv = 1.0 / (m11 * m22 - m12 * m12)
     return ((m22 * f1 - m12 * f2) * inv, (m11 * f2 - m12 * f1) * inv,
             -m12 * r.kv * inv, m11 * r.kv * inv)
+
+
+@jit
+def arm_voltage(sn, cs, thd, ad, arm_dd, r):
+    r"""The voltage that gives the arm the angular acceleration ``arm_dd`` (rad/s^2)
+    in the state (theta, theta', arm') with no friction: the coupled equations
+    solved for u (the swing-up's inverse of the arm's dynamics).
+
+    Eliminating :math:`\ddot\theta` with the pendulum's row,
+
+    .. math::
+
+        k_v u = \Bigl(m_{22} - \frac{m_{12}^2}{m_{11}}\Bigr)\ddot\phi
+                + \frac{m_{12}}{m_{11}} f_1 - f_2\big|_{u=0},
+
+    :math:`k_v = k_t/R_m` (the forcing is linear in u: :func:`dc_mass_forcing`).
+
+    Parameters
+    ----------
+    sn, cs : float
+        :math:`\sin\theta, \cos\theta`.
+    thd, ad : float
+        :math:`\dot\theta, \dot\phi` (rad/s).
+    arm_dd : float
+        The arm's angular acceleration asked for (rad/s^2).
+    r : DCRecord
+    """
+    m11, m12, m22, f1, f2 = dc_mass_forcing(sn, cs, thd, ad, 0.0, r)
+    q = m12 / m11
+    return ((m22 - q * m12) * arm_dd + q * f1 - f2) / r.kv
 
 
 def _record(params: FurutaDCParams) -> DCRecord:
@@ -479,12 +511,19 @@ QUBE2_WORKBOOK = dataclasses.replace(QUBE2, arm_damping=0.0015, pendulum_damping
 #: same rotary-pendulum module; damping as QUBE2, an estimate).
 QUBE3 = dataclasses.replace(QUBE2, resistance=7.5, torque_constant=0.0422,
                             emf_constant=0.0422)
-#: A home-built rig (Arduino, 12 V 30:1 gear motor with encoder, H-bridge, a
-#: pendulum on a bearing): an ESTIMATE (docs/model.md), not a measured rig.
+#: A home-built rig (docs/build-a-rig.md: an Arduino, a 12 V 30:1 gear motor on an
+#: H-bridge, 600-line encoders on both axes): an ESTIMATE, not a measured rig.  The
+#: motor is Pololu's 37D 30:1 12 V gear motor (items 4742/4752; "37D Metal Gearmotors"
+#: datasheet, Rev 1.2: 330 rpm and 0.2 A without load, 140 kg mm and 5.5 A stalled, at
+#: 12 V): R_m = 12 V / 5.5 A, k_m = (12 V - 0.2 A R_m) / 34.6 rad/s, k_t = 1.37 N m /
+#: (5.5 - 0.2) A at the output shaft (the gearbox's losses in it); the rotor's inertia
+#: through the gearbox is not in the datasheet (4e-4 kg m^2: a 10 ms mechanical time
+#: constant); links of a 0.15 m arm and a 0.25 m, 30 g rod (docs/model.md, "Presets").
 HOMEBUILT = FurutaDCParams(
-    resistance=2.4, torque_constant=0.2, emf_constant=0.3, arm_mass=0.06, arm_length=0.15,
-    rotor_inertia=4e-4, pendulum_mass=0.03, pendulum_length=0.25, arm_damping=0.002,
-    pendulum_damping=0.00005, voltage_limit=12.0, arm_counts=1920, pendulum_counts=2400)
+    resistance=2.2, torque_constant=0.26, emf_constant=0.335, arm_mass=0.06,
+    arm_length=0.15, rotor_inertia=4e-4, pendulum_mass=0.03, pendulum_length=0.25,
+    arm_damping=0.002, pendulum_damping=0.00005, voltage_limit=12.0, arm_counts=2400,
+    pendulum_counts=2400)
 
 #: The presets by name.
 PRESETS: dict[str, FurutaDCParams] = {
@@ -504,9 +543,18 @@ PRESET_FRICTION: dict[str, dict[str, float]] = {
     "qube2": dict(_QUBE_FRICTION),
     "qube2-workbook": dict(_QUBE_FRICTION),
     "qube3": dict(_QUBE_FRICTION),
-    "homebuilt": {"friction.stiction": 0.7, "friction.coulomb": 0.5, "friction.viscous": 0.0,
+    # the gear motor's no-load current times R_m (0.2 A x 2.2 ohm), stiction 1.3 times it
+    "homebuilt": {"friction.stiction": 0.57, "friction.coulomb": 0.44, "friction.viscous": 0.0,
                   "friction.zero_velocity_band": 0.02},
 }
+
+
+#: The swing-up's defaults on a motor plant (``swingup.*`` keys that differ
+#: from the thesis plant's; docs/swingup.md, "The DC-motor plant"): the
+#: friction margin in volts (the QUBE's F_C is estimated at 0.15 V; 0.3 V
+#: covers the range the Monte Carlo draws), the arm travel the cable to the
+#: pendulum module allows (about half a turn either way: 3 rad).
+PRESET_SWINGUP: dict[str, float] = {"swingup.friction_margin": 0.3, "swingup.arm_limit": 3.0}
 
 
 def preset(name: str) -> FurutaDCParams:

@@ -49,6 +49,7 @@ __all__ = [
     "dc_design",
     "dc_observer_step",
     "dc_observer_update",
+    "dc_predicted_peak",
     "dc_spec",
     "observer_row",
 ]
@@ -244,3 +245,23 @@ def dc_observer_step(xhat, theta_m, arm_m, arm_dot_m, u, obs_row):
     """
     xhat[0], xhat[1], xhat[2], xhat[3] = dc_observer_update(
         xhat[0], xhat[1], xhat[2], xhat[3], theta_m, arm_m, arm_dot_m, u, obs_row)
+
+
+@jit
+def dc_predicted_peak(l1, l2, l3, l4, o, theta, theta_dot, arm_dot, n):
+    """Largest |u| (V) of the state feedback ``u = -L x`` over the next ``n``
+    ticks, predicted on the design's discretised linearisation (``Phi``,
+    ``Gamma`` of :func:`observer_row`'s row ``o``) from (theta, theta', arm 0,
+    arm'): the swing-up's hand-over test on this plant (no friction, no
+    saturation)."""
+    x0, x1, x2, x3 = theta, theta_dot, 0.0, arm_dot
+    peak = 0.0
+    for _ in range(int(n)):
+        u = -(l1 * x0 + l2 * x1 + l3 * x2 + l4 * x3)
+        peak = max(peak, abs(u))
+        n0 = o[0] * x0 + o[1] * x1 + o[2] * x2 + o[3] * x3 + o[16] * u
+        n1 = o[4] * x0 + o[5] * x1 + o[6] * x2 + o[7] * x3 + o[17] * u
+        n2 = o[8] * x0 + o[9] * x1 + o[10] * x2 + o[11] * x3 + o[18] * u
+        n3 = o[12] * x0 + o[13] * x1 + o[14] * x2 + o[15] * x3 + o[19] * u
+        x0, x1, x2, x3 = n0, n1, n2, n3
+    return peak
