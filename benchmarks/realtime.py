@@ -38,6 +38,7 @@ Usage::
     .venv/bin/python benchmarks/realtime.py                 # 1 run of 120 s
     .venv/bin/python benchmarks/realtime.py --runs 3        # the issue's 3 x 120 s
     .venv/bin/python benchmarks/realtime.py --duration 20   # a smoke check
+    .venv/bin/python benchmarks/realtime.py --plant qube2 --duration 60   # a motor plant
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from frictionlab.io.runlog import run_log_features
 from frictionlab.realtime.rigsim import send_control
 
 CLI = [sys.executable, "-m", "frictionlab"]
@@ -108,8 +110,9 @@ def host_timer(cpu: int, seconds: float) -> dict | None:
 
 
 def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str],
-            baseline: float = 0.0) -> dict:
-    rig = subprocess.Popen([*CLI, "rig-sim", "--port", "0", "--json"], stdout=subprocess.PIPE,
+            baseline: float = 0.0, plant: str = "thesis") -> dict:
+    rig = subprocess.Popen([*CLI, "rig-sim", "--plant", plant, "--port", "0", "--json"],
+                           stdout=subprocess.PIPE,
                            stderr=subprocess.DEVNULL, text=True)
     hog = None
     try:
@@ -122,8 +125,8 @@ def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str],
         hog = _busy(allowed - {loop_cpu}) if busy else None
         floor = host_timer(loop_cpu, baseline)
         out = subprocess.run([*CLI, "run", "--headless", "--json", "--duration", str(duration),
-                              "--backend", f"udp://127.0.0.1:{port}", "--log-dir",
-                              str(log_dir), *extra], capture_output=True, text=True,
+                              "--backend", f"udp://127.0.0.1:{port}", "--plant", plant,
+                              "--log-dir", str(log_dir), *extra], capture_output=True, text=True,
                              timeout=duration + 120)
         try:
             rig_status = send_control("127.0.0.1", port, {"cmd": "status"})
@@ -140,8 +143,11 @@ def one_run(duration: float, busy: bool, log_dir: Path, extra: list[str],
     st = json.loads(out.stdout)
     meta = json.loads(Path(st["log"]).with_suffix(".json").read_text())
     full = meta["stats"]
+    feats = run_log_features(st["log"])["features"]
     return {
         **st,
+        "plant": plant,
+        "limit_cycle": {k: feats[k] for k in ("peak1", "period", "max_u")},
         "exit_status": out.returncode,
         "missed_fraction": full["missed_fraction"],
         "max_stall_ms": full["max_stall_ms"],
@@ -181,6 +187,8 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", type=float, default=20.0, help="seconds of the plain "
                     "host timer before each run (20; 0 = skip)")
     ap.add_argument("--log-dir", default=None, help="keep the logs here (default: a temp dir)")
+    ap.add_argument("--plant", default="thesis", help="the plant of rig-sim and run "
+                    "(thesis, furuta-dc, qube2, qube3; default thesis)")
     ap.add_argument("run_args", nargs="*", help="extra arguments for frictionlab run "
                     "(after --)")
     args = ap.parse_args(argv)
@@ -189,7 +197,7 @@ def main(argv=None) -> int:
         log_dir = Path(args.log_dir or tmp)
         for i in range(args.runs):
             run = one_run(args.duration, not args.no_busy, log_dir, args.run_args,
-                          args.baseline)
+                          args.baseline, args.plant)
             run["targets_met"] = targets_met(run)
             runs.append(run)
             j, c, r = run["jitter_ms"], run["compute_us"], run["rig_us"]
@@ -200,6 +208,9 @@ def main(argv=None) -> int:
                   f"max {j['max']:.3f} ms; compute p50 {c['p50']:.0f} us, p99 {c['p99']:.0f} "
                   f"us; rig round trip p50 {r['p50']:.0f} us, p99 {r['p99']:.0f} us",
                   file=sys.stderr)
+            lc = run["limit_cycle"]
+            print(f"  {run['plant']}: theta peak {lc['peak1']} rad, period {lc['period']} s, "
+                  f"max |u| {lc['max_u']} (units of u)", file=sys.stderr)
             print(f"  stalls {run['stalls']} (max {run['max_stall_ms']:.1f} ms, unaccounted "
                   f"> 50 ms: {run['unaccounted_stalls_over_50ms']}), dropped log samples "
                   f"{run['dropped_log_samples']}, rig timeouts {run['rig_timeouts']}; "

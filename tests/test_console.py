@@ -575,6 +575,43 @@ def test_adaptive_compensation_through_the_api(app_and_controller):
     assert r.json()["status"]["adaptation"] is None
 
 
+@pytest.mark.slow
+def test_the_console_of_a_motor_plant_shows_and_checks_it_in_volts(tmp_path):
+    """``frictionlab run --plant qube2``'s console: the schema and the status name the
+    plant and u's unit (V), the compensator's fields and defaults are in volts, the
+    presets are the plant's own designs, and the model's check of a change runs on the
+    plant (its slow design falls; a compensator level over the 10 V limit saturates,
+    said in volts)."""
+    from frictionlab.model.plants.furuta_dc_design import dc_design, dc_spec
+
+    cfg = build_config("fast", "classical", plant="qube2")
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    app = create_app(ctl, None, frame_period=0.01, status_period=0.05)
+    with TestClient(app, base_url="http://127.0.0.1:8000") as client:
+        sch = client.get("/api/schema").json()
+        assert (sch["plant"], sch["u_unit"]) == ("qube2", "V")
+        units = {f["name"]: f["unit"] for f in sch["compensation"]["fields"]["lugre"]}
+        assert units["stiction"] == "V" and units["sigma0"] == "V/rad"
+        assert sch["compensation"]["defaults"]["classical"]["coulomb"] == pytest.approx(0.155)
+        assert sch["presets"]["slow"]["omega0"] == pytest.approx(cfg.plant.omega0)
+        st = client.get("/api/status").json()
+        assert (st["plant"], st["u_unit"], st["design"]["preset"]) == ("qube2", "V", "fast")
+        assert np.shape(st["design"]["K"]) == (4, 3)  # the predictor observer's gain
+        # confirmed: the slow design falls on this plant (its refusal's search for a safe
+        # part simulates a dozen designs, seconds of CPU: not asked for here)
+        r = client.post("/api/design", json={"preset": "slow", "confirm": True})
+        assert r.status_code == 200 and r.json()["status"]["design"]["preset"] == "slow"
+        assert ctl.events[-1]["confirmed_unsafe"] == "falls"
+        slow = dc_design(dc_spec("slow", cfg.plant), cfg.plant)
+        np.testing.assert_allclose(r.json()["status"]["design"]["L"], slow.L)
+        r = client.post("/api/compensation", json={"kind": "coulomb",
+                                                   "params": {"coulomb": 12.0}})
+        assert r.status_code == 422 and r.json()["check"]["verdict"] == "saturating"
+        assert " V > the DAC limit 10" in r.json()["detail"]
+    ctl.close()
+
+
 @pytest.mark.parametrize("path, body, field, verdict", [
     ("/api/design", {"omega0": 100.0}, "omega0", "unstable"),
     ("/api/design", {"observer_omega1": 1000.0}, "observer_omega1", "unstable"),

@@ -350,13 +350,6 @@ def test_compensate_compare_runs_the_compensator_in_volts_on_the_qube2(cli):
     assert out["reduction"] > 1.5
 
 
-@pytest.mark.parametrize("command", [["run", "--headless", "--json"], ["rig-sim"]])
-def test_the_real_time_commands_refuse_a_motor_plant_before_starting(cli, command):
-    res = cli(*command, "--plant", "qube2")
-    assert res.returncode == 2
-    assert "thesis plant only" in res.stderr and res.stdout == ""
-
-
 def test_a_motor_plants_figure_title_names_the_plant_and_its_own_design_preset():
     from frictionlab.plotting import config_title
 

@@ -14,12 +14,10 @@ every call) first on its ``PYTHONPATH``:
   motor while it is stopped, and after SIGCONT the controller stops within
   2 s without enabling the amplifier again.
 
-Until the QUBE-Servo 2 plant's own controller exists (``--plant qube2``), the
-runs use the thesis's controller and swing-up tuned to the QUBE's pendulum
-(:data:`STAND_IN`: its natural frequency sqrt(3 g / 2 L_p) = 10.68 rad/s, its
-arm length), with u in volts (the backend's ``rig.u_scale`` 0.1): on the
-emulated board that swings up in about 1.7 s and balances within one encoder
-count.  When the plant lands, :data:`STAND_IN` becomes ``["--plant", "qube2"]``.
+Every run uses the QUBE-Servo 2 plant's own controller and swing-up within 10 V
+(``--plant qube2``, which ``qube2://`` implies): the swing-up run from hanging;
+the others from a start by hand (``?wait=upright`` and the emulated operator
+lifting the pendulum, ``lift_at``).
 """
 
 from __future__ import annotations
@@ -47,15 +45,24 @@ from qube_helpers import (
     voltages,
 )
 
-#: The controller for the QUBE until ``--plant qube2`` exists (see the module docstring).
-STAND_IN = ["--set", "plant.omega0=10.68", "--set", "design.omega0=10.68",
-            "--set", "plant.arm_length=0.085"]
+#: The operator lifts the pendulum this long after the board opens (board time, s).
+LIFT_AT = 0.3
 #: Slack for a loaded machine where the stop itself is not under test (docs/development.md):
 #: the board's watchdog and the loop's pause limit at half a second.
 SLACK = ["--max-pause", "0.5", "--silent-periods", "100"]
 
 
-def start(tmp_path: Path, backend: str, duration: float, *extra: str, faults=None):
+def start(tmp_path: Path, backend: str, duration: float, *extra: str, faults=None,
+          swing_up: bool = True):
+    """``frictionlab run --backend ... --headless --json`` in a process of its own (the
+    ``qube2`` plant): with the swing-up, or started by hand (``?wait=upright`` and the
+    emulated hand's ``lift_at``)."""
+    if not swing_up:
+        faults = {"lift_at": LIFT_AT, **(faults or {})}
+        backend += "&wait=upright" if "?" in backend else "?wait=upright"
+        # slack for a stalled host, the angle limit not being under test (a 0.3 s stall
+        # with the plant moving on threw the 0.1 rad cycle past 0.35 rad at a load of 18)
+        extra = ("--angle-limit", "1.2", *extra)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([FAKE, *filter(None, [env.get("PYTHONPATH")])])
     env["FAKE_QUANSER_LOG"] = str(tmp_path / "board.jsonl")
@@ -64,9 +71,10 @@ def start(tmp_path: Path, backend: str, duration: float, *extra: str, faults=Non
         env["FAKE_QUANSER_FAULTS"] = json.dumps(faults)
     else:
         env.pop("FAKE_QUANSER_FAULTS", None)
-    cmd = [sys.executable, "-m", "frictionlab", "run", "--backend", backend, "--swing-up",
+    how = ["--swing-up"] if swing_up else []
+    cmd = [sys.executable, "-m", "frictionlab", "run", "--backend", backend, *how,
            "--headless", "--duration", str(duration), "--json", "--log-dir",
-           str(tmp_path / "logs"), *STAND_IN, *extra]
+           str(tmp_path / "logs"), *extra]
     return subprocess.Popen(cmd, env=env, text=True, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, process_group=0)
 
@@ -161,7 +169,7 @@ def test_swings_up_and_balances_on_the_emulated_qube(tmp_path):
 @pytest.mark.realtime
 def test_sigint_while_balancing_zeroes_the_motor_and_closes_the_board(tmp_path):
     def attempt(folder):
-        proc = start(folder, "qube2://0?watchdog=0.5", 60, *SLACK)
+        proc = start(folder, "qube2://0?watchdog=0.5", 60, *SLACK, swing_up=False)
         wait_balancing(folder, proc)
         t_sig = time.monotonic()
         os.kill(proc.pid, signal.SIGINT)
@@ -189,7 +197,7 @@ def test_sigstop_the_board_watchdog_zeroes_the_motor(tmp_path):
     cannot run; after SIGCONT the run stops within 2 s, never enabling again."""
     def attempt(folder):
         proc = start(folder, "qube2://0?watchdog=0.2", 60, "--max-pause", "0.15",
-                     "--silent-periods", "30")
+                     "--silent-periods", "30", swing_up=False)
         wait_balancing(folder, proc)
         t_stop = time.monotonic()
         os.kill(proc.pid, signal.SIGSTOP)
@@ -213,35 +221,57 @@ def test_sigstop_the_board_watchdog_zeroes_the_motor(tmp_path):
 
 
 @pytest.mark.slow
-def test_an_amplifier_fault_while_balancing_stops_the_run(tmp_path, monkeypatch):
-    """In-process on a fake clock (the board's time too): the fault at 10.0 s, when the
-    stand-in controller balances; nothing but 0 V from the tick that reads it."""
+def test_an_amplifier_fault_while_the_qube2_controller_balances_stops_the_run(tmp_path,
+                                                                              monkeypatch):
+    """In-process on a fake clock (the board's time too): the QUBE-Servo 2 plant's own
+    controller (``qube2://`` implies ``--plant qube2``), started by hand (the pendulum
+    lifted at 0.3 s), balances within 10 V; the fault at 6 s stops the run, nothing
+    but 0 V from the tick that reads it."""
+    from frictionlab.cli.common import plant_from_args
     from frictionlab.config import build_config
     from frictionlab.realtime import FakeClock, RealtimeController
     from frictionlab.realtime.qube import QUBE_RIG
 
-    monkeypatch.setenv("FAKE_QUANSER_FAULTS", '{"amplifier_fault_at": 10.0}')
+    what = "amplifier_fault"
+    monkeypatch.setenv("FAKE_QUANSER_FAULTS", json.dumps({"lift_at": LIFT_AT,
+                                                          f"{what}_at": 6.0}))
     monkeypatch.delenv("FAKE_QUANSER_LOG", raising=False)
     monkeypatch.delenv("FAKE_QUANSER_STATE", raising=False)
     clock = FakeClock()
+    monkeypatch.setattr("frictionlab.realtime.qube.time.sleep",
+                        lambda s: clock.advance(round(s * 1e9)))
     hw = load_fake(clock)
+    backend = "qube2://0?wait=upright"
+    plant = plant_from_args(type("Args", (), {"plant": None, "backend": backend})())
     try:
-        sets = [*QUBE_RIG.items(), *(tuple(s.split("=")) for s in STAND_IN[1::2])]
-        ctl = RealtimeController(build_config(sets=sets), "qube2://0", log_dir=tmp_path,
-                                 clock=clock, realtime=False, duration=10.2, swing_up=True)
+        cfg = build_config(plant=plant, sets=list(QUBE_RIG.items()))
+        ctl = RealtimeController(cfg, backend, log_dir=tmp_path, clock=clock, realtime=False,
+                                 duration=6.2)
         st = ctl.run()
         board = hw.BOARDS[-1]
     finally:
         unload_fake()
-    assert st["stop_reason"] == "amplifier_fault"
-    assert st["swing_up"]["phase"] == "balancing"
+    assert plant == "qube2" and cfg.u_limit == 10.0
+    assert st["stop_reason"] == what, st
     calls = calls_of(board)
-    t_fault = next(c[0] for c in calls if c[2] == "event" and c[3][0] == "amplifier_fault")
-    assert all(v == 0.0 for _i, m, v in voltages(calls) if m >= t_fault)
-    writes_after = [m for _i, m, _v in voltages(calls) if m >= t_fault]
+    t_fault = next(c[0] for c in calls if c[2] == "event" and c[3][0] == what)
+    volts = voltages(calls)
+    # balancing in its friction limit cycle before the fault: within 0.2 rad, |V| < 10
+    th = thetas(log_rows_in(tmp_path))
+    assert max(abs(v) for t, v in th if 2.0 <= t < 6.0) < 0.2
+    assert 0.1 < max(abs(v) for _i, m, v in volts if m < t_fault) < 10.0
+    assert all(v == 0.0 for _i, m, v in volts if m >= t_fault)
+    writes_after = [m for _i, m, _v in volts if m >= t_fault]
     assert writes_after and writes_after[0] - t_fault <= 0.005 + 1e-9  # the next tick
     check_safe_sequence(calls)
-    # the LED: blue (open), yellow (swinging), green (balancing), red (the board's fault)
+    # the LED: blue (open, waiting), green (balancing), red (the board's fault)
     leds = [tuple(c[3][1]) for c in calls if c[2] == "write_other"]
     assert leds[0] == (0.0, 0.0, 1.0) and leds[-1] == (1.0, 0.0, 0.0)
-    assert leds.index((1.0, 1.0, 0.0)) < leds.index((0.0, 1.0, 0.0))
+    assert (0.0, 1.0, 0.0) in leds
+
+
+def log_rows_in(folder: Path) -> list[dict]:
+    """The run log's rows of a run logged straight into ``folder``."""
+    files = sorted(folder.glob("run-*.csv"))
+    with open(files[0], newline="") as fh:
+        return list(csv.DictReader(fh))

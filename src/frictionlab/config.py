@@ -172,9 +172,10 @@ class SimParams(Validated):
                          lo=0.0, hi=1.0)
     seed: int = param(0, "random seed of the measurement noise", "1", lo=0, hi=2**32 - 1,
                       integer=True)
-    quantization: float = param(0.0, "1 = measure through the rig's 12-bit converters "
-                                "(the grid in raw units with the rig.* factors, wrap and "
-                                "range; frictionlab.model.sensor), 0 = ideal", "1", lo=0.0, hi=1.0)
+    quantization: float = param(0.0, "1 = measure through the rig's 12-bit converters, a "
+                                "motor rig's encoders (the grid in raw units with the rig.* "
+                                "factors, wrap and range; frictionlab.model.sensor), 0 = ideal",
+                                "1", lo=0.0, hi=1.0)
     fall_angle: float = param(math.pi / 2, "|theta| beyond which the pendulum has fallen",
                               "rad", lo=0.0, hi=math.pi, lo_open=True)
     duration: float = param(40.0, "simulated time", "s", lo=0.0, hi=1e5, lo_open=True)

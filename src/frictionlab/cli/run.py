@@ -187,12 +187,6 @@ def _cmd_run(args) -> int:
         raise UsageError("--json needs --headless: the console prints its address, not one "
                          "JSON object (use --headless --duration S --json)")
     cfg = hanging_start(args, config_from_args(args))
-    if args.swing_up:
-        from ..realtime.api import swing_up_refusal
-
-        refusal = swing_up_refusal(cfg)
-        if refusal:
-            raise UsageError(f"--swing-up: {refusal}")
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise UsageError(f"--duration must be > 0, got {args.duration}")
     if not 0 <= args.prewarm_us < cfg.design.h * 1e6 / 2:

@@ -21,11 +21,13 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from ..config import Config, build_config, describe_keys, motor_friction_defaults
 from ..model.controller import COMPENSATOR_FIELDS as _MODEL_FIELDS
 from ..model.controller import COMPENSATORS, ERROR_SIGNALS
-from ..model.design import PRESETS, DesignSpec
+from ..model.design import DesignSpec
 from ..model.friction import FrictionParams
 from ..model.params import ParamError
+from ..realtime.params import plant_presets
 
 __all__ = [
     "COMPENSATOR_FIELDS",
@@ -328,18 +330,33 @@ def _field_info(cls, name: str) -> dict:
             "hi": num(m["hi"]), "lo_open": m["lo_open"], "hi_open": m["hi_open"]}
 
 
-def schema() -> dict:
-    """Fields, units and allowed ranges the page validates against (``GET /api/schema``)."""
+def schema(cfg: Config | None = None) -> dict:
+    """Fields, units and allowed ranges the page validates against (``GET /api/schema``),
+    for the run's plant (``cfg``; default the thesis's): ``plant`` its ``--plant`` name,
+    ``u_unit`` the unit of u and of the friction levels (``m/s^2``, or ``V`` for a motor
+    plant, whose compensator fields' units and defaults are then in volts), its
+    ``presets``."""
+    cfg = cfg or build_config()
+    units = {key.removeprefix("compensation."): unit
+             for key, _doc, unit, _rng in describe_keys(cfg.plant_kind)
+             if key.startswith("compensation.")}
+    comp = {k: FrictionParams.defaults(k, "compensation") for k in COMPENSATOR_FIELDS}
+    if cfg.motor:  # the thesis's settings scaled to the plant's levels (config)
+        comp = {k: motor_friction_defaults(cfg.plant_kind, p, p)[1] for k, p in comp.items()}
+
+    def field_info(name: str) -> dict:
+        return {**_field_info(FrictionParams, name), "unit": units.get(name, "")}
+
     return {
+        "plant": cfg.plant_kind,
+        "u_unit": cfg.plant_model.u_unit,
         "feedback": [_field_info(DesignSpec, n) for n in FEEDBACK_FIELDS],
         "observer": [_field_info(DesignSpec, n) for n in OBSERVER_FIELDS],
-        "presets": {k: dataclasses.asdict(v) for k, v in PRESETS.items()},
+        "presets": {k: dataclasses.asdict(v) for k, v in plant_presets(cfg).items()},
         "compensation": {
             "kinds": list(COMPENSATOR_FIELDS),
-            "fields": {k: [_field_info(FrictionParams, n) for n in v]
-                       for k, v in COMPENSATOR_FIELDS.items()},
-            "defaults": {k: dataclasses.asdict(FrictionParams.defaults(k, "compensation"))
-                         for k in COMPENSATOR_FIELDS},
+            "fields": {k: [field_info(n) for n in v] for k, v in COMPENSATOR_FIELDS.items()},
+            "defaults": {k: dataclasses.asdict(p) for k, p in comp.items()},
             "error_signals": list(ERROR_SIGNALS),
         },
         "push": {"lo": KICK_RANGE[0], "hi": KICK_RANGE[1], "default": 0.3},

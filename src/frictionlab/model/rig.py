@@ -79,8 +79,9 @@ class RigScaling(Validated):
     velocity_bias: float = param(0.02, "added to the arm-velocity reading v before scaling "
                                  "(the resting arm reads v = -velocity_bias; App. B.3)", "1",
                                  lo=-1.0, hi=1.0)
-    u_scale: float = param(-0.022, "k_u: signed DAC value per m/s^2 of u, u_DA = u_scale*u "
-                           "(App. B.4; negative on the thesis's rig; not 0)", "1/(m/s^2)",
+    u_scale: float = param(-0.022, "k_u: signed DAC value per unit of u (m/s^2; a volt on a "
+                           "motor plant: 1/voltage limit), u_DA = u_scale*u (App. B.4; "
+                           "negative on the thesis's rig; not 0)", "1/(m/s^2)",
                            lo=-1.0, hi=1.0)
     arm_sign: int = param(1, "direction of the arm encoder against the arm angle Omega "
                           "(encoder rigs, e.g. the QUBE-Servo: +1 as the maker wires it, "

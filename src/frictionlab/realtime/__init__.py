@@ -37,7 +37,10 @@ Everything the operator console (or a script) needs is one object,
     ``stop_reason``/``stop_detail``, ``ticks``, ``missed``, ``overruns``,
     ``rig_timeouts``, ``jitter_ms`` and ``compute_us`` (``p50``, ``p99``,
     ``p999``, ``max``, ``mean``), ``max_stall_ms``,
-    ``design`` (``preset``, ``spec``, ``L``, ``K``), ``compensation``
+    ``plant`` (the ``--plant`` name) and ``u_unit`` (u's and the friction
+    levels' unit: ``m/s^2``, or ``V`` for a motor plant),
+    ``design`` (``preset``, ``spec``, ``L``, ``K``: a motor plant's 4 x 3
+    observer gain as rows), ``compensation``
     (``enabled``, ``kind``, ``params``, ``error_signal``), ``friction``
     (the simulated plant's friction model, None for a real rig),
     ``recording``, ``log``/``log_files``, ``dropped_log_samples``,

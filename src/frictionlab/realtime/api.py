@@ -26,7 +26,7 @@ from .params import ControlParams
 from .rigs import Rig, RigError, open_rig, parse_backend
 from .samples import Subscription
 
-__all__ = ["GC_POLICY", "ControllerStateError", "RealtimeController", "swing_up_refusal"]
+__all__ = ["GC_POLICY", "ControllerStateError", "RealtimeController"]
 
 GC_POLICY = ("gc.freeze() + gc.disable() during the run; the loop runs gc.collect(0) every "
              "1 s, gc.collect(1) every 10 s, gc.collect(2) every 60 s, after a tick's output")
@@ -206,9 +206,6 @@ class RealtimeController:
     def _prepare(self, experiment=None, swing_up: bool | None = None,
                  hanging: bool = False) -> Loop:
         swing_up = self.swing_up if swing_up is None else bool(swing_up)
-        refusal = swing_up_refusal(self.cfg) if swing_up and experiment is None else None
-        if refusal:
-            raise ValueError(refusal)
         with self._lock:
             if self._closed:
                 raise ControllerStateError("the controller is closed")
@@ -572,6 +569,8 @@ class RealtimeController:
             "backend": self.backend_name,
             "sim_lockstep": self.sim_lockstep,
             "h": self.cfg.design.h,
+            "plant": self.cfg.plant_kind,
+            "u_unit": self.cfg.plant_model.u_unit,
             "t0_monotonic_ns": None if loop is None else loop.t0_ns,
             "x0": None if loop is None else loop.x0,
             "config": self.cfg.as_flat_dict(),
@@ -598,18 +597,6 @@ class RealtimeController:
             "experiment": (None if self.run_experiment is None
                            else self.run_experiment.describe()),
         }
-
-
-def swing_up_refusal(cfg: Config) -> str | None:
-    """Why a run of ``cfg`` cannot start with the swing-up (None: it can).
-
-    A motor plant's swing-up within its voltage limit is not there yet: its
-    controller's estimates are not the thesis swing-up's."""
-    if cfg.motor:
-        return (f"the swing-up of the {cfg.plant_kind!r} plant within its voltage limit is "
-                "not implemented yet: lift the pendulum by hand (qube2://0?wait=upright, "
-                "docs/qube.md)")
-    return None
 
 
 def check_backend(spec: str) -> None:

@@ -68,6 +68,7 @@ __all__ = [
     "ControlParams",
     "UncheckableChange",
     "UnsafeChange",
+    "plant_presets",
 ]
 
 #: Friction models the compensator can use (the thesis's "Friction Type").
@@ -490,13 +491,8 @@ class ControlParams:
 
     @functools.cached_property
     def presets(self) -> dict[str, DesignSpec]:
-        """The ``fast`` and ``slow`` designs of Sec. 2.4 on this plant (a motor
-        plant's: :func:`~frictionlab.model.plants.furuta_dc_design.dc_spec`, the
-        pattern scaled to its unstable rate, at the run's h)."""
-        if not self.cfg.motor:
-            return PRESETS
-        h = self.cfg.design.h
-        return {name: dc_spec(name, self.cfg.plant, h) for name in PRESETS}
+        """The ``fast`` and ``slow`` designs on this plant (:func:`plant_presets`)."""
+        return plant_presets(self.cfg)
 
     @property
     def preset(self) -> str | None:
@@ -521,6 +517,16 @@ class ControlParams:
                              "params": dataclasses.asdict(self.comp_params[self.comp_kind]),
                              "error_signal": self.error_signal},
         }
+
+
+def plant_presets(cfg: Config) -> dict[str, DesignSpec]:
+    """The ``fast`` and ``slow`` designs of Sec. 2.4 on the plant of ``cfg``: the
+    thesis's, or a motor plant's
+    (:func:`~frictionlab.model.plants.furuta_dc_design.dc_spec`: the pattern scaled to
+    its unstable rate), at the run's h."""
+    if not cfg.motor:
+        return PRESETS
+    return {name: dc_spec(name, cfg.plant, cfg.design.h) for name in PRESETS}
 
 
 def _passes(make) -> bool:

@@ -59,7 +59,9 @@ it count down at first.  Integrated by RK4 in steps of at most 1 ms.
 Faults (``FAKE_QUANSER_FAULTS``, a JSON object; or :meth:`Board.inject`):
 ``amplifier_fault_at`` (s of board time after ``open``: digital input 0 goes
 high and the amplifier turns off), ``stall_at`` (digital input 1),
-``stall_error_at`` (input 2, amplifier off).  A real stall is detected too: the
+``stall_error_at`` (input 2, amplifier off); ``lift_at`` (the operator's hand puts
+the pendulum :data:`LIFT_ANGLE` from upright and holds it there, the arm free, until
+the motor is driven: a start by hand).  A real stall is detected too: the
 motor at more than ``STALL_VOLTS`` with the arm slower than ``STALL_SPEED`` for
 ``STALL_TIME`` (input 1), and for ``STALL_ERROR_TIME`` more (input 2, amplifier off).
 ``FAKE_QUANSER_STATE`` (JSON: ``arm``, ``arm_rate``, ``pendulum``,
@@ -104,6 +106,8 @@ DT_MAX = 0.001     # largest integration step, s
 #: detected"; that for STALL_ERROR_TIME more, "stall error" (Quanser: about 3 s), the
 #: amplifier then off.
 STALL_VOLTS, STALL_SPEED, STALL_TIME, STALL_ERROR_TIME = 5.0, 0.5, 0.5, 3.0
+#: Where the operator's hand puts the pendulum (``lift``), rad from upright.
+LIFT_ANGLE = 0.05
 
 TACH = 14000
 LED = (11000, 11001, 11002)
@@ -237,6 +241,7 @@ class Board:
                   float(st.get("arm_rate", 0.0)), float(st.get("pendulum_rate", 0.0)))
         self.pendulum = bool(st.get("pendulum_module", True))
         self.blocked = bool(st.get("arm_blocked", False))
+        self.holding = False  # the hand holds the pendulum (lift) until the motor drives
         self.counts0 = [self._counts()[0], self._counts()[1]]
         self.voltage = 0.0        # analog output 0 as last written (V)
         self.enabled = False      # digital output 0
@@ -274,7 +279,11 @@ class Board:
     def _integrate(self, t_end: int) -> None:
         while self.t < t_end:
             dt = min(DT_MAX, (t_end - self.t) / 1e9)
+            if self.holding and self._motor():
+                self.holding = False  # the controller drives the motor: the hand lets go
             self.x = rk4(self.x, self._motor(), dt, self.pendulum, self.blocked)
+            if self.holding:
+                self.x = (self.x[0], LIFT_ANGLE, self.x[2], 0.0)
             self.t = min(t_end, self.t + max(1, round(dt * 1e9)))
             self._stall_check()
 
@@ -318,8 +327,13 @@ class Board:
         self._integrate(now)
 
     def inject(self, fault: str) -> None:
-        """Make a fault happen now: ``amplifier_fault``, ``stall``, ``stall_error``."""
-        if fault == "amplifier_fault":
+        """Make a fault happen now: ``amplifier_fault``, ``stall``, ``stall_error``; or
+        ``lift``: the operator's hand puts the pendulum 0.05 rad from upright, at rest,
+        and holds it there until the motor is driven (the thesis's start by hand)."""
+        if fault == "lift":
+            self.x = (self.x[0], LIFT_ANGLE, 0.0, 0.0)
+            self.holding = True
+        elif fault == "amplifier_fault":
             self.amp_fault = True
         elif fault == "stall":
             self.stall = True

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import inspect
 import math
 import threading
@@ -10,6 +9,7 @@ import time
 
 from fastapi import APIRouter, HTTPException
 
+from ...config import describe_keys
 from ...model.params import ParamError
 from ...realtime.api import ControllerStateError
 from ...realtime.experiment import EXPERIMENT_CLASSES, Limits
@@ -79,14 +79,15 @@ _UNITS = {"period": "s", "rest_angle": "rad", "residual_rms": "rad/s",
 
 def estimate_unit(key: str, cfg) -> str:
     """The unit of an experiment's estimate ``key``: that of the parameter of ``cfg`` (the
-    run's configuration: friction, plant, rig scalings) it estimates."""
+    run's configuration: friction, plant, rig scalings) it estimates, in the plant's units
+    (friction levels in volts on a motor plant)."""
     if key in _UNITS:
         return _UNITS[key]
     base = key.removesuffix("_positive").removesuffix("_negative")
-    for section in (cfg.friction, cfg.plant, cfg.rig):
-        for f in dataclasses.fields(section):
-            if f.name == base and "unit" in f.metadata:
-                return f.metadata["unit"]
+    units = {k: unit for k, _doc, unit, _rng in describe_keys(cfg.plant_kind)}
+    for section in ("friction", "plant", "rig"):
+        if f"{section}.{base}" in units:
+            return units[f"{section}.{base}"]
     return ""
 
 

@@ -36,6 +36,6 @@ def router(ctx: Context) -> APIRouter:
 
     @r.get("/api/schema")
     def get_schema():
-        return schema()
+        return schema(ctx.controller.cfg)
 
     return r

@@ -240,8 +240,9 @@
   }
 
   // --- status line --------------------------------------------------------------------------
+  const unitText = (u) => (u || "m/s^2").replace("^2", "²");
   const fmt = (v, d = 3) => (v === null || v === undefined || Number.isNaN(v) ? "-" : String(+Number(v).toPrecision(d)));
-  const gains = (arr) => (arr ? "[" + arr.map((v) => Number(v).toPrecision(4)).join(", ") + "]" : "-");
+  const gains = (arr) => (arr ? "[" + arr.flat().map((v) => Number(v).toPrecision(4)).join(", ") + "]" : "-");
 
   function showStatus(st, force) {
     ui.status = st;
@@ -271,7 +272,7 @@
 
     const comp = st.compensation || {};
     const friction = st.friction ? `${st.friction} friction` : "real rig";
-    $("setup").textContent = `backend ${st.backend} (${friction}) · design ${(st.design && st.design.preset) || "custom"} · ` +
+    $("setup").textContent = `plant ${st.plant || "thesis"} (u in ${unitText(st.u_unit)}) · backend ${st.backend} (${friction}) · design ${(st.design && st.design.preset) || "custom"} · ` +
       `compensation ${comp.enabled ? "on" : "off"} (${comp.kind || "-"})` + (st.pending_changes ? " · change pending" : "");
 
     const sw = st.swing_up;
@@ -699,6 +700,11 @@
       return;
     }
     ui.schema = r.data;
+    // the plant's unit of u and of the friction levels (V for a motor plant)
+    const uUnit = unitText(r.data.u_unit);
+    GROUPS.find((g) => g.id === "control").unit = uUnit;
+    for (const el of document.querySelectorAll(".u-unit")) el.textContent = uUnit;
+    $("plant").textContent = `plant ${r.data.plant} · u in ${uUnit}`;
     buildDesignPanel("feedback", r.data.feedback);
     buildDesignPanel("observer", r.data.observer);
     const es = $("error-signal");
