@@ -140,6 +140,21 @@ def test_the_sliding_check_has_the_centripetal_term():
     assert np.allclose(loop_matrices(ctrl, arm_speed=0.0)[0], rest)  # no v^2 at rest
 
 
+@pytest.mark.slow
+def test_a_compensator_is_not_blamed_for_the_sliding_loops_own_instability():
+    """The QUBE's slow design sliding at 3 rad/s: the centripetal term alone takes the
+    loop past 1 (the Coulomb relay adds no slope); the Coulomb compensator is not
+    refused for it (the console's fall check judges the design)."""
+    cfg = build_config("slow", "classical", "coulomb", plant="qube2")
+    ctrl = make_controller(cfg)
+    free = np.max(np.abs(np.linalg.eigvals(
+        loop_matrices(ctrl, cfg.plant, 3.0, compensate=False)[0])))
+    assert free > 1.0
+    chk = check_loop(ctrl, cfg.plant)
+    assert chk.verdict == "ok", chk.reasons
+    assert chk.compensator_radius == pytest.approx(free, abs=1e-6)
+
+
 def test_presets_and_rig_settings_pass():
     for spec in (FAST, SLOW):
         for comp in ("none", "coulomb", "classical", "lugre"):
