@@ -4,7 +4,8 @@
   no imports paid again), with the exit status, stdout and stderr of the real
   command.  Use a subprocess only where the test is about the process itself
   (signals, the installed executable, start-up time, servers).
-- Markers set here by node id: ``realtime`` (:data:`REALTIME_MODULES`, UDP tests) and
+- Markers set here by node id: ``realtime`` (:data:`REALTIME_MODULES`, UDP tests, not
+  :data:`NOT_REALTIME`) and
   ``alone`` (:data:`ALONE`), the phases of ``scripts/test``.
 - Tests marked ``slow`` are collected first, so that with pytest-xdist
   (``scripts/test`` runs ``-n auto --dist loadgroup``) the long ones start at
@@ -48,6 +49,21 @@ REALTIME_MODULES = ("tests/browser/", "tests/test_realtime_cli.py",
                     "tests/test_console.py::test_a_first_session_loads_nothing_while_the_loop_runs",
                     "tests/test_console.py::test_idle_connections_cannot_lock_the_operator_out",
                     "tests/test_scripts.py::test_scripts_run_installs_and_serves_the_console")
+#: Tests of those modules (or named like UDP tests) that run no real-time loop against
+#: another process: the command line's refusals, in-process runs on a fake clock or
+#: with the loop replaced, a rig that never answers.  They run with the rest of the
+#: suite on every CPU instead of one at a time (a new test of a real-time module is
+#: ``realtime`` unless it is named here).
+NOT_REALTIME = ("tests/test_realtime_cli.py::"
+                "test_the_console_s_signal_handler_stops_the_loop_itself",
+                "tests/test_realtime_cli.py::test_bad_input_exits_2_with_a_message",
+                "tests/test_realtime_cli.py::test_unreachable_rig_exits_1",
+                "tests/test_realtime_cli.py::test_run_without_headless_hands_over_to_the_console",
+                "tests/test_realtime_cli.py::test_run_s_signal_handling_before_and_after_the_run",
+                "tests/test_realtime_cli.py::test_a_signal_before_the_run_starts_means_no_run",
+                "tests/test_realtime_cli.py::test_a_signal_while_the_console_is_being_set_up_ends_run",
+                "tests/test_realtime_rigs.py::test_udp_backend_without_a_rig_fails_to_open",
+                "tests/test_rig_experiments_udp.py::test_rig_sim_scripted_hand_bad_input")
 #: Real-time tests that must have the machine to themselves within the suite (marker
 #: ``alone``: scripts/test runs them last, one at a time): a browser beside a console
 #: (chromium takes a CPU of its own while it renders) and a timing statistic compared
@@ -65,7 +81,8 @@ def pytest_collection_modifyitems(config, items):
     once in a serial run.
     """
     for item in items:
-        if item.nodeid.startswith(REALTIME_MODULES) or "udp" in item.name:
+        if ((item.nodeid.startswith(REALTIME_MODULES) or "udp" in item.name)
+                and not item.nodeid.startswith(NOT_REALTIME)):
             item.add_marker(pytest.mark.realtime)
         if item.nodeid.startswith(ALONE):
             item.add_marker(pytest.mark.alone)

@@ -214,6 +214,7 @@ def _run_command(cwd: Path, doc: Path, line: int, command: str) -> None:
     if argv is not None:  # the same command line, without paying the interpreter's start-up
         res = run_cli_in_process(argv, cwd=cwd, env={"MPLBACKEND": "Agg"})
     else:
+        before = set(cwd.rglob("*"))
         for _attempt in range(3):
             res = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(),
                                  capture_output=True, text=True, timeout=TIMEOUT)
@@ -223,6 +224,10 @@ def _run_command(cwd: Path, doc: Path, line: int, command: str) -> None:
             if not (runs_the_loop(command) and res.returncode == 1
                     and LOAD_STOPS.search(res.stderr)):
                 break
+            # the stopped run's files go, as if it had not run (a later line's glob,
+            # run-*.csv, matched both runs' logs)
+            for path in sorted(set(cwd.rglob("*")) - before, reverse=True):
+                path.rmdir() if path.is_dir() else path.unlink()
             # shown in pytest's warnings summary: how often a host stalls this long
             warnings.warn(f"{doc.name}:{line}: a stalled host stopped the run, run again: "
                           f"{res.stderr.strip().splitlines()[-1][:200]}", stacklevel=1)
