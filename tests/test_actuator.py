@@ -14,8 +14,11 @@ from frictionlab.model.actuator import (
     actuator_accel,
     fit_input_nonlinearity,
 )
+from frictionlab.model.friction import KINDS
+from frictionlab.model.friction import plant_record as friction_record
 from frictionlab.model.params import ParamError
-from frictionlab.runs import simulated_plant
+from frictionlab.model.plants import thesis
+from frictionlab.runs import loop_spec, simulated_plant
 
 
 def test_curvature_is_the_fit_of_the_four_points():
@@ -73,6 +76,28 @@ def test_off_by_default_and_bit_for_bit():
         u = 5.0 * np.sin(0.05 * k)
         sa, sb = a.step(sa, u), b.step(sb, u)
         assert np.array_equal(sa.x, sb.x)
+
+
+@pytest.mark.parametrize("kind", ["classical", "lugre"])
+def test_the_loops_step_is_the_general_step_with_and_without_back_emf(kind):
+    """The closed loop's plant step (inlined without the back-EMF, the general
+    step called with it) gives the general step's numbers bit for bit."""
+    for sets in (("actuator.curvature=0.11",),
+                 ("actuator.curvature=0.11", "actuator.back_emf=4.4")):
+        cfg = build_config("fast", kind, sets=sets)
+        spec = loop_spec(cfg)
+        pp, fkind = spec.plant_params.record(), KINDS.index(kind)
+        fp = friction_record(kind, spec.friction)
+        plant = simulated_plant(cfg)  # the closed loop's dispatch (plants.plant_step)
+        st = plant.init(0.05)
+        x, mem = st.x.copy(), 0.0
+        for k in range(100):
+            u = 5.0 * np.sin(0.05 * k)
+            st = plant.step(st, u)
+            f, mem = thesis.tick(x, u, mem, spec.substeps, spec.ratio, spec.h, pp, fkind, fp)
+            assert np.array_equal(st.x, x)
+            assert (st.friction, st.memory) == (f, mem)
+        assert abs(x[3]) > 0.1  # the arm did move
 
 
 def test_bad_values_name_the_key():

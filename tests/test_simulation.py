@@ -375,6 +375,6 @@ def test_the_loop_inlines_the_same_step_laws():
     from frictionlab.model import closedloop, controller, plants, sensor
     from frictionlab.model.plants import thesis
 
-    assert plants._thesis_tick.py_func is thesis.tick.py_func
+    assert plants._thesis_tick.py_func is thesis.tick_without_back_emf.py_func
     assert closedloop._controller_step_inline.py_func is controller.controller_step.py_func
     assert closedloop._measure_inline.py_func is sensor.measure.py_func

@@ -80,8 +80,10 @@ def plant_of(params) -> PlantKind:
 
 
 #: Each plant's step inlined into the closed loop (a call every tick cost about
-#: 10 % of a run): the same Python function, compiled in place.
-_thesis_tick = jit_inline(thesis.tick.py_func)
+#: 10 % of a run): the same Python function, compiled in place.  The thesis
+#: plant's is its step without the actuator's back-EMF; with a back-EMF the
+#: loop calls the general step (:func:`frictionlab.model.plants.thesis.tick`).
+_thesis_tick = jit_inline(thesis.tick_without_back_emf.py_func)
 
 
 @jit_inline
@@ -91,4 +93,8 @@ def plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp):
         # called, not inlined: its RK4 and mass matrix would double the closed
         # loop's compile time, for a plant whose step costs far more than a call
         return furuta_dc.tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
+    if thesis.plant_record(pp).act_back_emf != 0.0:
+        # the back-EMF in every substep: the general step, called (its inlined
+        # second copy would add to every closed loop's compile time)
+        return thesis.tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
     return _thesis_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)

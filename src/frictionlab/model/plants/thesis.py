@@ -86,7 +86,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inline
 from ..actuator import actuator_accel
 from ..friction import LUGRE, NONE, friction_step
 from ..params import Validated, param
@@ -108,6 +108,7 @@ __all__ = [
     "plant_record",
     "rhs",
     "tick",
+    "tick_without_back_emf",
     "zoh",
     "zoh_closed_form",
 ]
@@ -350,15 +351,44 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     Returns
     -------
     (mean friction over the sample, mem)
+
+    Notes
+    -----
+    The actuator's back-EMF (``actuator.back_emf``) makes the arm's
+    acceleration depend on its velocity in every substep; without it the
+    acceleration the motor gives is the same for the whole sample.  The step is
+    therefore compiled in two forms of one body: this one, for any actuator,
+    and :func:`tick_without_back_emf`, which the closed loop inlines when the
+    back-EMF is off (the same numbers bit for bit).
     """
+    return _step(x, u, mem, substeps, ratio, h, pp, fkind, fp,
+                 plant_record(pp).act_back_emf != 0.0)
+
+
+@jit
+def tick_without_back_emf(x, u, mem, substeps, ratio, h, pp, fkind, fp):
+    """:func:`tick` for a plant whose actuator has no back-EMF
+    (``actuator.back_emf`` = 0; the curvature may be on).
+
+    The same body with the back-EMF's line compiled out: the acceleration the
+    motor gives is then constant over the sample, and the arm's velocity
+    update in each substep no longer waits for a product and a difference on
+    the velocity just computed (a third of a cheap run's time; docs/performance.md).
+    """
+    return _step(x, u, mem, substeps, ratio, h, pp, fkind, fp, False)
+
+
+@jit_inline
+def _step(x, u, mem, substeps, ratio, h, pp, fkind, fp, back_emf):
+    """The body of :func:`tick`; ``back_emf`` (bool) says whether the actuator's
+    back-EMF is evaluated in the substeps, a constant where the caller passes one."""
     p = plant_record(pp)
     omega0, zeta, g, arm_len, ku = p.omega0, p.zeta, p.g, p.arm_length, p.input_gain
     dt = h / substeps
     # the actuator (App. B.4): the acceleration the motor gives for k_u u, at the
     # substep's arm velocity when it has a back-EMF
     fe_cmd = actuator_accel(p.act_curvature, 0.0, ku * u, 0.0, arm_len)
-    # its back-EMF, b L_1 times the arm velocity, taken off at each substep (no
-    # branch in the substep loop: with b = 0 the product is 0 and fe is fe_cmd)
+    # its back-EMF, b L_1 times the arm velocity, taken off at each substep
     emf = p.act_back_emf * arm_len
     fe = fe_cmd
     half_dt_over_l = 0.5 * dt / arm_len
@@ -381,7 +411,8 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
             th_acc, _ = accelerations_sc(sn, cs, thd, ad, fe - mem, omega0, zeta, g, arm_len)
             tau = 0.5 * dt
         for _ in range(m):
-            fe = fe_cmd - emf * ad
+            if back_emf:
+                fe = fe_cmd - emf * ad
             if fkind == LUGRE:
                 # the bristle sees the velocity at the substep's midpoint, predicted
                 # with the last friction: second order for this smooth model
