@@ -9,7 +9,8 @@ fast design's sampled closed loop at upright, linear
 (spectral radius >= 1):
 
 * with the true state fed back (no estimator: the reference),
-* with the full-model predictor (``design.full_observer=1``),
+* with the full-model predictor (``design.full_observer=1``) at the former
+  default, observer_omega1 = 20/6.8 omega0 (36.6 rad/s on the QUBE-Servo 2),
 * with the pendulum observer (the default) at each ``observer_omega1`` of
   ``--omegas`` (rad/s; ``default`` = the preset's).
 
@@ -42,9 +43,11 @@ def main() -> None:
     args = ap.parse_args()
     nominal = build_config(plant=args.plant)
     plants = draw_params(nominal.plant, args.n, args.seed)
+    former = 20.0 / 6.8 * nominal.plant.omega0
     cases = {"true state": (make_controller(nominal), True),
              "full-model predictor": (make_controller(build_config(
-                 plant=args.plant, sets=[("design.full_observer", 1)])), False)}
+                 plant=args.plant, sets=[("design.full_observer", 1),
+                                         ("design.observer_omega1", former)])), False)}
     for w in args.omegas.split(","):
         sets = [] if w == "default" else [("design.observer_omega1", float(w))]
         c = make_controller(build_config(plant=args.plant, sets=sets))
