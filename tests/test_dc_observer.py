@@ -78,6 +78,7 @@ def test_the_controller_feeds_back_the_measurements_and_the_estimate():
     assert full.record()[0].observer == DC_OBSERVER
 
 
+@pytest.mark.slow  # 90 loop linearisations: about 2 s
 def test_stable_on_drawn_plants_where_the_full_model_predictor_is_not():
     # the nominal fast design on 30 QUBE-Servo 2 linearisations within +-20 %
     nominal = build_config(plant="qube2")
