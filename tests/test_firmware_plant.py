@@ -76,6 +76,9 @@ def test_the_home_built_design_balances_through_the_firmware_sensors():
     pattern = {f"design.{k}": getattr(spec, k) for k in (
         "omega1", "zeta1", "omega2", "zeta2", "observer_omega1", "observer_zeta1",
         "observer_omega2", "observer_zeta2")}
+    # the pattern as it was, with the full-model predictor at the thesis's ratio
+    pattern.update({"design.full_observer": 1,
+                    "design.observer_omega1": 20.0 / 6.8 * spec.omega0})
     assert homebuilt_loop.closed_loop(pattern, duration=4.0).get("fell_at", 99) < 2.0
 
 

@@ -21,6 +21,7 @@ from frictionlab.model.plants.furuta_dc import (
     tick,
 )
 from frictionlab.model.plants.furuta_dc_design import (
+    OBSERVER_RATIO,
     dc_design,
     dc_observer_step,
     dc_spec,
@@ -32,14 +33,15 @@ from frictionlab.model.plants.thesis import zoh
 @pytest.mark.parametrize("name", ["fast", "slow"])
 @pytest.mark.parametrize("plant", [QUBE2, QUBE3, HOMEBUILT], ids=["qube2", "qube3", "home"])
 def test_the_design_places_the_section_2_4_pattern(name, plant):
-    d = dc_design(name, plant)
+    # the full-model predictor (design.full_observer 1): its four poles are checked
+    d = dc_design(dataclasses.replace(dc_spec(name, plant), full_observer=1), plant)
     spec, base = d.spec, thesis_preset(name)
     # the pattern: pendulum poles at the plant's unstable rate, arm poles as in the thesis
     A, B = linearization(plant)
     w0 = float(np.max(np.linalg.eigvals(A).real))
     assert spec.omega1 == pytest.approx(w0) and spec.omega0 == pytest.approx(w0)
     assert (spec.omega2, spec.zeta1, spec.zeta2) == (base.omega2, base.zeta1, base.zeta2)
-    assert spec.observer_omega1 == pytest.approx(base.observer_omega1 * w0 / base.omega0)
+    assert spec.observer_omega1 == pytest.approx(OBSERVER_RATIO * w0)
     Phi, Gamma = zoh(A, B, spec.h)
     eig = np.linalg.eigvals(Phi - Gamma @ d.L.reshape(1, 4))
     want = np.concatenate([discrete_pair(spec.omega1, spec.zeta1, spec.h),
@@ -75,7 +77,7 @@ def test_given_gains_replace_the_placement_for_example_an_lqr():
 
 
 def test_the_observer_step_is_the_predictor_and_converges_on_the_linear_model():
-    d = dc_design("fast", QUBE2)
+    d = dc_design(dataclasses.replace(dc_spec("fast", QUBE2), full_observer=1), QUBE2)
     row = observer_row(d)
     rng = np.random.default_rng(7)
     # one step is Phi xhat + Gamma u + K (y - C xhat)
@@ -120,7 +122,8 @@ def _balance(design, fkind, fp, duration=10.0, theta0=0.1, u_max=10.0):
 
 
 def test_the_qube2_balances_in_a_friction_limit_cycle_within_10_volts():
-    d = dc_design("fast", QUBE2)
+    # the full-model predictor's loop written here (the default observer's: test_dc_observer)
+    d = dc_design(dataclasses.replace(dc_spec("fast", QUBE2), full_observer=1), QUBE2)
     f = PRESET_FRICTION["qube2"]
     fp = FrictionParams(coulomb=f["friction.coulomb"], stiction=f["friction.coulomb"]).record()
     theta, u = _balance(d, "coulomb", fp)

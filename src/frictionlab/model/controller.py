@@ -76,7 +76,12 @@ from .friction import (
 )
 from .observers import arm_observer_step, pendulum_observer_step
 from .params import ParamError
-from .plants.furuta_dc_design import DCDesign, dc_observer_update, observer_row
+from .plants.furuta_dc_design import (
+    DCDesign,
+    dc_observer_update,
+    observer_row,
+    pendulum_observer_update,
+)
 from .plants.thesis import PlantParams
 from .records import copy_record, float_record_dtype, new_record, record_row, row_record
 from .rig import RigScaling
@@ -88,6 +93,7 @@ __all__ = [
     "COMPENSATOR_FIELDS",
     "COMPENSATOR_KINDS",
     "DC_OBSERVER",
+    "DC_PENDULUM_OBSERVER",
     "DEFAULT_ERROR_SIGNAL",
     "ERROR_SIGNALS",
     "NS",
@@ -247,7 +253,12 @@ class Gains(NamedTuple):
         plant's 4-state predictor,
         :func:`frictionlab.model.plants.furuta_dc_design.dc_observer_step`,
         its matrices in ``obs``; the state's ``x2`` then holds
-        :math:`\\hat{\\dot\\theta}` itself, ``omega0`` = 1).
+        :math:`\\hat{\\dot\\theta}` itself, ``omega0`` = 1) or
+        :data:`DC_PENDULUM_OBSERVER` (the DC-motor plant's pendulum observer
+        driven by the measured arm acceleration,
+        :func:`~frictionlab.model.plants.furuta_dc_design.pendulum_observer_update`:
+        u from this tick's estimate and the measured angles and arm rate; the
+        state then holds this tick's estimate and measurements, ``omega0`` = 1).
     obs : tuple of 32 floats
         The DC observer's row (:func:`~frictionlab.model.plants.furuta_dc_design.observer_row`;
         zeros for the thesis's observers).
@@ -301,8 +312,8 @@ class Gains(NamedTuple):
 
 
 #: :attr:`Gains.observer` codes: the thesis's pendulum and arm observers; the
-#: DC-motor plant's 4-state predictor.
-THESIS_OBSERVERS, DC_OBSERVER = 0, 1
+#: DC-motor plant's 4-state predictor; its pendulum observer.
+THESIS_OBSERVERS, DC_OBSERVER, DC_PENDULUM_OBSERVER = 0, 1, 2
 #: Length of :attr:`Gains.obs`.
 OBS_LEN = 32
 
@@ -471,7 +482,16 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     thd_hat = w0 * s.x2
     arm_hat = s.arm
     armd_hat = s.arm_dot
-    u_fb = -(gp.l1 * th_hat + gp.l2 * thd_hat + gp.l3 * arm_hat + gp.l4 * armd_hat)
+    current = gp.observer == DC_PENDULUM_OBSERVER
+    if current:
+        # this tick's estimate first (the arm's acceleration over the last tick
+        # from its measured rate); the compensator's innovations below compare
+        # with the last tick's measurements (s.arm, s.arm_dot)
+        th_hat, thd_hat = pendulum_observer_update(th_hat, thd_hat, theta_m,
+                                                   (arm_dot_m - armd_hat) / h, gp.obs)
+        u_fb = -(gp.l1 * theta_m + gp.l2 * thd_hat + gp.l3 * arm_m + gp.l4 * arm_dot_m)
+    else:
+        u_fb = -(gp.l1 * th_hat + gp.l2 * thd_hat + gp.l3 * arm_hat + gp.l4 * armd_hat)
     kind = gp.compensator
     f_hat = 0.0
     if kind != 0:
@@ -498,7 +518,9 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     elif u < -umax:
         u = -umax
     u_obs = u - f_hat if gp.feed_net != 0.0 else u
-    if gp.observer == DC_OBSERVER:
+    if current:
+        x1n, x2n, an, adn = th_hat, thd_hat, arm_m, arm_dot_m
+    elif gp.observer == DC_OBSERVER:
         x1n, x2n, an, adn = dc_observer_update(th_hat, thd_hat, arm_hat, armd_hat, theta_m,
                                                arm_m, arm_dot_m, u_obs, gp.obs)
     else:
@@ -561,8 +583,9 @@ class Controller:
     design : Design or DCDesign
         Gains from :func:`frictionlab.model.design.design`, or for the DC-motor
         plant :func:`frictionlab.model.plants.furuta_dc_design.dc_design`
-        (u in volts; its 4-state predictor observer in place of the
-        thesis's pendulum and arm observers).
+        (u in volts; its pendulum observer, or with ``design.full_observer``
+        its 4-state predictor, in place of the thesis's pendulum and arm
+        observers).
     compensation : str
         ``none``, ``coulomb``, ``classical`` (Sec. 6.2's implementation form),
         ``lugre`` (the observer eq. 19) or ``adaptive`` (eq. 19 with levels
@@ -613,7 +636,8 @@ class Controller:
             gains = Gains(*L, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0 / float(d.B[3, 0]),
                           float(d.spec.h), float(self.u_max), int(self.compensator_code),
                           ERROR_SIGNALS.index(self.error_signal), feed_net,
-                          observer=DC_OBSERVER, obs=tuple(float(v) for v in observer_row(d)))
+                          observer=DC_OBSERVER if d.full_observer else DC_PENDULUM_OBSERVER,
+                          obs=tuple(float(v) for v in observer_row(d)))
             return gains, compensator_params(self.compensation_params)
         K = [float(x) for x in d.K]
         gains = Gains(*L, *K, float(d.spec.omega0), float(d.g), float(d.arm_length),

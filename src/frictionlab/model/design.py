@@ -90,6 +90,12 @@ class DesignSpec(Validated):
                                    lo=MIN_OMEGA, hi=1e3)
     observer_zeta2: float = param(0.7, "arm observer damping [zeta_o2]", "1", lo=0.0, hi=1.0,
                                   lo_open=True)
+    full_observer: int = param(
+        0, "motor plants only: 1 = the 4-state predictor observer on the full linearised "
+        "model (needs the motor's constants), 0 = the pendulum observer driven by the "
+        "measured arm acceleration (the default: little model, robust to parameter errors); "
+        "the thesis plant always uses the observers of Sec. 2.3", "1", lo=0, hi=1,
+        integer=True)
     gains: tuple[float, float, float, float] | None = param(
         None, "state-feedback gains L = (l1, l2, l3, l4) of u = -L x (x = theta, theta_dot, "
         "arm, arm_dot; m/s^2 per rad or rad/s), used instead of the "

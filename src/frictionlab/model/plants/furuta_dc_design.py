@@ -10,21 +10,55 @@ with the pole pattern of Sec. 2.4: the pendulum pair at
 mapped by eq. (8).  The thesis's presets (eqs. 13-16) are carried over by
 their pattern: :math:`\omega_1 = \omega_0`, the rate of this plant's unstable
 upright mode (12.5 rad/s for the QUBE-Servo 2 against the thesis rig's 6.8),
-the pendulum observer's :math:`\omega_{o1}` scaled by the same ratio, and the
-arm's frequencies (10 and 3 rad/s, observer 10 and 7.5) unchanged.  Given
+the arm's frequencies (10 and 3 rad/s, observer 10 and 7.5) unchanged; the
+pendulum observer's :math:`\omega_{o1}` is :data:`OBSERVER_RATIO` times
+:math:`\omega_0` (80 rad/s on the QUBE-Servo 2; below).  Given
 gains (``design.gains``: e.g. an LQR from python-control, docs/model.md)
 replace the placement.
 
 Not everything is measured: the QUBE gives theta and the arm angle from its
-encoders and the arm rate from its tachometer, but not theta_dot.  The
-observer is a discrete linear predictor on the same 4-state model,
+encoders and the arm rate from its tachometer, but not theta_dot.
+
+The pendulum observer (the default, ``design.full_observer`` 0)
+---------------------------------------------------------------
+Only theta_dot is estimated, and from the pendulum's own equation, as the
+thesis's pendulum observer (Sec. 2.3) does: the linearised coupled equations
+give, whatever the arm and the motor,
+
+.. math:: J_p\ddot\theta = c\,\theta - D_p\dot\theta - b\,\ddot\phi,
+
+(:math:`c = m_p g l_p`, :math:`b = m_p l_p L_r`; the thesis's
+:math:`\ddot\theta = \omega_0^2\theta - (\omega_0^2/g)\,u` with u the arm
+tip's acceleration :math:`L_r\ddot\phi`), so the arm's acceleration,
+measured as the difference of the measured arm rate over the last tick,
+drives it and the motor's constants, the arm's inertia and the viscous arm
+damping drop out.  Exact ZOH discretisation (the difference is the mean
+acceleration over the tick), then a *current* correction with this tick's
+theta (no prediction: the voltage law needs no model):
+
+.. math:: \bar x = F\hat x_{k-1} + g\,(\dot\phi_k - \dot\phi_{k-1})/h,\quad
+          \hat x_k = \bar x + K(\theta_k - \bar x_1),\quad
+          u_k = -L(\theta_k, \hat{\dot\theta}_k, \phi_k, \dot\phi_k)
+
+with the poles of :math:`(I - K e_1^T)F` at the z-images of
+:math:`(\omega_{o1}, \zeta_{o1})`; the measured angles and arm rate are
+used as measured (``observer_omega2``/``observer_zeta2`` are not used).  On
+300 QUBE-Servo 2 linearisations drawn within +-20 % the loop with this
+observer is stable wherever the true-state feedback is, but for one or two
+(benchmarks/dc_observer.py, docs/model.md); the predictor below fails on
+about 70 %.
+
+The full-model predictor (``design.full_observer`` 1)
+-----------------------------------------------------
+A discrete linear predictor on the same 4-state model,
 
 .. math:: \hat x_{k+1} = \Phi\hat x_k + \Gamma u_k + K(y_k - C\hat x_k),
           \quad y = (\theta, \phi, \dot\phi)
 
 with its four poles at the z-images of the design's observer specs
 (:math:`(\omega_{o1}, \zeta_{o1})` and :math:`(\omega_{o2}, \zeta_{o2})`),
-placed on :math:`(\Phi^T, C^T)`.  As the thesis's controller does, the
+placed on :math:`(\Phi^T, C^T)`. It needs the motor's constants: with them 20 % off
+the loop is unstable on most plants.  As the thesis's controller does, the
 estimate used at tick k was formed at tick k-1 (read, compute u from
 :math:`\hat x_k`, output, then update: :func:`dc_observer_step`).
 """
@@ -45,6 +79,7 @@ from .thesis import zoh
 
 __all__ = [
     "MEASURED",
+    "OBSERVER_RATIO",
     "DCDesign",
     "dc_design",
     "dc_observer_step",
@@ -52,11 +87,21 @@ __all__ = [
     "dc_predicted_peak",
     "dc_spec",
     "observer_row",
+    "pendulum_model",
+    "pendulum_observer_update",
 ]
 
 #: Rows of C: what the rig measures (theta, arm, arm_dot).
 MEASURED = ("theta", "arm", "arm_dot")
 _C = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
+#: The presets' pendulum observer frequency over the plant's omega0 (80 rad/s on
+#: the QUBE-Servo 2): on +-20 % plants the loop's robustness grows with it up to
+#: about 80 rad/s (benchmarks/dc_observer.py) while the encoder's quantisation
+#: in theta_dot grows with it too.  (The thesis's pattern, 20/6.8, gave 36.6 rad/s:
+#: the former full-model predictor's default.)
+OBSERVER_RATIO = 6.4
 
 
 def dc_spec(spec: DesignSpec | str = "fast", params: FurutaDCParams = QUBE2,
@@ -65,8 +110,9 @@ def dc_spec(spec: DesignSpec | str = "fast", params: FurutaDCParams = QUBE2,
 
     A preset name (``fast``, ``slow``) gives the thesis's Sec. 2.4 pattern on
     this plant: ``omega0`` and ``omega1`` the plant's unstable rate
-    :attr:`FurutaDCParams.omega0`, ``observer_omega1`` scaled by the same
-    ratio as omega0, the arm's frequencies as in the thesis.  A
+    :attr:`FurutaDCParams.omega0`, ``observer_omega1`` :data:`OBSERVER_RATIO`
+    times it (the pendulum observer's pair), the arm's frequencies as in the
+    thesis.  A
     :class:`DesignSpec` is used as given, its ``omega0`` set to the plant's.
     ``h`` replaces the sampling period.
     """
@@ -75,7 +121,7 @@ def dc_spec(spec: DesignSpec | str = "fast", params: FurutaDCParams = QUBE2,
         base = design_preset(spec)
         scale = w0 / base.omega0
         spec = dataclasses.replace(base, omega1=base.omega1 * scale,
-                                   observer_omega1=base.observer_omega1 * scale)
+                                   observer_omega1=OBSERVER_RATIO * w0)
     spec = dataclasses.replace(spec, omega0=w0)
     if h is not None:
         spec = dataclasses.replace(spec, h=h)
@@ -99,15 +145,18 @@ class DCDesign:
         The measured states (:data:`MEASURED`).
     L : ndarray (4,)
         ``u = -L x`` (V per rad, V per rad/s).
-    K : ndarray (4, 3)
+    K : ndarray (4, 3), or (2, 1) for the pendulum observer
         The observer's gain.
     requested_poles, poles : ndarray (4,) complex
         z-plane poles of ``Phi - Gamma L`` asked for and achieved (paired);
         with given gains both are the achieved ones.
-    requested_observer_poles, observer_poles : ndarray (4,) complex
-        z-plane poles of ``Phi - K C`` asked for and achieved.
+    requested_observer_poles, observer_poles : ndarray complex
+        z-plane poles of the observer's error asked for and achieved (4 of
+        ``Phi - K C``; 2 of ``(I - K e_1^T) F`` for the pendulum observer).
     method : str
         ``"numeric"`` (pole placement) or ``"given"`` (``spec.gains``).
+    F, g : ndarray (2, 2), (2,)
+        The pendulum observer's model, :func:`pendulum_model` at ``spec.h``.
     """
 
     spec: DesignSpec
@@ -124,6 +173,13 @@ class DCDesign:
     requested_observer_poles: np.ndarray
     observer_poles: np.ndarray
     method: str
+    F: np.ndarray
+    g: np.ndarray
+
+    @property
+    def full_observer(self) -> bool:
+        """The 4-state predictor (``design.full_observer`` 1), else the pendulum observer."""
+        return bool(self.spec.full_observer)
 
     @property
     def max_pole_error(self) -> float:
@@ -147,6 +203,7 @@ class DCDesign:
             "requested_observer_poles": pairs(self.requested_observer_poles),
             "spec": dataclasses.asdict(self.spec),
             "method": self.method,
+            "observer": "full" if self.full_observer else "pendulum",
             "linearization": {
                 "A": [[float(v) for v in row] for row in self.A],
                 "B": [[float(v) for v in row] for row in self.B],
@@ -193,25 +250,70 @@ def _dc_design(spec: DesignSpec, params: FurutaDCParams) -> DCDesign:
         method = "numeric"
     ach = match_poles(np.linalg.eigvals(Phi - Gamma @ L.reshape(1, 4)), req)
 
-    obs_req = np.concatenate([
-        discrete_pair(spec.observer_omega1, spec.observer_zeta1, spec.h),
-        discrete_pair(spec.observer_omega2, spec.observer_zeta2, spec.h),
-    ])
     from scipy.signal import place_poles  # heavy import, only when used
 
-    K = np.asarray(place_poles(Phi.T, _C.T, obs_req).gain_matrix, dtype=float).T
-    obs_ach = match_poles(np.linalg.eigvals(Phi - K @ _C), obs_req)
+    F, g = pendulum_model(params, spec.h)
+    if spec.full_observer:
+        obs_req = np.concatenate([
+            discrete_pair(spec.observer_omega1, spec.observer_zeta1, spec.h),
+            discrete_pair(spec.observer_omega2, spec.observer_zeta2, spec.h),
+        ])
+        K = np.asarray(place_poles(Phi.T, _C.T, obs_req).gain_matrix, dtype=float).T
+        obs_ach = match_poles(np.linalg.eigvals(Phi - K @ _C), obs_req)
+    else:
+        # current observer: error dynamics (I - K e1^T) F, placed on (F^T, (e1^T F)^T)
+        obs_req = discrete_pair(spec.observer_omega1, spec.observer_zeta1, spec.h)
+        cF = F[:1, :]
+        K = np.asarray(place_poles(F.T, cF.T, obs_req).gain_matrix, dtype=float).T
+        obs_ach = match_poles(np.linalg.eigvals((np.eye(2) - K @ np.array([[1.0, 0.0]])) @ F),
+                              obs_req)
     C = _C.copy()
-    for arr in (A, B, Phi, Gamma, C, L, K, req, ach, obs_req, obs_ach):
+    for arr in (A, B, Phi, Gamma, C, L, K, req, ach, obs_req, obs_ach, F, g):
         arr.flags.writeable = False
     return DCDesign(spec, params, A, B, Phi, Gamma, C, L, K, req, ach, obs_req, obs_ach,
-                    method)
+                    method, F, g)
+
+
+def pendulum_model(params: FurutaDCParams, h: float) -> tuple[np.ndarray, np.ndarray]:
+    r"""The pendulum's own linearised equation, discretised: ``(F, g)`` with
+    :math:`x_{k+1} = F x_k + g\,a_k`, x = (theta, theta_dot), a the arm's mean
+    angular acceleration over the tick (rad/s^2), held (ZOH).
+
+    From :math:`J_p\ddot	heta = c\,	heta - D_p\dot	heta - b\,\ddot\phi`
+    (module docstring): only the pendulum's mass, length, inertia and damping
+    and the arm's length enter, not the motor or the arm's inertia.
+    """
+    j_p, _j0, b, c, _kv, _km, _dr, d_p = (float(v) for v in params.record())
+    Ap = np.array([[0.0, 1.0], [c / j_p, -d_p / j_p]])
+    Bp = np.array([[0.0], [-b / j_p]])
+    F, g = zoh(Ap, Bp, h)
+    return np.asarray(F, dtype=float), np.asarray(g, dtype=float).ravel()
 
 
 def observer_row(result: DCDesign) -> np.ndarray:
-    """The float row :func:`dc_observer_step` reads: Phi (16, row by row),
-    Gamma (4), K (12, row by row: 4 rows of 3), 32 floats."""
-    return np.concatenate([result.Phi.ravel(), result.Gamma.ravel(), result.K.ravel()])
+    """The float row the controller step reads, 32 floats: Phi (16, row by
+    row), Gamma (4), then for the full-model predictor
+    (:func:`dc_observer_step`) K (12, row by row: 4 rows of 3), for the
+    pendulum observer (:func:`pendulum_observer_update`) F (4, row by row),
+    g (2), K (2) and 4 zeros."""
+    if result.full_observer:
+        tail = result.K.ravel()
+    else:
+        tail = np.concatenate([result.F.ravel(), result.g, result.K.ravel(), np.zeros(4)])
+    return np.concatenate([result.Phi.ravel(), result.Gamma.ravel(), tail])
+
+
+@jit
+def pendulum_observer_update(x0, x1, theta_m, accel, o):
+    """One tick of the pendulum observer (module docstring): the estimate
+    (theta, theta_dot) of the last tick ``(x0, x1)``, this tick's measured
+    angle and the arm's mean angular acceleration over the last tick ``accel``
+    (rad/s^2) give this tick's estimate (two floats); ``o`` the row of
+    :func:`observer_row` (F at 20-23, g at 24-25, K at 26-27)."""
+    p0 = o[20] * x0 + o[21] * x1 + o[24] * accel
+    p1 = o[22] * x0 + o[23] * x1 + o[25] * accel
+    e = theta_m - p0
+    return p0 + o[26] * e, p1 + o[27] * e
 
 
 @jit
