@@ -40,14 +40,15 @@ def test_a_motor_plants_rig_is_in_volts_with_a_qubes_encoders(cfg):
 
 @pytest.mark.slow
 def test_balances_in_a_limit_cycle_within_10_volts_through_the_emulated_rig(cfg, tmp_path):
-    """The emulated rig with the QUBE's encoders: a friction limit cycle like the
-    simulator's (theta peak 0.1 rad), |u| within 10 V, u_DA = u / 10 V in every
-    tick; the sidecar names the plant and u's unit."""
+    """The emulated rig with the QUBE's encoders: balanced in a small friction cycle
+    (the default pendulum observer: a few encoder counts, as the simulator's theta
+    peak 0.007 rad), |u| within 10 V, u_DA = u / 10 V in every tick; the sidecar
+    names the plant and u's unit."""
     _ctl, emu, _tx, stats, log, meta = run_with_emulator(cfg, tmp_path, duration=4.0)
     assert stats["stop_reason"] == "duration" and emu.u_da == 0.0
     th, u, uda = log["theta_m"][:-1], log["u"][:-1], log["u_da"][:-1]
-    assert 0.05 < np.max(np.abs(th[-300:])) < 0.15  # the cycle, not settled, not falling
-    assert 0.3 < np.max(np.abs(u)) < 10.0
+    assert 0.0 < np.max(np.abs(th[-300:])) < 0.05  # moving by counts, not falling
+    assert 0.0 < np.max(np.abs(u[-300:])) and np.max(np.abs(u)) < 10.0
     np.testing.assert_allclose(uda, [dac.py_func(v, 0.1) for v in u], rtol=1e-8)  # 9 digits
     # the angles arrive on the encoder's grid (one count 2 pi / 2048)
     counts = th / (2 * math.pi / 2048)
