@@ -90,8 +90,10 @@ def test_loop_matrix_equals_the_hand_derived_one(spec):
 def test_the_dc_plant_is_checked_through_its_own_step():
     """The loop check of a QUBE-Servo 2 controller: the plant's rows are the ZOH of
     the DC plant's linearisation (its RK4 step), u = -L x_hat, the loop's eigenvalues
-    the design's poles and observer poles (separation), and its verdict passes."""
-    cfg = build_config("fast", "classical", plant="qube2")
+    the design's poles and observer poles (separation), and its verdict passes.  With
+    the 4-state predictor observer (``design.full_observer=1``), whose u is built from
+    the estimates alone; the default pendulum observer: tests/test_dc_observer.py."""
+    cfg = build_config("fast", "classical", plant="qube2", sets=[("design.full_observer", 1)])
     ctrl = make_controller(cfg)
     d = ctrl.design
     M, N, K, D = loop_matrices(ctrl, cfg.plant)
@@ -144,8 +146,11 @@ def test_the_sliding_check_has_the_centripetal_term():
 def test_a_compensator_is_not_blamed_for_the_sliding_loops_own_instability():
     """The QUBE's slow design sliding at 3 rad/s: the centripetal term alone takes the
     loop past 1 (the Coulomb relay adds no slope); the Coulomb compensator is not
-    refused for it (the console's fall check judges the design)."""
-    cfg = build_config("slow", "classical", "coulomb", plant="qube2")
+    refused for it (the console's fall check judges the design).  With the 4-state
+    predictor observer (``design.full_observer=1``): the default pendulum observer's
+    sliding loop stays inside (0.985)."""
+    cfg = build_config("slow", "classical", "coulomb", plant="qube2",
+                       sets=[("design.full_observer", 1)])
     ctrl = make_controller(cfg)
     free = np.max(np.abs(np.linalg.eigvals(
         loop_matrices(ctrl, cfg.plant, 3.0, compensate=False)[0])))
