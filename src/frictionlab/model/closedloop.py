@@ -38,7 +38,7 @@ from .controller import (
     state_vector,
 )
 from .friction import FRICTION_DTYPE, copy_friction_into, drifted_params, is_drifting
-from .plants import plant_step
+from .plants import inlines_step, plant_step, plant_step_called
 from .sensor import ideal_reading, measure, reading
 from .swingup import (
     BALANCING,
@@ -161,6 +161,30 @@ def run_loop(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, 
     (ticks done, status, mem, x0) with status :data:`OK`, :data:`FELL` or
     :data:`SWING_STOPPED`.
     """
+    # one loop per kind of plant step, chosen once per call: with the thesis plant's
+    # step inlined (no call in the tick), or with every step called
+    if inlines_step(pcode, pp):
+        return _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0,
+                      x0, fall_angle, out, record, swing, sup_row, wx, phase_out, True)
+    return _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
+                  fall_angle, out, record, swing, sup_row, wx, phase_out, None)
+
+
+@jit
+def _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
+           fall_angle, out, record, swing, sup_row, wx, phase_out, inline):
+    """The ticks of :func:`run_loop`, compiled once per type of ``inline``.
+
+    ``inline`` True: the plant's step (:func:`frictionlab.model.plants.plant_step`,
+    the thesis plant's inlined), the controller step and the sensor inlined
+    into the tick, which then calls nothing but the swing-up supervisor.
+    ``inline`` None: every step called
+    (:func:`frictionlab.model.plants.plant_step_called`): a loop that is quick
+    to compile, for the plants whose step costs far more than the calls (the
+    DC plant, the thesis plant with the actuator's back-EMF).  numba prunes
+    the branches on ``inline is None`` before it compiles the rest, so neither
+    loop carries the other's code.
+    """
     h = gp.h
     drifting = is_drifting(fp)
     # the plant's levels at the tick, in a scratch record (kept alive to the end:
@@ -177,13 +201,19 @@ def run_loop(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, 
         if ideal:
             th_m, arm_m, armd_m, x0 = ideal_reading(x[0], x[2], x[3], n0 + k == 0, x0)
         else:
-            th_m, arm_m, armd_m, x0 = _measure_inline(sp, x[0], x[2], x[3], n0 + k, x0)
+            if inline is None:
+                th_m, arm_m, armd_m, x0 = measure(sp, x[0], x[2], x[3], n0 + k, x0)
+            else:
+                th_m, arm_m, armd_m, x0 = _measure_inline(sp, x[0], x[2], x[3], n0 + k, x0)
         th_hat, thd_hat, arm_hat, armd_hat, z_hat = estimates(s, gp)
         if swing:
             th_m = wrap_angle(th_m)
             u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sup, th_m, arm_m, armd_m)
         else:
-            u, _u_fb, f_hat = _controller_step_inline(s, gp, cp, th_m, arm_m, armd_m)
+            if inline is None:
+                u, _u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
+            else:
+                u, _u_fb, f_hat = _controller_step_inline(s, gp, cp, th_m, arm_m, armd_m)
         if record:
             theta = x[0]
             if swing:
@@ -196,7 +226,10 @@ def run_loop(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, 
                         f_hat, z_hat, theta, x, fc_used, fs_used)
         if drifting:
             drifted_params(fp, (n0 + k) * h, fpt)
-        f_mean, mem = plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fpt)
+        if inline is None:
+            f_mean, mem = plant_step_called(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fpt)
+        else:
+            f_mean, mem = plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         if record:
             out[k, 15] = f_mean
         if swing:

@@ -39,7 +39,8 @@ from dataclasses import dataclass
 from .._jit import jit_inline
 from . import furuta_dc, thesis
 
-__all__ = ["FURUTA_DC", "PLANTS", "THESIS", "PlantKind", "plant_of", "plant_step"]
+__all__ = ["FURUTA_DC", "PLANTS", "THESIS", "PlantKind", "inlines_step", "plant_of", "plant_step",
+           "plant_step_called"]
 
 
 @dataclass(frozen=True)
@@ -79,22 +80,37 @@ def plant_of(params) -> PlantKind:
     raise TypeError(f"no plant takes {type(params).__name__} parameters")
 
 
-#: Each plant's step inlined into the closed loop (a call every tick cost about
-#: 10 % of a run): the same Python function, compiled in place.  The thesis
-#: plant's is its step without the actuator's back-EMF; with a back-EMF the
-#: loop calls the general step (:func:`frictionlab.model.plants.thesis.tick`).
+#: The thesis plant's step without the actuator's back-EMF inlined where the
+#: closed loop advances the plant (a call every tick cost about 10 % of a run):
+#: the same Python function, compiled in place.
 _thesis_tick = jit_inline(thesis.tick_without_back_emf.py_func)
 
 
 @jit_inline
+def inlines_step(pcode, pp):
+    """Whether :func:`plant_step` inlines the step of the plant ``pcode`` with the
+    parameter row ``pp``: the thesis plant whose actuator has no back-EMF."""
+    return pcode == 0 and not thesis.plant_record(pp).act_back_emf != 0.0
+
+
+@jit_inline
 def plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp):
-    """Advance the plant of code ``pcode`` over one sample (its module's ``tick``)."""
+    """Advance the plant of code ``pcode`` over one sample (its module's ``tick``):
+    the thesis plant's step without the back-EMF inlined (:func:`inlines_step`),
+    any other step called (:func:`plant_step_called`)."""
+    if inlines_step(pcode, pp):
+        return _thesis_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
+    return plant_step_called(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp)
+
+
+@jit_inline
+def plant_step_called(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp):
+    """:func:`plant_step` with every plant's step called, none inlined: the form
+    of a loop compiled for the plants whose step :func:`plant_step` does not
+    inline (its compile time is then the loop's alone)."""
     if pcode == 1:
-        # called, not inlined: its RK4 and mass matrix would double the closed
-        # loop's compile time, for a plant whose step costs far more than a call
+        # the DC plant's RK4 and mass matrix would double a loop's compile time,
+        # for a step that costs far more than a call
         return furuta_dc.tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
-    if thesis.plant_record(pp).act_back_emf != 0.0:
-        # the back-EMF in every substep: the general step, called (its inlined
-        # second copy would add to every closed loop's compile time)
-        return thesis.tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
-    return _thesis_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
+    # the thesis plant with the back-EMF in every substep: the general step
+    return thesis.tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
