@@ -31,8 +31,10 @@ import numpy as np
 
 from ._jit import jit, jit_inline, keep_alive
 from .controller import (
+    THESIS_OBSERVERS,
     compensator_levels,
     controller_step,
+    controller_tick,
     estimates,
     state_record,
     state_vector,
@@ -111,10 +113,8 @@ def record_tick(out, k, th_m, th_hat, thd_hat, u, arm_m, armd_m, arm_hat, armd_h
     out[k, 17] = fs_used
 
 
-#: The controller's and the plant's steps inlined into the loop (their calls
-#: every tick cost about 10 % of a run; with a noisy converter, the sensor's
-#: call as much again): the same Python functions, compiled in place.
-_controller_step_inline = jit_inline(controller_step.py_func)
+#: The sensor inlined into the loop (with a noisy converter its call every
+#: tick cost about 10 % of a run): the same Python function, compiled in place.
 _measure_inline = jit_inline(measure.py_func)
 
 
@@ -163,7 +163,7 @@ def run_loop(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, 
     """
     # one loop per kind of plant step, chosen once per call: with the thesis plant's
     # step inlined (no call in the tick), or with every step called
-    if inlines_step(pcode, pp):
+    if inlines_step(pcode, pp) and gp.observer == THESIS_OBSERVERS:
         return _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0,
                       x0, fall_angle, out, record, swing, sup_row, wx, phase_out, True)
     return _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
@@ -176,8 +176,10 @@ def _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp
     """The ticks of :func:`run_loop`, compiled once per type of ``inline``.
 
     ``inline`` True: the plant's step (:func:`frictionlab.model.plants.plant_step`,
-    the thesis plant's inlined), the controller step and the sensor inlined
-    into the tick, which then calls nothing but the swing-up supervisor.
+    the thesis plant's inlined), the controller step with the thesis's
+    observers (:func:`frictionlab.model.controller.controller_tick`) and the
+    sensor inlined into the tick, which then calls nothing but the swing-up
+    supervisor.
     ``inline`` None: every step called
     (:func:`frictionlab.model.plants.plant_step_called`): a loop that is quick
     to compile, for the plants whose step costs far more than the calls (the
@@ -213,7 +215,8 @@ def _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp
             if inline is None:
                 u, _u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
             else:
-                u, _u_fb, f_hat = _controller_step_inline(s, gp, cp, th_m, arm_m, armd_m)
+                u, _u_fb, f_hat = controller_tick(s, gp, cp, th_m, arm_m, armd_m,
+                                                  THESIS_OBSERVERS)
         if record:
             theta = x[0]
             if swing:

@@ -108,6 +108,7 @@ __all__ = [
     "compensator_params",
     "controller_step",
     "controller_step_rows",
+    "controller_tick",
     "copy_state",
     "estimates",
     "gains_record",
@@ -476,13 +477,21 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     -------
     (u, u_fb, F_hat) : applied control, feedback part, friction estimate.
     """
+    return controller_tick(s, gp, cp, theta_m, arm_m, arm_dot_m, gp.observer)
+
+
+@jit_inline
+def controller_tick(s, gp, cp, theta_m, arm_m, arm_dot_m, observer):
+    """:func:`controller_step` with the observers' code ``observer`` (``gp.observer``)
+    given: a loop that passes a constant (:data:`THESIS_OBSERVERS`) compiles the
+    other observers' branches out of its tick."""
     w0 = gp.omega0
     h = gp.h
     th_hat = s.x1
     thd_hat = w0 * s.x2
     arm_hat = s.arm
     armd_hat = s.arm_dot
-    current = gp.observer == DC_PENDULUM_OBSERVER
+    current = observer == DC_PENDULUM_OBSERVER
     if current:
         # this tick's estimate first (the arm's acceleration over the last tick
         # from its measured rate); the compensator's innovations below compare
@@ -520,7 +529,7 @@ def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     u_obs = u - f_hat if gp.feed_net != 0.0 else u
     if current:
         x1n, x2n, an, adn = th_hat, thd_hat, arm_m, arm_dot_m
-    elif gp.observer == DC_OBSERVER:
+    elif observer == DC_OBSERVER:
         x1n, x2n, an, adn = dc_observer_update(th_hat, thd_hat, arm_hat, armd_hat, theta_m,
                                                arm_m, arm_dot_m, u_obs, gp.obs)
     else:
