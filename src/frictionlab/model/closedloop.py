@@ -40,7 +40,7 @@ from .controller import (
     state_vector,
 )
 from .friction import FRICTION_DTYPE, copy_friction_into, drifted_params, is_drifting
-from .plants import inlines_step, plant_step, plant_step_called
+from .plants import inlined_params, inlined_step, inlines_step, plant_step, plant_step_called
 from .sensor import ideal_reading, measure, reading
 from .swingup import (
     BALANCING,
@@ -165,7 +165,8 @@ def run_loop(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, 
     # step inlined (no call in the tick), or with every step called
     if inlines_step(pcode, pp) and gp.observer == THESIS_OBSERVERS:
         return _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0,
-                      x0, fall_angle, out, record, swing, sup_row, wx, phase_out, True)
+                      x0, fall_angle, out, record, swing, sup_row, wx, phase_out,
+                      inlined_params(pp))
     return _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp, n0, x0,
                   fall_angle, out, record, swing, sup_row, wx, phase_out, None)
 
@@ -175,17 +176,19 @@ def _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp
            fall_angle, out, record, swing, sup_row, wx, phase_out, inline):
     """The ticks of :func:`run_loop`, compiled once per type of ``inline``.
 
-    ``inline`` True: the plant's step (:func:`frictionlab.model.plants.plant_step`,
-    the thesis plant's inlined), the controller step with the thesis's
-    observers (:func:`frictionlab.model.controller.controller_tick`) and the
-    sensor inlined into the tick, which then calls nothing but the swing-up
-    supervisor.
-    ``inline`` None: every step called
+    ``inline`` the thesis plant's record
+    (:func:`frictionlab.model.plants.inlined_params`, read once, by value): its
+    step without the back-EMF (:func:`frictionlab.model.plants.inlined_step`),
+    the controller step with the thesis's observers
+    (:func:`frictionlab.model.controller.controller_tick`) and the sensor
+    inlined into the tick, which then calls nothing but the swing-up
+    supervisor, and the plant's parameters and what the step derives from
+    them stay out of the ticks.  ``inline`` None: every step called
     (:func:`frictionlab.model.plants.plant_step_called`): a loop that is quick
     to compile, for the plants whose step costs far more than the calls (the
     DC plant, the thesis plant with the actuator's back-EMF).  numba prunes
-    the branches on ``inline is None`` before it compiles the rest, so neither
-    loop carries the other's code.
+    the branches on ``inline is None`` where ``inline`` is None before it
+    compiles the rest.
     """
     h = gp.h
     drifting = is_drifting(fp)
@@ -232,7 +235,7 @@ def _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp
         if inline is None:
             f_mean, mem = plant_step_called(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fpt)
         else:
-            f_mean, mem = plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fpt)
+            f_mean, mem = inlined_step(x, u, mem, substeps, ratio, h, inline, fkind, fpt)
         if record:
             out[k, 15] = f_mean
         if swing:

@@ -39,8 +39,8 @@ from dataclasses import dataclass
 from .._jit import jit_inline
 from . import furuta_dc, thesis
 
-__all__ = ["FURUTA_DC", "PLANTS", "THESIS", "PlantKind", "inlines_step", "plant_of", "plant_step",
-           "plant_step_called"]
+__all__ = ["FURUTA_DC", "PLANTS", "THESIS", "PlantKind", "inlined_params", "inlined_step",
+           "inlines_step", "plant_of", "plant_step", "plant_step_called"]
 
 
 @dataclass(frozen=True)
@@ -80,17 +80,25 @@ def plant_of(params) -> PlantKind:
     raise TypeError(f"no plant takes {type(params).__name__} parameters")
 
 
-#: The thesis plant's step without the actuator's back-EMF inlined where the
+#: The thesis plant's step without the actuator's back-EMF, inlined where the
 #: closed loop advances the plant (a call every tick cost about 10 % of a run):
-#: the same Python function, compiled in place.
-_thesis_tick = jit_inline(thesis.tick_without_back_emf.py_func)
+#: the same Python function, compiled in place, on the plant's record.
+inlined_step = jit_inline(thesis.step_without_back_emf.py_func)
 
 
 @jit_inline
 def inlines_step(pcode, pp):
     """Whether :func:`plant_step` inlines the step of the plant ``pcode`` with the
-    parameter row ``pp``: the thesis plant whose actuator has no back-EMF."""
+    parameter row ``pp`` (:func:`inlined_step` on :func:`inlined_params`): the
+    thesis plant whose actuator has no back-EMF."""
     return pcode == 0 and not thesis.plant_record(pp).act_back_emf != 0.0
+
+
+@jit_inline
+def inlined_params(pp):
+    """The record :func:`inlined_step` takes, of the row ``pp`` (read once by a
+    loop, before its ticks)."""
+    return thesis.plant_record(pp)
 
 
 @jit_inline
@@ -99,7 +107,7 @@ def plant_step(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp):
     the thesis plant's step without the back-EMF inlined (:func:`inlines_step`),
     any other step called (:func:`plant_step_called`)."""
     if inlines_step(pcode, pp):
-        return _thesis_tick(x, u, mem, substeps, ratio, h, pp, fkind, fp)
+        return inlined_step(x, u, mem, substeps, ratio, h, inlined_params(pp), fkind, fp)
     return plant_step_called(pcode, x, u, mem, substeps, ratio, h, pp, fkind, fp)
 
 

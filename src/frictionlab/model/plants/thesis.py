@@ -107,6 +107,7 @@ __all__ = [
     "linearized_model",
     "plant_record",
     "rhs",
+    "step_without_back_emf",
     "tick",
     "tick_without_back_emf",
     "zoh",
@@ -361,8 +362,8 @@ def tick(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     and :func:`tick_without_back_emf`, which the closed loop inlines when the
     back-EMF is off (the same numbers bit for bit).
     """
-    return _step(x, u, mem, substeps, ratio, h, pp, fkind, fp,
-                 plant_record(pp).act_back_emf != 0.0)
+    p = plant_record(pp)
+    return _step(x, u, mem, substeps, ratio, h, p, fkind, fp, p.act_back_emf != 0.0)
 
 
 @jit
@@ -375,14 +376,25 @@ def tick_without_back_emf(x, u, mem, substeps, ratio, h, pp, fkind, fp):
     update in each substep no longer waits for a product and a difference on
     the velocity just computed (a third of a cheap run's time; docs/performance.md).
     """
-    return _step(x, u, mem, substeps, ratio, h, pp, fkind, fp, False)
+    return _step(x, u, mem, substeps, ratio, h, plant_record(pp), fkind, fp, False)
+
+
+@jit
+def step_without_back_emf(x, u, mem, substeps, ratio, h, p, fkind, fp):
+    """:func:`tick_without_back_emf` on the plant's :class:`PlantRecord` ``p`` (by
+    value) in place of its row: a loop that reads the record once, before its
+    ticks, keeps the parameters and what the step derives from them (the
+    reciprocals of eq. 6's divisions) out of every tick; read from the row in
+    each tick, they are not (the row may share memory with the state the step
+    writes), which cost a cheap run 10-15 % (docs/performance.md)."""
+    return _step(x, u, mem, substeps, ratio, h, p, fkind, fp, False)
 
 
 @jit_inline
-def _step(x, u, mem, substeps, ratio, h, pp, fkind, fp, back_emf):
-    """The body of :func:`tick`; ``back_emf`` (bool) says whether the actuator's
-    back-EMF is evaluated in the substeps, a constant where the caller passes one."""
-    p = plant_record(pp)
+def _step(x, u, mem, substeps, ratio, h, p, fkind, fp, back_emf):
+    """The body of :func:`tick` on the plant's record ``p``; ``back_emf`` (bool)
+    says whether the actuator's back-EMF is evaluated in the substeps, a
+    constant where the caller passes one."""
     omega0, zeta, g, arm_len, ku = p.omega0, p.zeta, p.g, p.arm_length, p.input_gain
     dt = h / substeps
     # the actuator (App. B.4): the acceleration the motor gives for k_u u, at the
