@@ -375,6 +375,46 @@ def test_the_loop_inlines_the_same_step_laws():
     from frictionlab.model import closedloop, controller, plants, sensor
     from frictionlab.model.plants import thesis
 
-    assert plants._thesis_tick.py_func is thesis.tick_without_back_emf.py_func
-    assert closedloop._controller_step_inline.py_func is controller.controller_step.py_func
+    assert plants.inlined_step.py_func is thesis.step_without_back_emf.py_func
+    assert closedloop.controller_tick is controller.controller_tick
     assert closedloop._measure_inline.py_func is sensor.measure.py_func
+
+
+@pytest.mark.parametrize("friction,sets", [
+    ("classical", ["sim.noise=0.002", "sim.quantization=1"]),
+    ("lugre", ["friction.observer_gain=1"]),
+    ("coulomb", []),
+])
+def test_the_two_loops_run_the_same_ticks(friction, sets):
+    # run_loop's loop with the thesis plant's step, controller and sensor inlined
+    # (the plant's record read once) and its loop with the plant's step called:
+    # the same run bit for bit, and the same as simulate_config's
+    from frictionlab.model import closedloop
+    from frictionlab.model.friction import KINDS, plant_record, resolve_drift
+    from frictionlab.model.plants import inlined_params, inlines_step
+    from frictionlab.runs import loop_spec
+
+    cfg = build_config("fast", friction, sets=[*sets, "sim.initial_angle=0.05"])
+    spec = loop_spec(cfg)
+    n = 400
+    gp, cp = spec.controller.record()
+    pp = spec.plant_params.record()
+    fkind = KINDS.index(spec.friction_kind)
+    assert inlines_step(spec.plant.code, pp)
+    runs = []
+    for inline in (inlined_params(pp), None):
+        x = np.zeros(5)
+        x[0] = spec.initial_angle
+        s = spec.controller.init(spec.initial_angle)
+        out = np.zeros((n, len(COLUMNS)))
+        fp = resolve_drift(plant_record(spec.friction_kind, spec.friction), n * spec.h)
+        sup_row, wx, phase = closedloop.no_swing()
+        done, status, mem, _ = closedloop._ticks(
+            x, 0.0, n, spec.plant.code, spec.substeps, spec.ratio, pp, fkind, fp, gp, cp, s,
+            spec.sensor, 0, 0.0, spec.fall_angle, out, True, False, sup_row, wx, phase, inline)
+        assert (done, status) == (n, closedloop.OK)
+        runs.append((out, x, mem))
+    (a, xa, ma), (b, xb, mb) = runs
+    assert np.array_equal(a, b) and np.array_equal(xa, xb) and ma == mb
+    assert np.abs(a[:, COLUMNS.index("arm_dot")]).max() > 0  # the arm moved
+    assert np.array_equal(simulate_config(cfg, n * spec.h).data, a)

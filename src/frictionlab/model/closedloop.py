@@ -183,10 +183,12 @@ def _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp
     (:func:`frictionlab.model.controller.controller_tick`) and the sensor
     inlined into the tick, which then calls nothing but the swing-up
     supervisor, and the plant's parameters and what the step derives from
-    them stay out of the ticks.  ``inline`` None: every step called
-    (:func:`frictionlab.model.plants.plant_step_called`): a loop that is quick
-    to compile, for the plants whose step costs far more than the calls (the
-    DC plant, the thesis plant with the actuator's back-EMF).  numba prunes
+    them stay out of the ticks.  ``inline`` None: the plant's step called
+    (:func:`frictionlab.model.plants.plant_step_called`), the controller step
+    and the sensor inlined, the controller with any observers: the loop of
+    the plants whose step costs far more than a call (the DC plant, the thesis
+    plant with the actuator's back-EMF), quicker to compile than one with a
+    second plant step inlined.  numba prunes
     the branches on ``inline is None`` where ``inline`` is None before it
     compiles the rest.
     """
@@ -206,20 +208,15 @@ def _ticks(x, mem, n_ticks, pcode, substeps, ratio, pp, fkind, fp, gp, cp, s, sp
         if ideal:
             th_m, arm_m, armd_m, x0 = ideal_reading(x[0], x[2], x[3], n0 + k == 0, x0)
         else:
-            if inline is None:
-                th_m, arm_m, armd_m, x0 = measure(sp, x[0], x[2], x[3], n0 + k, x0)
-            else:
-                th_m, arm_m, armd_m, x0 = _measure_inline(sp, x[0], x[2], x[3], n0 + k, x0)
+            th_m, arm_m, armd_m, x0 = _measure_inline(sp, x[0], x[2], x[3], n0 + k, x0)
         th_hat, thd_hat, arm_hat, armd_hat, z_hat = estimates(s, gp)
         if swing:
             th_m = wrap_angle(th_m)
             u, _u_fb, f_hat = swingup_step(w, s, gp, cp, sup, th_m, arm_m, armd_m)
         else:
-            if inline is None:
-                u, _u_fb, f_hat = controller_step(s, gp, cp, th_m, arm_m, armd_m)
-            else:
-                u, _u_fb, f_hat = controller_tick(s, gp, cp, th_m, arm_m, armd_m,
-                                                  THESIS_OBSERVERS)
+            # inlined in both loops (its call cost a DC plant's run about 10 %)
+            u, _u_fb, f_hat = controller_tick(s, gp, cp, th_m, arm_m, armd_m,
+                                              gp.observer if inline is None else THESIS_OBSERVERS)
         if record:
             theta = x[0]
             if swing:
