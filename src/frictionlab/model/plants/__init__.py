@@ -27,7 +27,7 @@ one dispatch the compiled closed loop (:mod:`frictionlab.model.closedloop`)
 calls; :data:`PLANTS` names the plants and their codes.
 
 Adding a plant: write its module to the interface above, add it to
-:data:`PLANTS` and one branch to :func:`plant_step`, and give it a preset in
+:data:`PLANTS` and one branch to :func:`plant_step_called`, and give it a preset in
 the configuration (docs/architecture.md, "Add a plant").
 """
 
