@@ -349,7 +349,6 @@ class RigEmulator:
             return  # older than the last command: a stale datagram
         if self._faults and self._take("ignore_commands", frame.seq):
             return
-        self.last_command_seq = frame.seq
         self.counts["commands"] += 1
         self.saturated = not (-1.0 <= u_da <= 1.0)
         u_da = dac.py_func(u_da, 1.0)
@@ -362,6 +361,8 @@ class RigEmulator:
         self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
         self._t_cmd = t
         self.tripped = False
+        # last: a thread that sees this command's number (without the lock) sees it applied
+        self.last_command_seq = frame.seq
 
     def _sample(self, seq: int, t: int) -> list[bytes]:
         self._advance(t)
