@@ -52,21 +52,25 @@ def test_a_bad_bound_is_bad_input(cli, value):
     assert "FRICTIONLAB_SERVE_LIMIT" in res.stderr and len(res.stderr.splitlines()) == 1
 
 
-@pytest.mark.slow  # the loop's start-up (its warm-up) and 0.3 s of real time
+@pytest.mark.slow  # the loop's start-up and a second of real time
 def test_a_headless_run_without_duration_stops_at_the_bound_with_the_motor_zeroed(cli,
                                                                                   tmp_path):
-    res = cli("run", "--headless", "--json", "--no-realtime", "--log-dir", tmp_path,
-              env={"FRICTIONLAB_SERVE_LIMIT": "0.3"})
-    assert res.returncode == 1
-    assert "the serving bound FRICTIONLAB_SERVE_LIMIT" in res.stderr
     import json
 
     from frictionlab.io.logs import read_log
 
+    # the sim backend's slack for a loaded host (docs/development.md): not a safety stop
+    res = cli("run", "--headless", "--json", "--no-realtime", "--sim-lockstep",
+              "--angle-limit", "1.2", "--log-dir", tmp_path,
+              env={"FRICTIONLAB_SERVE_LIMIT": "1"})
+    assert res.returncode == 1
+    assert "stopped after 1 s, the serving bound FRICTIONLAB_SERVE_LIMIT" in res.stderr
     st = json.loads(res.stdout)
-    assert st["stop_reason"] == "duration" and st["ticks"] > 0
-    log = read_log(st["log"])
-    assert log["u"][-1] == 0.0  # the stop's tick writes u = 0
+    assert st["stop_reason"] == "signal"  # stopped as a signal does
+    if st["ticks"]:  # the stop's tick writes u = 0
+        assert read_log(st["log"])["u"][-1] == 0.0
+    else:  # the bound came before the first tick (a stalled host): no command at all
+        assert st["log"] is None or not any(read_log(st["log"])["u"])
 
 
 @pytest.mark.slow  # the controller built for the console

@@ -264,16 +264,16 @@ def _cmd_run(args) -> int:
                               compensation_transition=args.compensation_transition)
     check_output_dir(args.log_dir, "--log-dir")
     limit = serve_limit()
-    # the serving bound ends a headless run that has no --duration as a duration would
+    # the serving bound ends a headless run that has no --duration as a signal would
     args.bound = limit if args.headless and args.duration is None else None
+    args.bound_hit = False
     flush_notes(args)
     with RunSignals() as signals:
         if signals.received is not None:  # came during the start-up: nothing ran
             return _report(not_started(signals.received), args)
         ctl = RealtimeController(cfg, args.backend, log_dir=args.log_dir,
                                  clock=MonotonicClock(), safety=safety,
-                                 prewarm_us=args.prewarm_us,
-                                 duration=args.duration if args.bound is None else args.bound,
+                                 prewarm_us=args.prewarm_us, duration=args.duration,
                                  realtime=not args.no_realtime, fsync=args.fsync,
                                  cpu=_resolve_cpu(args.cpu), sim_lockstep=args.sim_lockstep,
                                  log_formats=("csv", args.log_format),
@@ -401,7 +401,10 @@ def _run_headless(ctl, args) -> int:
             return 1
         # block without periodic wake-ups (a woken main thread takes the GIL); signal
         # handlers still run, in this thread, and ask the loop to stop
-        ctl.wait()
+        if not ctl.wait(getattr(args, "bound", None)):  # the serving bound: one wake-up
+            args.bound_hit = True
+            ctl.stop("signal", SERVE_LIMIT_ENV)
+            ctl.wait()
     finally:
         if ctl.running:
             ctl.stop("signal")
@@ -423,7 +426,7 @@ def _report(st: dict, args) -> int:
                   f" compute p50 {c['p50']:.0f} us, p99 {c['p99']:.0f} us")
         print(f"log: {st['log']}")
     reason = st.get("stop_reason")
-    if reason == "duration" and getattr(args, "bound", None) is not None:
+    if getattr(args, "bound_hit", False) and reason == "signal":  # not a safety stop first
         return _bound_hit("run", args.bound)
     if reason in _OK_STOPS:
         return 0
