@@ -21,6 +21,7 @@ expected refusal went away fails instead of serving forever
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import math
 import os
@@ -41,8 +42,8 @@ from .common import (
     safety_from_args,
 )
 
-__all__ = ["SERVE_LIMIT_ENV", "interface_stats", "register_cli", "serve_limit",
-           "start_console"]
+__all__ = ["SERVE_LIMIT_ENV", "WAIT_PRIORITY", "interface_stats", "register_cli",
+           "serve_limit", "start_console", "waiting_priority"]
 
 DEFAULT_RIG_PORT = 9870
 PREWARM_US = 300.0
@@ -390,6 +391,33 @@ class RunSignals:
             signal.signal(signal.SIGTSTP, self._suspend)
 
 
+#: SCHED_FIFO priority of the main thread while a headless run waits for its end or a
+#: signal: that of the console's server (below the loop, 50, and the log writer, 10).
+WAIT_PRIORITY = 5
+
+
+@contextlib.contextmanager
+def waiting_priority(realtime: bool):
+    """The calling thread at :data:`WAIT_PRIORITY` (where permitted), its own
+    scheduling policy back afterwards (``run`` may run in a test's thread)."""
+    from ..realtime.osrt import try_realtime_priority
+
+    try:
+        before = (os.sched_getscheduler(0), os.sched_getparam(0))
+    except (AttributeError, OSError):
+        before = None
+    if realtime and before is not None:
+        try_realtime_priority(WAIT_PRIORITY)
+    try:
+        yield
+    finally:
+        if realtime and before is not None:
+            try:
+                os.sched_setscheduler(0, *before)
+            except OSError:
+                pass
+
+
 def _run_headless(ctl, args) -> int:
     from ..realtime import RigError
 
@@ -400,11 +428,15 @@ def _run_headless(ctl, args) -> int:
             print(f"frictionlab run: error: {exc}", file=sys.stderr)
             return 1
         # block without periodic wake-ups (a woken main thread takes the GIL); signal
-        # handlers still run, in this thread, and ask the loop to stop
-        if not ctl.wait(getattr(args, "bound", None)):  # the serving bound: one wake-up
-            args.bound_hit = True
-            ctl.stop("signal", SERVE_LIMIT_ENV)
-            ctl.wait()
+        # handlers still run, in this thread, and ask the loop to stop.  At a low
+        # SCHED_FIFO priority (below the loop's and the log writer's, as the console's
+        # server): on a loaded host a normal thread woke 15-30 ms late for the handler,
+        # and the motor ran on for 3-6 ticks after a SIGINT
+        with waiting_priority(getattr(ctl, "realtime", False)):
+            if not ctl.wait(getattr(args, "bound", None)):  # the serving bound
+                args.bound_hit = True
+                ctl.stop("signal", SERVE_LIMIT_ENV)
+                ctl.wait()
     finally:
         if ctl.running:
             ctl.stop("signal")
