@@ -12,6 +12,7 @@ import numpy as np
 from frictionlab.config import build_config
 from frictionlab.model.swingup import CAUGHT, SWINGING
 from frictionlab.runs import make_controller
+from frictionlab.studies.dc_robustness import VARIED
 from frictionlab.studies.swingup_sim import ROBUST_DESIGN, simulate_swingup, swingup_outcome
 
 HANGING = ("sim.initial_angle", math.pi)
@@ -83,11 +84,9 @@ def test_a_slice_of_the_qube_monte_carlo_with_the_robust_design():
     at 20 s, the command after each catch below 80 % of 10 V."""
     rng = np.random.default_rng(11)
     nominal = build_config(plant="qube2").plant
-    varied = ("arm_mass", "arm_length", "pendulum_mass", "pendulum_length", "resistance",
-              "torque_constant", "emf_constant")
     for i in range(8):
         fc = rng.uniform(0.0, 0.3)
-        values = [(f"plant.{f}", getattr(nominal, f) * rng.uniform(0.8, 1.2)) for f in varied]
+        values = [(f"plant.{f}", getattr(nominal, f) * rng.uniform(0.8, 1.2)) for f in VARIED]
         values += [("friction.coulomb", fc), ("friction.stiction", fc + rng.uniform(0, 0.1)),
                    ("sim.seed", i)]
         res = swing("qube2", ROBUST_DESIGN, values, known=False)
