@@ -131,6 +131,7 @@ def _copy_log(log, folder, name, **sidecar):
     return str(folder / f"{name}.csv")
 
 
+@pytest.mark.slow
 def test_features_name_the_plant_and_the_unit_of_u(run_log, tmp_path, capsys):
     """The sidecar's plant and u's unit, in the JSON and in the text (max_u in volts
     on a motor plant); a log without a sidecar: unknown, unless --plant says."""
@@ -168,6 +169,7 @@ def test_a_plant_that_contradicts_the_sidecar_exits_2(run_log, tmp_path, capsys,
     assert rc == 2 and message in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_identify_limit_cycle_takes_the_plant_of_its_measured_files(run_log, tmp_path,
                                                                      capsys, monkeypatch):
     """Without --plant the fit runs on the plant the files name (a QUBE log, its
