@@ -37,7 +37,7 @@ def test_the_fit_of_app_a2s_peaks():
     d = a[:-1] - a[1:]
     line = 2 * math.pi * zeta * a[:-1] + 4 * fp / 6.8**2
     ratio = d @ a[:-1] / (a[:-1] @ a[:-1])
-    assert np.sum((d - line) ** 2) < 0.2 * np.sum((d - ratio * a[:-1]) ** 2)
+    assert np.sum((d - line) ** 2) < 0.1 * np.sum((d - ratio * a[:-1]) ** 2)
 
 
 def test_coulomb_decay_is_linear_with_the_derived_decrement():
