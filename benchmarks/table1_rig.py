@@ -25,7 +25,7 @@ Usage::
     .venv/bin/python benchmarks/table1_rig.py [--seed 2] [--maxiter 80] [--popsize 15] [--no-pivot]
 
 docs/identification.md, "What else the 1996 rig had", quotes its figures
-(seed 1 and 2, 80 generations of 15 per key: about 5 min on the shared
+(seed 1 and 2, 80 generations of 15 per key: about 4-5 min on the shared
 2-core machine).
 """
 
