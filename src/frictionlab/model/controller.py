@@ -103,6 +103,7 @@ __all__ = [
     "Controller",
     "ControllerOutput",
     "Gains",
+    "arm_prediction",
     "check_compensator",
     "compensator_levels",
     "compensator_params",
