@@ -42,7 +42,7 @@ from frictionlab.model.limit_cycles import trajectory_features
 from frictionlab.studies.compensation import PEAK_TO_PEAK_FLOOR
 
 sys.path.insert(0, str(Path(__file__).parent))
-from swingup import draw  # noqa: E402  (the same drawn plants)
+from swingup import draw  # the same drawn plants
 
 COMPENSATORS = ("classical", "lugre", "adaptive")
 DURATION, WINDOW = 30.0, 15.0
@@ -95,7 +95,7 @@ def levels() -> list[dict]:
                 row[c] = shrink(base, peak_to_peak(build_config("fast", "classical", c,
                                                                 sets=sets, plant="qube2")))
             rows.append(row)
-            print(f"  noise {noise:5.3f} F_C {fc:5.3f} without {fmt(base)}  "
+            print(f"  noise {noise:5.3f} F_C {fc:5.3f} without {base or 0:.4f}  "
                   + "  ".join(f"{c} {fmt(row[c])}" for c in COMPENSATORS))
     return rows
 
