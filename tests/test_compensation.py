@@ -662,51 +662,37 @@ def test_reduction_divides_by_at_least_one_adc_quantum():
 # ---------------------------------------------------------------------------
 
 
-def _motor_innovations(friction, compensation, ticks=300):
-    """Per tick of a closed QUBE-Servo 2 loop from 0.05 rad (the compiled controller
-    step, the 200 Hz loop's form): the innovation of the measured arm rate against
-    the linear model's one-tick prediction from the last tick's state and net
-    voltage (computed here from the design's Phi and Gamma), the change of the
-    measured rate over the tick, the plant's mean friction and F_hat over the
-    tick before, and the LuGre compensator object's F_hat for that innovation
-    (NaN without the LuGre compensator); and Gamma's arm-rate entry."""
-    from frictionlab.model.controller import (
-        controller_step_rows,
-        gains_row,
-        state_index,
-        state_vector,
-    )
-    from frictionlab.model.friction import friction_row
-    from frictionlab.model.simulation import SimulatedPlant
-    from frictionlab.runs import loop_spec, make_controller, plant_design
+def _motor_innovations(friction, compensation):
+    """A simulated QUBE-Servo 2 run of 1.5 s from 0.05 rad, per tick from the
+    second: the innovation of the measured arm rate against the linear model's
+    one-tick prediction from the last tick's state and net voltage (computed
+    here from the recorded estimates and the design's Phi and Gamma), the change
+    of the measured rate over the tick, the plant's mean friction and F_hat over
+    the tick before, the recorded F_hat and the LuGre compensator object's
+    F_hat for that innovation (NaN without the LuGre compensator); and Gamma's
+    arm-rate entry."""
+    from frictionlab.runs import plant_design
 
-    cfg = build_config("fast", friction, compensation, plant="qube2")
-    ctl = make_controller(cfg)
-    gp, cp = ctl.record()
+    cfg = build_config("fast", friction, compensation, plant="qube2",
+                       sets=["sim.initial_angle=0.05"])
+    tr = simulate_config(cfg, 1.5)
     d = plant_design(cfg)
     phi3, gamma3 = np.asarray(d.Phi)[3], float(np.asarray(d.Gamma)[3, 0])
-    lugre = make_compensator("lugre", cfg.compensation) if compensation == "lugre" else None
-    g_row, cp_row = gains_row(gp), friction_row(cp)
-    idx = {n: state_index(n) for n in ("x1", "x2", "arm", "arm_dot", "u", "f_hat", "z_hat")}
-    plant = SimulatedPlant(loop_spec(cfg))
-    ps, x = plant.init(0.05), state_vector(ctl.init(0.05))
-    rows = []
-    for _ in range(ticks):
-        th, _, arm, arm_dot = ps.x[:4]
-        last = x.copy()
-        pred = (phi3 @ last[[idx["x1"], idx["x2"], idx["arm"], idx["arm_dot"]]]
-                + gamma3 * (last[idx["u"]] - last[idx["f_hat"]]))
-        u, _, f_hat = controller_step_rows(x, g_row, cp_row, th, arm, arm_dot)
-        f_obj = math.nan
-        if lugre is not None:
-            f_obj, _ = lugre.step(comp.CompensatorState(0.0, last[idx["z_hat"]], 0.0),
-                                  arm_dot, e=arm_dot - pred)
-        rows.append((arm_dot - pred, arm_dot - last[idx["arm_dot"]], ps.friction,
-                     last[idx["f_hat"]], f_hat, f_obj))
-        ps = plant.step(ps, u)
-    return np.array(rows[1:]), gamma3  # the first tick has no last tick
+    last = np.column_stack([tr[c] for c in ("theta_hat", "theta_dot_hat", "arm_hat",
+                                            "arm_dot_hat")])[1:]
+    u, f_hat, rate = tr["u"], tr["friction_hat"], tr["arm_dot_m"]
+    e = rate[1:] - (last @ phi3 + gamma3 * (u[:-1] - f_hat[:-1]))
+    f_obj = np.full(len(e), math.nan)
+    if compensation == "lugre":
+        lugre = make_compensator("lugre", cfg.compensation)
+        for k, (z, v, ek) in enumerate(zip(tr["z_hat"][1:], rate[1:], e, strict=True)):
+            f_obj[k], _ = lugre.step(comp.CompensatorState(0.0, z, 0.0), v, e=ek)
+    rows = np.column_stack([e, rate[1:] - rate[:-1], tr["friction"][:-1], f_hat[:-1],
+                            f_hat[1:], f_obj])
+    return rows, gamma3
 
 
+@pytest.mark.slow  # the file's first motor-plant loop: loads its kernels (about 2 s)
 def test_motor_plant_innovation_is_the_friction_error():
     """With the pendulum observer nothing predicts the arm, so the compensators'
     innovation is the measured rate minus the linear model's one-tick prediction
