@@ -756,3 +756,22 @@ def test_motor_plant_lugre_over_compensating_does_not_enlarge_the_cycle():
     res = compare(build_config("fast", "classical", "lugre", sets=sets, plant="qube2"),
                   DUR, WIN)
     assert res.status != "fell" and res.reduction > 1.5
+
+
+@pytest.mark.slow
+def test_the_loop_check_sees_the_motor_innovation():
+    """The loop check (the console's, before a compensator is switched on) linearises
+    the tick with the last tick's u and F_hat as states, which the motor plant's
+    innovation reads: it passes the LuGre and adaptive defaults, and flags a damping
+    kick sigma_1 k h / L above 1 (k 20, sigma_1 0.6: 1.1), with which the simulated
+    pendulum falls."""
+    from frictionlab.model.loopcheck import check_loop
+    from frictionlab.runs import make_controller
+
+    for kind in ("lugre", "adaptive"):
+        cfg = build_config("fast", "classical", kind, plant="qube2")
+        assert check_loop(make_controller(cfg), cfg.plant).ok
+    kick = ["compensation.observer_gain=20", "compensation.sigma1=0.6"]
+    cfg = build_config("fast", "classical", "lugre", sets=kick, plant="qube2")
+    assert check_loop(make_controller(cfg), cfg.plant).verdict == "compensator_unstable"
+    assert simulate_config(cfg, 10.0).status == "fell"
