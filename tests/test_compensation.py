@@ -775,3 +775,24 @@ def test_the_loop_check_sees_the_motor_innovation():
     cfg = build_config("fast", "classical", "lugre", sets=kick, plant="qube2")
     assert check_loop(make_controller(cfg), cfg.plant).verdict == "compensator_unstable"
     assert simulate_config(cfg, 10.0).status == "fell"
+
+
+def test_the_default_tuning_grid_of_a_motor_plant_spans_the_thesis_ratios():
+    """compensate tune's default grid: the thesis's on the thesis plant; on a motor
+    plant each level or gain scaled by the plant's default over the thesis's
+    (volts), velocities and bandwidths kept."""
+    thesis = build_config("fast", "classical", "lugre")
+    assert comp.default_grid(thesis) == comp.DEFAULT_GRIDS["lugre"]
+    for kind in ("classical", "lugre", "adaptive"):
+        cfg = build_config("fast", "classical", kind, plant="qube2")
+        ref = FrictionParams.defaults(kind, "compensation")
+        for (key, values), (tkey, tvalues) in zip(comp.default_grid(cfg),
+                                                  comp.DEFAULT_GRIDS[kind], strict=True):
+            field = key.split(".", 1)[1]
+            assert key == tkey
+            if field in ("stribeck_velocity", "hysteresis", "adaptation_bandwidth"):
+                assert values == tvalues
+            else:  # the motor default sits where the thesis default sat
+                ratio = getattr(cfg.compensation, field) / getattr(ref, field)
+                np.testing.assert_allclose(values, np.array(tvalues) * ratio, rtol=1e-3)
+        assert comp.check_grid(cfg, comp.default_grid(cfg))  # every point is valid
