@@ -593,6 +593,10 @@ def test_the_console_of_a_motor_plant_shows_and_checks_it_in_volts(tmp_path):
         assert (sch["plant"], sch["u_unit"]) == ("qube2", "V")
         units = {f["name"]: f["unit"] for f in sch["compensation"]["fields"]["lugre"]}
         assert units["stiction"] == "V" and units["sigma0"] == "V/rad"
+        adaptive = {f["name"]: f["unit"] for f in sch["compensation"]["fields"]["adaptive"]}
+        # the adaptive law's gain: a level's rate (V/s) per arm-velocity error (rad/s)
+        assert adaptive["adaptation_gain"] == "V/rad" and adaptive["adaptation_max"] == "V"
+        assert not [u for u in adaptive.values() if "m/" in u]
         assert sch["compensation"]["defaults"]["classical"]["coulomb"] == pytest.approx(0.155)
         assert sch["presets"]["slow"]["omega0"] == pytest.approx(cfg.plant.omega0)
         st = client.get("/api/status").json()
@@ -605,6 +609,15 @@ def test_the_console_of_a_motor_plant_shows_and_checks_it_in_volts(tmp_path):
         assert "confirmed_unsafe" not in ctl.events[-1]
         slow = dc_design(dc_spec("slow", cfg.plant), cfg.plant)
         np.testing.assert_allclose(r.json()["status"]["design"]["L"], slow.L)
+        # the design's omega_0 is the plant's: another is refused at its field, confirm or
+        # not (it would be shown and change nothing); the page's 6 digits of it pass
+        for confirm in (False, True):
+            r = client.post("/api/design", json={"omega0": 1e-300, "confirm": confirm})
+            assert r.status_code == 422 and [e["field"] for e in r.json()["errors"]] == [
+                "omega0"], r.text
+            assert "its own omega_0" in r.json()["detail"]
+        w0 = float(f"{cfg.plant.omega0:.6g}")
+        assert client.post("/api/design", json={"omega0": w0, "zeta1": 0.7}).status_code == 200
         r = client.post("/api/compensation", json={"kind": "coulomb",
                                                    "params": {"coulomb": 12.0}})
         assert r.status_code == 422 and r.json()["check"]["verdict"] == "saturating"
