@@ -368,6 +368,24 @@ def test_tiny_design_values_are_refused_at_their_field_confirm_or_not(console, f
     assert _settings(client) == before
 
 
+@pytest.mark.parametrize("path, body, field", [
+    ("/api/design", {"preset": "fast", "omega0": 5e-324}, "omega0"),
+    ("/api/design", {"omega0": None}, "omega0"),
+    ("/api/design", {"preset": None}, "preset"),
+    ("/api/compensation", {"kind": None}, "kind"),
+    ("/api/compensation", {"enabled": None, "confirm": True}, "enabled"),
+    ("/api/compensation", {"params": None}, "params"),
+])
+def test_what_the_long_fuzz_found_is_refused_at_its_field(console, path, body, field):
+    """A preset with field values, a field sent as null: refused at that field, not at the
+    body as a whole."""
+    client, _ctl = console
+    before = _settings(client)
+    r = client.post(path, json=body)
+    assert r.status_code == 422 and [e["field"] for e in r.json()["errors"]] == [field], r.text
+    assert _settings(client) == before
+
+
 @pytest.mark.parametrize("field", ["zeta1", "observer_zeta2"])
 def test_a_tiny_damping_is_refused_unless_confirmed(console, field):
     """zeta = 1e-300 is an undamped pole pair: the check computes it and refuses it as

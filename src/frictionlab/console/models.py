@@ -113,10 +113,20 @@ class DesignRequest(_Request):
     observer_omega2: Number | None = None
     observer_zeta2: Number | None = None
 
+    @field_validator("preset", *FEEDBACK_FIELDS, *OBSERVER_FIELDS, mode="before")
+    @classmethod
+    def _not_null(cls, v, info):
+        # a field sent as null is refused at that field (left out, it keeps its value)
+        if v is None:
+            raise ValueError(f"{info.field_name} must not be null (leave it out to keep it)")
+        return v
+
     @field_validator(*FEEDBACK_FIELDS, *OBSERVER_FIELDS)
     @classmethod
     def _in_range(cls, v, info):
-        return v if v is None else _check(DesignSpec, info.field_name, v, "design.")
+        if info.data.get("preset") is not None:  # located at the field, not the body
+            raise ValueError("give either a preset or field values, not both")
+        return _check(DesignSpec, info.field_name, v, "design.")
 
     @model_validator(mode="after")
     def _one_kind(self):
@@ -185,6 +195,13 @@ class CompensationRequest(_Request):
     kind: Literal[COMPENSATORS] | None = None  # the same as Literal["coulomb", ...]
     params: FrictionModelRequest | None = None
     error_signal: Literal[ERROR_SIGNALS] | None = None  # type: ignore[valid-type]
+
+    @field_validator("enabled", "kind", "params", "error_signal", mode="before")
+    @classmethod
+    def _not_null(cls, v, info):
+        if v is None:  # refused at its field; left out, it keeps its value
+            raise ValueError(f"{info.field_name} must not be null (leave it out to keep it)")
+        return v
 
     @model_validator(mode="after")
     def _something(self):
