@@ -90,7 +90,12 @@
     const id = `${prefix}-${f.name}`;
     row.innerHTML = `<label for="${id}"></label><input id="${id}" type="text" inputmode="decimal" autocomplete="off"><span class="error" id="${id}-error"></span>`;
     const label = row.querySelector("label");
-    label.textContent = f.name + (f.unit && f.unit !== "1" ? ` (${f.unit})` : "");
+    // a long name breaks after an underscore, not inside a word (<wbr>)
+    f.name.split("_").forEach((part, i) => {
+      if (i) label.append("_", document.createElement("wbr"));
+      label.append(part);
+    });
+    if (f.unit && f.unit !== "1") label.append(` (${f.unit})`);
     label.title = `${f.doc}; allowed ${rangeText(f)}`;
     const input = row.querySelector("input");
     input.dataset.field = f.name;
