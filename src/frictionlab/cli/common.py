@@ -194,9 +194,11 @@ FEATURE_UNITS = {"peak1": "rad", "peak2": "rad", "valley": "rad", "period": "s",
                  "max_u": "m/s^2", "max_arm_velocity": "rad/s", "peak_to_peak": "rad"}
 
 
-def feature_lines(features: dict) -> list[str]:
-    """The plain-text lines of limit-cycle ``features``: name, value, unit."""
-    return [f"  {k:18s} {'-' if v is None else f'{v:.4g}'} {FEATURE_UNITS.get(k, '')}".rstrip()
+def feature_lines(features: dict, u_unit: str = "m/s^2") -> list[str]:
+    """The plain-text lines of limit-cycle ``features``: name, value, unit (``max_u`` in
+    ``u_unit``, the plant's unit of u: V for a motor plant)."""
+    units = {**FEATURE_UNITS, "max_u": u_unit}
+    return [f"  {k:18s} {'-' if v is None else f'{v:.4g}'} {units.get(k, '')}".rstrip()
             for k, v in features.items()]
 
 
