@@ -467,6 +467,19 @@ def test_a_design_the_simulated_pendulum_falls_with_is_refused_unless_confirmed(
     assert client.post("/api/design", json={"preset": "fast"}).status_code == 200
 
 
+def test_the_documented_refusal_is_the_program_s(console):
+    """docs/console.md's example of a refusal (``{"omega0": 100}``) is what the server
+    answers, word for word and number for number."""
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[1] / "docs" / "console.md").read_text()
+    block = doc.split('For example\n`{"omega0": 100}`:\n\n', 1)[1].split("\n\n", 1)[0]
+    shown = " ".join(line.strip() for line in block.splitlines())
+    client, _ctl = console
+    r = client.post("/api/design", json={"omega0": 100.0})
+    assert r.status_code == 422 and r.json()["detail"] == shown, (r.json()["detail"], shown)
+
+
 @pytest.mark.parametrize("options, field", [
     ({"scaling": 1.0}, "options.scaling"),
     ({"step": 1e-300}, "options.step"),
