@@ -371,6 +371,9 @@ def _figures_of(theta_of_t, seconds: float = 6.0) -> dict:
     # fell: the last angle is beyond the limit, the loop stopped
     (lambda t: 0.01 * math.exp(t), False, {}, "fallen"),
     (lambda t: 0.01, False, {}, "stopped"),
+    # the angle limit stopped it: the reading past the limit is not among the figures'
+    (lambda t: 0.3 * math.sin(7 * t), False, {"stop_reason": "angle_limit"}, "fallen"),
+    (lambda t: 0.3 * math.sin(7 * t), False, {"stop_reason": "user"}, "stopped"),
 ])
 def test_the_status_says_what_the_pendulum_does_and_figures_only_while_balancing(
         theta, running, kw, state):
