@@ -801,7 +801,7 @@ def test_a_recording_the_console_never_saw_running_still_asks_for_its_name(
     ctl.record_start()  # no status of the console has seen it recording
     ctl.stop("angle_limit")
     assert ctl.wait(5.0)
-    assert ctl.unnamed_recording is not None
+    # the hub's own status update (every 0.05 s) may take it before the request does
     st = client.get("/api/status").json()
     assert not st["recording"] and st["console"]["pending_recording"]
     assert ctl.unnamed_recording is None  # taken by the console: asked for only once
