@@ -612,6 +612,13 @@ def test_the_console_of_a_motor_plant_shows_and_checks_it_in_volts(tmp_path):
         assert "confirmed_unsafe" not in ctl.events[-1]
         slow = dc_design(dc_spec("slow", cfg.plant), cfg.plant)
         np.testing.assert_allclose(r.json()["status"]["design"]["L"], slow.L)
+        # a value out of range is said in the plant's units
+        r = client.post("/api/compensation", json={"params": {"coulomb": 1e300}})
+        assert r.json()["errors"] == [{"field": "params.coulomb", "message":
+                                       "compensation.coulomb = 1e+300 V is out of range; "
+                                       "allowed [0, 1000] V"}]
+        r = client.post("/api/design", json={"omega2": 1e-300})
+        assert "= 1e-300 rad/s is out of range; allowed [0.01, 1000] rad/s" in r.text
         # the design's omega_0 is the plant's: another is refused at its field, confirm or
         # not (it would be shown and change nothing); the page's 6 digits of it pass
         for confirm in (False, True):

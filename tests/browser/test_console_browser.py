@@ -377,7 +377,7 @@ def test_server_refusals_are_shown_beside_the_field(console, page):
         sigma0.fill("-300")
         page.locator("#friction-apply").click()
         expect(page.locator("#friction-sigma0-error")).to_contain_text(
-            "compensation.sigma0 = -300 is out of range")
+            "compensation.sigma0 = -300 1/s^2 is out of range; allowed [1, 1e+07] 1/s^2")
         expect(page.locator("#friction-msg")).to_have_text("refused: see the marked fields")
     finally:
         page.evaluate(loosen, 0)
