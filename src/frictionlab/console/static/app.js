@@ -80,7 +80,8 @@
     if (!Number.isFinite(v)) return { error: `${f.name} must be a finite number` };
     const below = f.lo !== null && (v < f.lo || (f.lo_open && v === f.lo));
     const above = f.hi !== null && (v > f.hi || (f.hi_open && v === f.hi));
-    if (below || above) return { error: `${f.name} = ${v} is out of range; allowed ${rangeText(f)}` };
+    const unit = f.unit && f.unit !== "1" ? " " + f.unit : "";
+    if (below || above) return { error: `${f.name} = ${v}${unit} is out of range; allowed ${rangeText(f)}${unit}` };
     return { value: v };
   }
 
