@@ -600,6 +600,13 @@ def test_the_console_of_a_motor_plant_shows_and_checks_it_in_volts(tmp_path):
         # the adaptive law's gain: a level's rate (V/s) per arm-velocity error (rad/s)
         assert adaptive["adaptation_gain"] == "V/rad" and adaptive["adaptation_max"] == "V"
         assert not [u for u in adaptive.values() if "m/" in u]
+        # every Friction Type starts from the schema's defaults in volts (the kinds the
+        # console did not start with had the thesis's: 2.3 "V" of stiction)
+        for kind in ("coulomb", "classical", "adaptive", "lugre"):
+            r = client.post("/api/compensation", json={"kind": kind, "enabled": False})
+            shown = r.json()["status"]["compensation"]["params"]
+            want = sch["compensation"]["defaults"][kind]
+            assert {f: shown[f] for f in units} == {f: want[f] for f in units}, kind
         assert sch["compensation"]["defaults"]["classical"]["coulomb"] == pytest.approx(0.155)
         assert sch["presets"]["slow"]["omega0"] == pytest.approx(cfg.plant.omega0)
         st = client.get("/api/status").json()
