@@ -584,8 +584,8 @@ def test_the_documented_body_timeout_is_the_servers():
 def test_a_body_that_never_arrives_is_answered_and_its_connection_closed(tmp_path):
     """A request head, then part of its body and nothing more, on every route of the app at
     once (GETs with a body too), and on two a body trickled a byte at a time: 408 and the
-    connection closed once the body timeout has passed; the operator's requests still
-    answer."""
+    connection closed once the body timeout has passed; a WebSocket handshake with a body:
+    400 and closed; the operator's requests still answer."""
     cfg = build_config("fast", "classical")
     (tmp_path / "rec.dat").write_bytes(b"0\n")
     ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
@@ -611,6 +611,15 @@ def test_a_body_that_never_arrives_is_answered_and_its_connection_closed(tmp_pat
             # slack, far below the 5 s a kept-alive idle connection is held)
             assert min(closed_after) >= timeout and max(closed_after) < timeout + 4.0, \
                 closed_after
+            # a WebSocket handshake announcing a body: refused and closed at once (uvicorn
+            # would hand the head alone to the WebSocket protocol, which waited for ever)
+            ws = socket.create_connection(("127.0.0.1", srv.port), timeout=10)
+            ws.sendall(b"GET /ws HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+                       b"Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                       b"Sec-WebSocket-Version: 13\r\nContent-Length: 20\r\n\r\n{\"ki")
+            got, closed, _ = _answer_and_close(ws, timeout + 20)
+            ws.close()
+            assert got.startswith(b"HTTP/1.1 400") and closed, got[:100]
             ok = socket.create_connection(("127.0.0.1", srv.port), timeout=10)
             ok.sendall(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close"
                        b"\r\n\r\n")

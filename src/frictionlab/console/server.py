@@ -14,7 +14,9 @@ a complete request head within :data:`HEAD_TIMEOUT` seconds, and when more
 than :data:`MAX_PENDING` connections are waiting for their first request it
 closes the oldest of them.  A refused request (no token, wrong origin)
 closes its connection (:mod:`.security`), and an idle kept-alive
-connection is closed after uvicorn's keep-alive timeout (5 s).
+connection is closed after uvicorn's keep-alive timeout (5 s).  A WebSocket
+handshake that announces a body is answered 400 and closed (it would wait for
+ever: see :meth:`ConsoleHTTP.handle_websocket_upgrade`).
 """
 
 from __future__ import annotations
@@ -90,6 +92,16 @@ class ConsoleHTTP(H11Protocol):
     def connection_lost(self, exc) -> None:
         self._not_pending()
         super().connection_lost(exc)
+
+    def handle_websocket_upgrade(self, event) -> None:
+        # a WebSocket handshake has no body; uvicorn hands the head alone to the
+        # WebSocket protocol, which then waited for ever on one announced (a stalled
+        # connection the body timeout never saw): refused, and the connection closed
+        if any(name in (b"content-length", b"transfer-encoding") and value.strip() != b"0"
+               for name, value in self.headers):
+            self.send_400_response("a WebSocket handshake has no body")
+            return
+        super().handle_websocket_upgrade(event)
 
 
 class _Server(uvicorn.Server):
