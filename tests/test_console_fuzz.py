@@ -637,3 +637,48 @@ def test_a_body_that_never_arrives_is_answered_and_its_connection_closed(tmp_pat
                 assert got.startswith(b"HTTP/1.1 404"), (path, got[:100])
     finally:
         ctl.close()
+
+
+@pytest.mark.slow
+def test_a_kept_alive_connection_must_send_each_head_in_time(tmp_path, monkeypatch):
+    """After an answer, the next request's head on the same connection has the head timeout
+    too, from its first byte: trickled a byte at a time (which restarts uvicorn's keep-alive
+    timer) or left half sent, the connection is closed; a healthy kept-alive client is
+    served."""
+    from frictionlab.console import server
+
+    head_timeout = 0.5
+    monkeypatch.setattr(server, "HEAD_TIMEOUT", head_timeout)
+    cfg = build_config("fast", "classical")
+    ctl = RealtimeController(cfg, "sim", log_dir=tmp_path, clock=FakeClock(), realtime=False,
+                             manage_gc=False)
+    req = b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"
+    try:
+        with _Uvicorn(create_app(ctl, None)) as srv:
+            trials = []
+            for first, trickle in ((req + b"GET /api/status HTTP/1.1\r\nX-Pad: ", True),
+                                   (req, True), (req + b"GET /api/sta", False)):
+                s = socket.create_connection(("127.0.0.1", srv.port), timeout=10)
+                s.sendall(first)
+                trials.append((s, trickle))
+            t0 = time.monotonic()
+            results = [_answer_and_close(s, head_timeout + 20, trickle=t) for s, t in trials]
+            for s, _ in trials:
+                s.close()
+            for got, closed, t in results:
+                assert closed and got.count(b"HTTP/1.1 200") == 1, got[:200]
+                assert t - t0 < head_timeout + 4.0  # far below the 20 s a held one reaches
+            healthy = socket.create_connection(("127.0.0.1", srv.port), timeout=10)
+            for _ in range(2):  # each sent at once: answered, the connection kept open
+                healthy.sendall(req)
+                got = b""
+                while b"\r\n\r\n" not in got:
+                    got += healthy.recv(1 << 16)
+                head, body = got.split(b"\r\n\r\n", 1)
+                length = int(head.lower().split(b"content-length: ")[1].split(b"\r\n")[0])
+                while len(body) < length:
+                    body += healthy.recv(1 << 16)
+                assert head.startswith(b"HTTP/1.1 200") and len(body) == length, head
+            healthy.close()
+    finally:
+        ctl.close()
