@@ -444,6 +444,8 @@ _VOLT_UNITS = {
     ("", "m/s^2/(rad/s)"): "V/(rad/s)",
     ("sigma0", "1/s^2"): "V/rad",
     ("sigma1", "1/s"): "V/(rad/s)",
+    # the adaptive law's gain: a level's rate per arm-velocity error, (V/s)/(rad/s)
+    ("adaptation_gain", "m/(rad s^2)"): "V/rad",
     ("u_scale", "1/(m/s^2)"): "1/V",
 }
 
