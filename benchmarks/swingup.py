@@ -30,6 +30,11 @@ the NOMINAL QUBE-Servo 2 (they do not know the draw), classical friction,
 noise 0.002, |V| <= 10 V (``--u-max``, V; the amplifier's limit), the
 swing-up's defaults for the plant.
 
+``--robust-design`` balances with the design for a plant the design does
+not know (:data:`frictionlab.studies.swingup_sim.ROBUST_DESIGN`: both pole
+pairs critically damped, the arm's at 5 rad/s; docs/swingup.md, "Plants the
+design does not know"): the setting with which both plants meet the targets.
+
 Prints one line per failure, the figures, and a JSON object as the last line;
 ``--plot PATH`` writes the map figure (success and catch time over F_C, F_S
 and the omega0 mismatch).
@@ -37,7 +42,8 @@ and the omega0 mismatch).
 Usage::
 
     .venv/bin/python benchmarks/swingup.py [--n 1000] [--seed 1] [--u-max 10] \
-        [--compensation none|adaptive|...] [--plot docs/figures/swingup_map.png]
+        [--compensation none|adaptive|...] [--robust-design] [--set KEY=VALUE] \
+        [--plot docs/figures/swingup_map.png]
 """
 
 from __future__ import annotations
@@ -53,7 +59,7 @@ import numpy as np
 from frictionlab.config import build_config
 from frictionlab.model.swingup import CAUGHT, SWINGING
 from frictionlab.runs import make_controller
-from frictionlab.studies.swingup_sim import simulate_swingup, swingup_outcome
+from frictionlab.studies.swingup_sim import ROBUST_DESIGN, simulate_swingup, swingup_outcome
 
 #: The omega0 the plants' natural frequencies are drawn around (and the default design's).
 NOMINAL_OMEGA0 = 6.8
@@ -137,7 +143,7 @@ def run_one(values: dict, duration: float, noise: float, design_omega0: float,
             "u_limit": cfg.u_limit}
 
 
-def plot(rows: list[dict], path: str, plant: str = "thesis") -> None:
+def plot(rows: list[dict], path: str, plant: str = "thesis", design: str = "fast design") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -167,7 +173,7 @@ def plot(rows: list[dict], path: str, plant: str = "thesis") -> None:
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=9)
     cb = fig.colorbar(sc, cax=fig.add_axes((0.85, 0.22, 0.02, 0.66)))
     cb.set_label("swing_up_time (s)")
-    fig.suptitle(f"Swing-up from hanging, {plant}, fast design ({rate} "
+    fig.suptitle(f"Swing-up from hanging, {plant}, {design} ({rate} "
                  f"{rows[0]['design.omega0']:.3g} rad/s), |u| <= {rows[0]['u_limit']:.3g} "
                  f"{unit},\nclassical friction, "
                  f"noise 0.002: {ok.sum()}/{len(ok)} caught and balancing")
@@ -213,8 +219,13 @@ def main() -> None:
                     help="controller.u_max in units of u: m/s^2 for the thesis plant, V "
                          "for qube2 (0: only the DAC's range or the voltage limit)")
     ap.add_argument("--compensation", default="none")
-    ap.add_argument("--set", action="append", default=[], metavar="swingup.KEY=VALUE",
-                    help="a swing-up setting for every plant (repeatable)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a setting (swingup.*, design.*, ...) for every plant and for the "
+                         "nominal design (repeatable)")
+    ap.add_argument("--robust-design", action="store_true",
+                    help="the balancing design for a plant it does not know "
+                         "(frictionlab.studies.swingup_sim.ROBUST_DESIGN: design.omega2=5, "
+                         "design.zeta1=1, design.zeta2=1), before --set")
     ap.add_argument("--known-plant", action="store_true",
                     help="qube2: design the controller and the swing-up for each drawn "
                          "plant (default: for the nominal QUBE-Servo 2)")
@@ -222,6 +233,8 @@ def main() -> None:
     args = ap.parse_args()
     plants = draw(args.n, args.seed, args.plant)
     sets = tuple((k, float(v)) for k, v in (a.split("=", 1) for a in args.set))
+    if args.robust_design:
+        sets = (*ROBUST_DESIGN, *sets)
     unit = "V" if args.plant != "thesis" else "m/s^2"
     t0 = time.perf_counter()
     rows = [run_one(v, args.duration, args.noise, args.design_omega0, args.u_max,
@@ -234,7 +247,7 @@ def main() -> None:
                   f"omega0 {r['plant.omega0']:.2f} seed {r['sim.seed']}: {r['status']} "
                   f"{r['stop_reason']} catches {r['catches']}")
     summary = summarise(rows, seconds)
-    summary.update(plant=args.plant, compensation=args.compensation,
+    summary.update(plant=args.plant, seed=args.seed, compensation=args.compensation,
                    design_omega0=rows[0]["design.omega0"], unit=unit,
                    settings=dict(sets), known_plant=args.known_plant)
     tc, ua = summary["swing_up_time_s"], summary["u_after_catch"]
@@ -251,7 +264,8 @@ def main() -> None:
     print(f"largest |u| while swinging {summary['max_u_swinging']:.2f} {unit}, "
           f"overall {summary['max_u']:.2f} {unit}; {seconds:.1f} s", file=sys.stderr)
     if args.plot:
-        plot(rows, args.plot, args.plant)
+        plot(rows, args.plot, args.plant,
+             "robust design" if args.robust_design else "fast design")
         summary["plot"] = args.plot
         print(f"figure: {args.plot}")
     print(json.dumps(summary))

@@ -20,6 +20,10 @@ import pytest
 from inprocess import run_cli_in_process
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the serving bound (docs/development.md): a rig-sim, console or headless run without
+# --duration, started by a test in-process or as a process, stops after 30 minutes
+# (exit 1, saying so) instead of serving forever; run_cli_in_process: 60 s
+os.environ.setdefault("FRICTIONLAB_SERVE_LIMIT", "1800")
 
 
 @pytest.fixture(scope="session")

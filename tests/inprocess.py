@@ -8,6 +8,12 @@ import os
 import shlex
 import subprocess
 
+#: The serving bound of a command run in-process (``FRICTIONLAB_SERVE_LIMIT``, seconds):
+#: a ``rig-sim``, console or headless ``run`` without ``--duration`` that a test expected
+#: to be refused ends after this long with exit status 1 instead of holding the test's
+#: process (docs/development.md).  ``env`` may set another.
+IN_PROCESS_SERVE_LIMIT = "60"
+
 
 def run_cli_in_process(argv, cwd: str | os.PathLike | None = None,
                        env: dict | None = None) -> subprocess.CompletedProcess:
@@ -16,7 +22,8 @@ def run_cli_in_process(argv, cwd: str | os.PathLike | None = None,
     ``returncode`` is what the command's process would exit with (``main``'s
     return value, or the status of a ``SystemExit``, e.g. argparse's 2 on bad
     usage); ``stdout``/``stderr`` are the text it wrote.  ``cwd`` and ``env``
-    (variables to set) apply for the duration of the call.
+    (variables to set) apply for the duration of the call; a command that would
+    serve until a signal stops after :data:`IN_PROCESS_SERVE_LIMIT` seconds.
     """
     from frictionlab.cli import main
 
@@ -26,6 +33,7 @@ def run_cli_in_process(argv, cwd: str | os.PathLike | None = None,
     try:
         if cwd is not None:
             os.chdir(cwd)
+        os.environ["FRICTIONLAB_SERVE_LIMIT"] = IN_PROCESS_SERVE_LIMIT
         if env:
             os.environ.update(env)
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):

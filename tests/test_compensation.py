@@ -655,3 +655,144 @@ def test_reduction_divides_by_at_least_one_adc_quantum():
     assert ratio(0.0) == pytest.approx(0.3 / comp.PEAK_TO_PEAK_FLOOR)
     assert ratio(1e-18) == ratio(0.0) < 300
     assert ratio(math.nan) is None and ratio(0.03, "fell") is None
+
+
+# ---------------------------------------------------------------------------
+# motor plants: the innovation with the pendulum observer, the derived defaults
+# ---------------------------------------------------------------------------
+
+
+def _motor_innovations(friction, compensation):
+    """A simulated QUBE-Servo 2 run of 1.5 s from 0.05 rad, per tick from the
+    second: the innovation of the measured arm rate against the linear model's
+    one-tick prediction from the last tick's state and net voltage (computed
+    here from the recorded estimates and the design's Phi and Gamma), the change
+    of the measured rate over the tick, the plant's mean friction and F_hat over
+    the tick before, the recorded F_hat and the LuGre compensator object's
+    F_hat for that innovation (NaN without the LuGre compensator); and Gamma's
+    arm-rate entry."""
+    from frictionlab.runs import plant_design
+
+    cfg = build_config("fast", friction, compensation, plant="qube2",
+                       sets=["sim.initial_angle=0.05"])
+    tr = simulate_config(cfg, 1.5)
+    d = plant_design(cfg)
+    phi3, gamma3 = np.asarray(d.Phi)[3], float(np.asarray(d.Gamma)[3, 0])
+    last = np.column_stack([tr[c] for c in ("theta_hat", "theta_dot_hat", "arm_hat",
+                                            "arm_dot_hat")])[1:]
+    u, f_hat, rate = tr["u"], tr["friction_hat"], tr["arm_dot_m"]
+    e = rate[1:] - (last @ phi3 + gamma3 * (u[:-1] - f_hat[:-1]))
+    f_obj = np.full(len(e), math.nan)
+    if compensation == "lugre":
+        lugre = make_compensator("lugre", cfg.compensation)
+        for k, (z, v, ek) in enumerate(zip(tr["z_hat"][1:], rate[1:], e, strict=True)):
+            f_obj[k], _ = lugre.step(comp.CompensatorState(0.0, z, 0.0), v, e=ek)
+    rows = np.column_stack([e, rate[1:] - rate[:-1], tr["friction"][:-1], f_hat[:-1],
+                            f_hat[1:], f_obj])
+    return rows, gamma3
+
+
+@pytest.mark.slow  # the file's first motor-plant loop: loads its kernels (about 2 s)
+def test_motor_plant_innovation_is_the_friction_error():
+    """With the pendulum observer nothing predicts the arm, so the compensators'
+    innovation is the measured rate minus the linear model's one-tick prediction
+    from the last state and net voltage: ~0 without friction (not the rate's change,
+    the former signal), -Gamma_3 F with friction and no compensator, and
+    -Gamma_3 (F - F_hat) with the LuGre compensator."""
+    rows, gamma3 = _motor_innovations("none", "lugre")
+    assert np.abs(rows[:, 0]).max() < 0.1 * np.abs(rows[:, 1]).max()
+    # the compiled step's LuGre observer ran on this innovation (eq. 19)
+    np.testing.assert_allclose(rows[:, 4], rows[:, 5], rtol=1e-9, atol=1e-12)
+    rows, _ = _motor_innovations("coulomb", "none")
+    sliding = np.abs(rows[:, 2]) > 0.1  # Coulomb level 0.15 V
+    assert sliding.sum() > 100
+    np.testing.assert_allclose(rows[sliding, 0], -gamma3 * rows[sliding, 2],
+                               atol=0.05 * gamma3 * 0.15)
+    rows, _ = _motor_innovations("coulomb", "lugre")
+    err = -gamma3 * (rows[:, 2] - rows[:, 3])
+    assert np.abs(rows[:, 3]).max() > 0.1  # the compensator is on
+    np.testing.assert_allclose(rows[:, 0], err, atol=0.05 * np.abs(err).max())
+    np.testing.assert_allclose(rows[:, 4], rows[:, 5], rtol=1e-9, atol=1e-12)
+
+
+def test_motor_plant_lugre_gains_follow_the_correction_rate():
+    """k and sigma_1 of a motor plant's LuGre compensator are derived: the
+    innovation corrects MOTOR_CORRECTION of a level error per tick through the
+    bristle (k sigma_0 h^2 / L) and the damping term kicks MOTOR_KICK of it in
+    (sigma_1 k h / L); the thesis plant keeps Sec. 6.3's k 7, sigma_1 6."""
+    from frictionlab.config import MOTOR_CORRECTION, MOTOR_KICK
+
+    for plant in ("qube2", "qube3", "furuta-dc"):
+        for kind in ("lugre", "adaptive"):
+            cfg = build_config("fast", "classical", kind, plant=plant)
+            p, h, L = cfg.compensation, cfg.design.h, cfg.input_length
+            assert p.observer_gain * p.sigma0 * h * h / L == pytest.approx(MOTOR_CORRECTION,
+                                                                           rel=1e-3)
+            assert p.sigma1 * p.observer_gain * h / L == pytest.approx(MOTOR_KICK, rel=1e-3)
+    p = build_config("fast", "classical", "lugre").compensation
+    assert (p.observer_gain, p.sigma1) == (7.0, 6.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("plant", ["qube2", "qube3"])
+def test_motor_plant_compensators_shrink_the_cycle(plant):
+    """On the nominal motor plants (classical friction at the preset's levels, the
+    default pendulum observer) every compensator shrinks the cycle: classical 2.0x,
+    LuGre 6.7x, adaptive 6.8x measured (benchmarks/motor_compensators.py)."""
+    least = {"classical": 1.5, "lugre": 4.0, "adaptive": 4.0}
+    for kind, factor in least.items():
+        res = compare(build_config("fast", "classical", kind, plant=plant), DUR, WIN)
+        assert res.status != "fell" and res.baseline_status == "limit_cycle"
+        assert res.reduction > factor, (kind, res.reduction)
+
+
+@pytest.mark.slow
+def test_motor_plant_lugre_over_compensating_does_not_enlarge_the_cycle():
+    """A QUBE-Servo 2 with no Coulomb friction (F_S 0.05 V) and the LuGre
+    compensator at its default 0.155 V: the innovation corrects the level, and the
+    cycle still shrinks (3.4x measured; the memoryless classical compensator makes
+    it 4 times larger)."""
+    sets = ["friction.coulomb=0", "friction.stiction=0.05"]
+    res = compare(build_config("fast", "classical", "lugre", sets=sets, plant="qube2"),
+                  DUR, WIN)
+    assert res.status != "fell" and res.reduction > 1.5
+
+
+@pytest.mark.slow
+def test_the_loop_check_sees_the_motor_innovation():
+    """The loop check (the console's, before a compensator is switched on) linearises
+    the tick with the last tick's u and F_hat as states, which the motor plant's
+    innovation reads: it passes the LuGre and adaptive defaults, and flags a damping
+    kick sigma_1 k h / L above 1 (k 20, sigma_1 0.6: 1.1), with which the simulated
+    pendulum falls."""
+    from frictionlab.model.loopcheck import check_loop
+    from frictionlab.runs import make_controller
+
+    for kind in ("lugre", "adaptive"):
+        cfg = build_config("fast", "classical", kind, plant="qube2")
+        assert check_loop(make_controller(cfg), cfg.plant).ok
+    kick = ["compensation.observer_gain=20", "compensation.sigma1=0.6"]
+    cfg = build_config("fast", "classical", "lugre", sets=kick, plant="qube2")
+    assert check_loop(make_controller(cfg), cfg.plant).verdict == "compensator_unstable"
+    assert simulate_config(cfg, 10.0).status == "fell"
+
+
+def test_the_default_tuning_grid_of_a_motor_plant_spans_the_thesis_ratios():
+    """compensate tune's default grid: the thesis's on the thesis plant; on a motor
+    plant each level or gain scaled by the plant's default over the thesis's
+    (volts), velocities and bandwidths kept."""
+    thesis = build_config("fast", "classical", "lugre")
+    assert comp.default_grid(thesis) == comp.DEFAULT_GRIDS["lugre"]
+    for kind in ("classical", "lugre", "adaptive"):
+        cfg = build_config("fast", "classical", kind, plant="qube2")
+        ref = FrictionParams.defaults(kind, "compensation")
+        for (key, values), (tkey, tvalues) in zip(comp.default_grid(cfg),
+                                                  comp.DEFAULT_GRIDS[kind], strict=True):
+            field = key.split(".", 1)[1]
+            assert key == tkey
+            if field in ("stribeck_velocity", "hysteresis", "adaptation_bandwidth"):
+                assert values == tvalues
+            else:  # the motor default sits where the thesis default sat
+                ratio = getattr(cfg.compensation, field) / getattr(ref, field)
+                np.testing.assert_allclose(values, np.array(tvalues) * ratio, rtol=1e-3)
+        assert comp.check_grid(cfg, comp.default_grid(cfg))  # every point is valid

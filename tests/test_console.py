@@ -371,6 +371,9 @@ def _figures_of(theta_of_t, seconds: float = 6.0) -> dict:
     # fell: the last angle is beyond the limit, the loop stopped
     (lambda t: 0.01 * math.exp(t), False, {}, "fallen"),
     (lambda t: 0.01, False, {}, "stopped"),
+    # the angle limit stopped it: the reading past the limit is not among the figures'
+    (lambda t: 0.3 * math.sin(7 * t), False, {"stop_reason": "angle_limit"}, "fallen"),
+    (lambda t: 0.3 * math.sin(7 * t), False, {"stop_reason": "user"}, "stopped"),
 ])
 def test_the_status_says_what_the_pendulum_does_and_figures_only_while_balancing(
         theta, running, kw, state):
@@ -593,6 +596,17 @@ def test_the_console_of_a_motor_plant_shows_and_checks_it_in_volts(tmp_path):
         assert (sch["plant"], sch["u_unit"]) == ("qube2", "V")
         units = {f["name"]: f["unit"] for f in sch["compensation"]["fields"]["lugre"]}
         assert units["stiction"] == "V" and units["sigma0"] == "V/rad"
+        adaptive = {f["name"]: f["unit"] for f in sch["compensation"]["fields"]["adaptive"]}
+        # the adaptive law's gain: a level's rate (V/s) per arm-velocity error (rad/s)
+        assert adaptive["adaptation_gain"] == "V/rad" and adaptive["adaptation_max"] == "V"
+        assert not [u for u in adaptive.values() if "m/" in u]
+        # every Friction Type starts from the schema's defaults in volts (the kinds the
+        # console did not start with had the thesis's: 2.3 "V" of stiction)
+        for kind in ("coulomb", "classical", "adaptive", "lugre"):
+            r = client.post("/api/compensation", json={"kind": kind, "enabled": False})
+            shown = r.json()["status"]["compensation"]["params"]
+            want = sch["compensation"]["defaults"][kind]
+            assert {f: shown[f] for f in units} == {f: want[f] for f in units}, kind
         assert sch["compensation"]["defaults"]["classical"]["coulomb"] == pytest.approx(0.155)
         assert sch["presets"]["slow"]["omega0"] == pytest.approx(cfg.plant.omega0)
         st = client.get("/api/status").json()
@@ -605,6 +619,22 @@ def test_the_console_of_a_motor_plant_shows_and_checks_it_in_volts(tmp_path):
         assert "confirmed_unsafe" not in ctl.events[-1]
         slow = dc_design(dc_spec("slow", cfg.plant), cfg.plant)
         np.testing.assert_allclose(r.json()["status"]["design"]["L"], slow.L)
+        # a value out of range is said in the plant's units
+        r = client.post("/api/compensation", json={"params": {"coulomb": 1e300}})
+        assert r.json()["errors"] == [{"field": "params.coulomb", "message":
+                                       "compensation.coulomb = 1e+300 V is out of range; "
+                                       "allowed [0, 1000] V"}]
+        r = client.post("/api/design", json={"omega2": 1e-300})
+        assert "= 1e-300 rad/s is out of range; allowed [0.01, 1000] rad/s" in r.text
+        # the design's omega_0 is the plant's: another is refused at its field, confirm or
+        # not (it would be shown and change nothing); the page's 6 digits of it pass
+        for confirm in (False, True):
+            r = client.post("/api/design", json={"omega0": 1e-300, "confirm": confirm})
+            assert r.status_code == 422 and [e["field"] for e in r.json()["errors"]] == [
+                "omega0"], r.text
+            assert "its own omega_0" in r.json()["detail"]
+        w0 = float(f"{cfg.plant.omega0:.6g}")
+        assert client.post("/api/design", json={"omega0": w0, "zeta1": 0.7}).status_code == 200
         r = client.post("/api/compensation", json={"kind": "coulomb",
                                                    "params": {"coulomb": 12.0}})
         assert r.status_code == 422 and r.json()["check"]["verdict"] == "saturating"
@@ -785,7 +815,7 @@ def test_a_recording_the_console_never_saw_running_still_asks_for_its_name(
     ctl.record_start()  # no status of the console has seen it recording
     ctl.stop("angle_limit")
     assert ctl.wait(5.0)
-    assert ctl.unnamed_recording is not None
+    # the hub's own status update (every 0.05 s) may take it before the request does
     st = client.get("/api/status").json()
     assert not st["recording"] and st["console"]["pending_recording"]
     assert ctl.unnamed_recording is None  # taken by the console: asked for only once

@@ -340,11 +340,10 @@ def test_identify_limit_cycle_fits_the_motor_plants_coulomb_level_in_volts(cli, 
 
 
 def test_compensate_compare_runs_the_compensator_in_volts_on_the_qube2(cli):
-    # with the full-model predictor (design.full_observer 1), whose uncompensated
-    # cycle is large: the default pendulum observer's is 15 times smaller and the
-    # fixed LuGre compensator does not shrink it further (docs/model.md)
+    # the default pendulum observer; the compensator's innovation against the
+    # model's arm prediction (docs/model.md, "The controller on a motor plant")
     res = cli("compensate", "compare", "--plant", "qube2", "--compensation", "lugre",
-              "--duration", "10", "--json", "--set", "design.full_observer=1")
+              "--duration", "10", "--json")
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout)
     assert out["status"] == "limit_cycle"

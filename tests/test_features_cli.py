@@ -114,3 +114,105 @@ def test_identify_limit_cycle_takes_run_logs_and_features_objects(run_log, tmp_p
                "--json"])
     err = capsys.readouterr().err
     assert rc == 2 and "plant.omga0" in err and "measured" not in err
+
+
+def _copy_log(log, folder, name, **sidecar):
+    """The run's .csv and .dat as ``folder/name.*``; its sidecar with ``sidecar``'s
+    fields replaced (None: no sidecar)."""
+    base = log.removesuffix(".csv")
+    for ext in ("csv", "dat"):
+        shutil.copy(f"{base}.{ext}", folder / f"{name}.{ext}")
+    if sidecar.get("drop"):
+        return str(folder / f"{name}.csv")
+    with open(f"{base}.json") as fh:
+        meta = json.load(fh)
+    meta.update(sidecar)
+    (folder / f"{name}.json").write_text(json.dumps(meta))
+    return str(folder / f"{name}.csv")
+
+
+@pytest.mark.slow
+def test_features_name_the_plant_and_the_unit_of_u(run_log, tmp_path, capsys):
+    """The sidecar's plant and u's unit, in the JSON and in the text (max_u in volts
+    on a motor plant); a log without a sidecar: unknown, unless --plant says."""
+    _, log = run_log
+    rc, got, _ = _features(capsys, log)
+    assert rc == 0 and (got["plant"], got["u_unit"]) == ("thesis", "m/s^2")
+    qube = _copy_log(log, tmp_path, "qube", plant="qube2", u_unit="V")
+    rc, got, _ = _features(capsys, qube)
+    assert rc == 0 and (got["plant"], got["u_unit"]) == ("qube2", "V")
+    assert main(["features", qube]) == 0
+    text = capsys.readouterr().out.splitlines()
+    assert "qube2 plant, u in V" in text[0]
+    assert [ln.split()[-1] for ln in text if ln.split()[0] == "max_u"] == ["V"]
+    # a sidecar without u_unit (a plant name only): the plant's unit
+    rc, got, _ = _features(capsys, _copy_log(log, tmp_path, "old", plant="qube3",
+                                             u_unit=None))
+    assert rc == 0 and (got["plant"], got["u_unit"]) == ("qube3", "V")
+    bare = _copy_log(log, tmp_path, "bare", drop=True)
+    rc, got, _ = _features(capsys, bare, "--design", "slow")
+    assert rc == 0 and got["plant"] is None and got["u_unit"] is None
+    assert main(["features", bare, "--design", "slow"]) == 0
+    assert "plant not recorded" in capsys.readouterr().out
+    rc, got, _ = _features(capsys, bare, "--design", "slow", "--plant", "furuta-dc")
+    assert rc == 0 and (got["plant"], got["u_unit"]) == ("furuta-dc", "V")
+
+
+@pytest.mark.parametrize("sidecar, argv, message", [
+    ({"plant": "qube2", "u_unit": "V"}, ["--plant", "thesis"], "says the qube2 plant"),
+    ({"plant": "qube9"}, [], "plant 'qube9'"),
+])
+def test_a_plant_that_contradicts_the_sidecar_exits_2(run_log, tmp_path, capsys, sidecar,
+                                                       argv, message):
+    path = _copy_log(run_log[1], tmp_path, "run", **sidecar)
+    rc, _, err = _features(capsys, path, *argv)
+    assert rc == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_identify_limit_cycle_takes_the_plant_of_its_measured_files(run_log, tmp_path,
+                                                                     capsys, monkeypatch):
+    """Without --plant the fit runs on the plant the files name (a QUBE log, its
+    features object); files of two plants, or a --plant against them, exit 2."""
+    from frictionlab.studies.identification import limit_cycle
+
+    _, log = run_log
+    qube = _copy_log(log, tmp_path, "qube", plant="qube2", u_unit="V", run_id="qube")
+    rc, feats, _ = _features(capsys, qube)
+    (tmp_path / "qube-features.json").write_text(json.dumps({**feats, "name": "again"}))
+    (tmp_path / "table.json").write_text(json.dumps(
+        {"experiments": [{"design": "fast", "features": {"peak1": 0.17, "period": 0.93}}]}))
+    (tmp_path / "thesis.json").write_text(json.dumps(
+        {"plant": "thesis", "experiments": [{"design": "fast", "features": {"peak1": 0.1}}]}))
+    asked = []
+
+    def fit(experiments, keys, **kwargs):  # the work itself: not run here
+        asked.append((len(experiments), kwargs["plant"]))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(limit_cycle, "fit_limit_cycle", fit)
+
+    def identify(*measured, extra=()):
+        argv = ["identify", "limit-cycle", "--fit", "friction.coulomb", "--quiet", *extra]
+        for m in measured:
+            argv += ["--measured", str(m)]
+        rc = main(argv)
+        return rc, capsys.readouterr().err
+
+    rc, err = identify(qube, tmp_path / "qube-features.json", tmp_path / "table.json")
+    assert rc == 130 and asked[-1] == (3, "qube2"), err  # a file naming no plant: any
+    assert "on the qube2 plant (from the measured files)" in err
+    rc, err = identify(qube, extra=["--plant", "qube2"])
+    assert rc == 130 and asked[-1] == (1, "qube2")
+    rc, err = identify(tmp_path / "table.json")
+    assert rc == 130 and asked[-1] == (1, "thesis")  # nothing says: the thesis plant
+    n = len(asked)
+    for measured, extra, message in [
+        ((qube, log), (), "different plants"),
+        ((tmp_path / "qube-features.json", tmp_path / "thesis.json"), (), "different plants"),
+        ((qube,), ("--plant", "thesis"), "--plant thesis: the measured experiments are of "
+                                         "the qube2 plant"),
+    ]:
+        rc, err = identify(*measured, extra=extra)
+        assert rc == 2 and message in err and len(err.strip().splitlines()) == 1, err
+    assert len(asked) == n  # refused before any work

@@ -117,6 +117,15 @@ GOOD = {"experiments": [{"design": "fast", "features": {"period": 1.0, "peak1": 
     ("{not json", [], "not valid JSON"),
     (GOOD, ["--search-duration", "0"], "--search-duration must be > 0"),
     (GOOD, ["--search-duration", "15", "--search-window", "20"], "--search-window"),
+    # the plant the files name (docs/identification.md)
+    ({**GOOD, "plant": "qube9"}, [], "\"plant\" 'qube9' is not one of"),
+    ({**GOOD, "plant": "qube2"}, ["--plant", "thesis"],
+     "--plant thesis: the measured experiments are of the qube2 plant"),
+    ({"plant": "qube2", "experiments": [{**GOOD["experiments"][0], "plant": "thesis"}]}, [],
+     "an experiment of the thesis plant in a file of the qube2 plant"),
+    ({"experiments": [{**GOOD["experiments"][0], "plant": "qube2"},
+                      {**GOOD["experiments"][0], "plant": "qube3", "name": "b"}]}, [],
+     "different plants"),
 ])
 def test_limit_cycle_infeasible_input_exits_2(capsys, tmp_path, measured, extra, match):
     argv = ["identify", "limit-cycle", "--measured", _write(tmp_path, measured),
@@ -128,6 +137,27 @@ def test_limit_cycle_infeasible_input_exits_2(capsys, tmp_path, measured, extra,
     assert out == ""
     msg = err.strip().splitlines()
     assert len(msg) == 1 and match in msg[0]
+
+
+def test_limit_cycle_fits_on_the_plant_its_file_names(capsys, tmp_path, monkeypatch):
+    """``"plant"`` in an experiments file (or in each experiment): the fit's plant
+    without --plant, its keys checked on that plant (a motor plant's own keys)."""
+    from frictionlab.studies.identification import limit_cycle
+
+    asked = []
+
+    def fit(experiments, keys, **kwargs):  # the work itself: not run here
+        asked.append((keys, kwargs["plant"]))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(limit_cycle, "fit_limit_cycle", fit)
+    exp = GOOD["experiments"][0]
+    for measured in ({**GOOD, "plant": "qube2"}, {"experiments": [{**exp, "plant": "qube2"}]}):
+        rc, _, err = _run(capsys, ["identify", "limit-cycle", "--measured",
+                                   _write(tmp_path, measured), "--quiet",
+                                   "--fit", "friction.coulomb,plant.resistance"])
+        assert rc == 130 and "on the qube2 plant (from the measured files)" in err
+        assert asked[-1] == (["friction.coulomb", "plant.resistance"], "qube2")
 
 
 def test_limit_cycle_missing_file_exits_2(capsys, tmp_path):

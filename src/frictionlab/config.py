@@ -444,6 +444,8 @@ _VOLT_UNITS = {
     ("", "m/s^2/(rad/s)"): "V/(rad/s)",
     ("sigma0", "1/s^2"): "V/rad",
     ("sigma1", "1/s"): "V/(rad/s)",
+    # the adaptive law's gain: a level's rate per arm-velocity error, (V/s)/(rad/s)
+    ("adaptation_gain", "m/(rad s^2)"): "V/rad",
     ("u_scale", "1/(m/s^2)"): "1/V",
 }
 
@@ -667,6 +669,15 @@ def build_config(
     return _apply(cfg, items) if items else cfg
 
 
+#: A motor plant's LuGre compensator (eq. 19): the share of a friction level
+#: error its innovation corrects per tick through the bristle (lambda h; 1:
+#: the whole error in one tick, the fastest without overshoot) and the share
+#: the damping term sigma_1 kicks in at once (kappa; small, as it would
+#: overshoot at 1).  :func:`motor_friction_defaults` turns them into
+#: ``compensation.observer_gain`` and ``compensation.sigma1``.
+MOTOR_CORRECTION = 1.0
+MOTOR_KICK = 0.1
+
 #: The friction fields in units of u (levels, and coefficients per rad or
 #: rad/s): scaled with the level from the thesis plant to a motor plant.
 _LEVEL_FIELDS = ("stiction", "coulomb", "viscous", "sigma0", "sigma1", "stiction_negative",
@@ -687,6 +698,18 @@ def motor_friction_defaults(plant: str, friction: FrictionParams,
     by the ratio of the input lengths (:attr:`Config.input_length`), so its
     stability margin (gamma h^2/L) is the thesis's.  Velocities (v_S,
     epsilon, the bands) are unchanged.
+
+    The LuGre observer's gain k and damping sigma_1 (eq. 19; the ``lugre``
+    and ``adaptive`` compensators) are set for the motor plant's
+    innovation, the measured arm rate minus the model's one-tick
+    prediction (:func:`frictionlab.model.controller.arm_prediction`), which
+    is -h (F - F_hat)/L for a friction error: k = lambda L / (sigma_0 h)
+    corrects a level error at the rate lambda = :data:`MOTOR_CORRECTION` / h
+    (all of it in one tick), and sigma_1 = kappa sigma_0 / lambda makes the
+    one-tick kick of the damping term, sigma_1 k h / L, the fraction kappa =
+    :data:`MOTOR_KICK` of the error (kappa near 1 flips the error's sign each
+    tick).  h is the design's default 5 ms (docs/model.md, "The controller
+    on a motor plant").
     """
     pf = PRESET_FRICTION[plant]
     r = pf["friction.coulomb"] / FrictionParams().coulomb
@@ -701,6 +724,12 @@ def motor_friction_defaults(plant: str, friction: FrictionParams,
     length = 1.0 / float(linearization(dc_preset(plant))[1][3, 0])
     comp = scaled(compensation)
     gain = compensation.adaptation_gain * length / PlantParams().arm_length
-    comp = dataclasses.replace(comp, adaptation_gain=float(f"{gain:.12g}"))
+    h = DesignSpec().h
+    rate = MOTOR_CORRECTION / h
+    k = rate * length / (comp.sigma0 * h)
+    sigma1 = MOTOR_KICK * comp.sigma0 / rate
+    comp = dataclasses.replace(comp, adaptation_gain=float(f"{gain:.12g}"),
+                               observer_gain=float(f"{k:.4g}"),
+                               sigma1=float(f"{sigma1:.4g}"))
     return scaled(friction, **fixed), comp
 

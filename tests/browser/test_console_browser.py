@@ -195,7 +195,8 @@ def test_invalid_entries_refused_beside_the_field(console, page):
     sigma0 = page.locator("#friction-sigma0")
     sigma0.fill("-300")
     page.locator("#friction-apply").click()
-    expect(page.locator("#friction-sigma0-error")).to_contain_text("out of range")
+    expect(page.locator("#friction-sigma0-error")).to_contain_text(
+        "sigma0 = -300 1/s^2 is out of range; allowed [1, 10000000] 1/s^2")  # the page's
     # nothing was applied
     st = console.get("/api/status")[1]
     assert st["design"]["spec"] == before["spec"]
@@ -377,7 +378,7 @@ def test_server_refusals_are_shown_beside_the_field(console, page):
         sigma0.fill("-300")
         page.locator("#friction-apply").click()
         expect(page.locator("#friction-sigma0-error")).to_contain_text(
-            "compensation.sigma0 = -300 is out of range")
+            "compensation.sigma0 = -300 1/s^2 is out of range; allowed [1, 1e+07] 1/s^2")
         expect(page.locator("#friction-msg")).to_have_text("refused: see the marked fields")
     finally:
         page.evaluate(loosen, 0)

@@ -189,6 +189,22 @@ def test_an_experiment_in_the_operator_s_words(console, page, shots):
     expect(page.locator("#run-state")).to_contain_text("stopped", timeout=10_000)
     page.locator("#experiment-name").select_option("free-oscillation")
     page.locator("#experiment-options").fill('{"duration": 4}')
+    # the panel's fields fit: the experiment's name and the options' text shown whole
+    fit = page.evaluate("""() => {
+        const panel = document.querySelector('#experiment-panel').getBoundingClientRect();
+        const sel = document.querySelector('#experiment-name');
+        const opt = document.querySelector('#experiment-options');
+        const canvas = document.createElement('canvas').getContext('2d');
+        canvas.font = getComputedStyle(sel).font;
+        const name = canvas.measureText(sel.options[sel.selectedIndex].text).width;
+        return {panelEnd: panel.right, selEnd: sel.getBoundingClientRect().right,
+                selWidth: sel.clientWidth, nameWidth: name,
+                optEnd: opt.getBoundingClientRect().right,
+                optScroll: opt.scrollWidth, optClient: opt.clientWidth};
+    }""")
+    assert fit["selEnd"] <= fit["panelEnd"] and fit["optEnd"] <= fit["panelEnd"], fit
+    assert fit["nameWidth"] + 20 <= fit["selWidth"], fit  # the name and the arrow
+    assert fit["optScroll"] <= fit["optClient"], fit
     page.locator("#experiment-run").click()
     dialog = page.locator("#confirm")
     expect(dialog).to_be_visible()
@@ -214,5 +230,8 @@ def test_an_experiment_in_the_operator_s_words(console, page, shots):
                                                            timeout=10_000)
     expect(page.locator("#lc-status")).to_contain_text("pendulum hanging")
     assert status(page)["console"]["limit_cycle"]["peak_to_peak"] is None
+    # the result (the log's long path included) wraps inside the panel
+    assert page.evaluate("""() => { const r = document.querySelector('#experiment-result');
+        return r.scrollWidth <= r.clientWidth; }""")
     page.locator("#experiment-panel").screenshot(path=str(shots / "6-experiment-done.png"))
     page.locator("#statusbar").screenshot(path=str(shots / "7-hanging-status.png"))

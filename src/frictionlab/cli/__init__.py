@@ -22,7 +22,18 @@ import sys
 from collections.abc import Sequence
 
 from ..config import UnknownKeyError
-from . import compensate, design, identify, keys, predict, reproduce, run, simulate, sweep
+from . import (
+    compensate,
+    design,
+    features,
+    identify,
+    keys,
+    predict,
+    reproduce,
+    run,
+    simulate,
+    sweep,
+)
 from .common import Parser, UsageError, error_message, flush_notes
 from .simulate import simulate_result
 
@@ -61,7 +72,8 @@ def _describe_subcommands(parser: argparse.ArgumentParser) -> None:
 
 def _register_subcommands(sub) -> None:
     """Every subcommand, one module each (``cli/<name>.py``, ``register_cli``)."""
-    for mod in (design, simulate, keys, sweep, identify, compensate, run, reproduce, predict):
+    for mod in (design, simulate, keys, sweep, features, identify, compensate, run, reproduce,
+                predict):
         mod.register_cli(sub)
 
 

@@ -86,6 +86,17 @@ def check_output_dir(path: str, option: str) -> None:
         raise UsageError(f"{option} {path}: the directory is not writable")
 
 
+def parse_number(text: str, what: str) -> float:
+    """``text`` as a finite float; a :class:`UsageError` naming ``what`` otherwise."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise UsageError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise UsageError(f"{what}: {text!r} must be finite")
+    return v
+
+
 def finite(option: str, value: float | None, lo: float | None = None,
            lo_open: bool = True, hi: float | None = None) -> None:
     """Refuse a float option that is not finite or outside ``lo``/``hi``
@@ -194,9 +205,11 @@ FEATURE_UNITS = {"peak1": "rad", "peak2": "rad", "valley": "rad", "period": "s",
                  "max_u": "m/s^2", "max_arm_velocity": "rad/s", "peak_to_peak": "rad"}
 
 
-def feature_lines(features: dict) -> list[str]:
-    """The plain-text lines of limit-cycle ``features``: name, value, unit."""
-    return [f"  {k:18s} {'-' if v is None else f'{v:.4g}'} {FEATURE_UNITS.get(k, '')}".rstrip()
+def feature_lines(features: dict, u_unit: str | None = None) -> list[str]:
+    """The plain-text lines of limit-cycle ``features``: name, value, unit
+    (``max_u`` in ``u_unit``, default the thesis plant's m/s^2; V on a motor plant)."""
+    units = {**FEATURE_UNITS, **({"max_u": u_unit} if u_unit else {})}
+    return [f"  {k:18s} {'-' if v is None else f'{v:.4g}'} {units.get(k, '')}".rstrip()
             for k, v in features.items()]
 
 
@@ -205,13 +218,16 @@ def emit_json(obj) -> None:
     sys.stdout.flush()
 
 
-def add_plant_arg(p: argparse.ArgumentParser, backend: bool = False) -> None:
+def add_plant_arg(p: argparse.ArgumentParser, backend: bool = False,
+                  default_from: str | None = None) -> None:
     """``--plant NAME``: the plant simulated and designed for (docs/cli.md);
     ``backend``: its default is the plant ``--backend`` implies
-    (:func:`plant_from_args`)."""
+    (:func:`plant_from_args`); ``default_from``: its default (None) is found by the
+    command, as this text says."""
     default = ("the plant of --backend: qube2 for qube2://, qube3 for qube3://, else "
-               "thesis" if backend else "%(default)s")
-    p.add_argument("--plant", choices=PLANT_NAMES, default=None if backend else "thesis",
+               "thesis" if backend else default_from or "%(default)s")
+    unset = backend or default_from is not None
+    p.add_argument("--plant", choices=PLANT_NAMES, default=None if unset else "thesis",
                    help="the plant: 'thesis' (eq. 6, u the arm's acceleration), "
                         "'furuta-dc' or 'qube2' (the QUBE-Servo 2: a DC motor, u in volts, "
                         "friction in volts), 'qube3' (the QUBE-Servo 3); its presets are "

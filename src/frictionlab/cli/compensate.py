@@ -180,14 +180,14 @@ def cmd_compare(args) -> int:
 
 def cmd_tune(args) -> int:
     """``frictionlab compensate tune``."""
-    from ..studies.compensation import DEFAULT_GRIDS, check_grid, tune
+    from ..studies.compensation import check_grid, default_grid, tune
     from ..studies.sweep import parse_vary
 
     t0 = time.perf_counter()
     cfg = _compensated_config(args)
     finite("--chatter-weight", args.chatter_weight, 0.0, lo_open=False)
     check_engine_args(args)
-    grid = [parse_vary(v, args.plant) for v in args.vary] or DEFAULT_GRIDS[cfg.compensation_kind]
+    grid = [parse_vary(v, args.plant) for v in args.vary] or default_grid(cfg)
     n = len(check_grid(cfg, grid))  # every point validated before anything runs
     flush_notes(args)
     print(f"frictionlab compensate tune: {cfg.compensation_kind} compensator, {n} points, "

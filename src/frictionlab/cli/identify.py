@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import json
-import math
-import os
 import signal
 import sys
 
-from ..config import PLANT_FRICTION_KINDS, build_config, load_toml
+from ..config import PLANT_FRICTION_KINDS, PLANT_NAMES, build_config, load_toml
 from ..model.limit_cycles import FEATURES
 from ..model.params import ParamError
 from ..studies.identification.experiments import EXPERIMENTS, IdentificationError
@@ -26,25 +24,16 @@ from .common import (
     check_window,
     emit_json,
     error_message,
-    feature_lines,
     finite,
     note_text,
+    parse_number,
     parse_sets,
     progress_bar,
     safety_from_args,
 )
+from .features import design_h, log_experiment
 
 __all__ = ["parse_bounds", "parse_weights", "register_cli"]
-
-
-def _float(text: str, what: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise UsageError(f"{what}: {text!r} is not a number") from None
-    if not math.isfinite(v):
-        raise UsageError(f"{what}: {text!r} must be finite")
-    return v
 
 
 def parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
@@ -55,7 +44,7 @@ def parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
             raise UsageError(f"--bounds expects KEY=LO:HI, got {item!r}")
         key, rng = item.split("=", 1)
         lo_s, hi_s = rng.split(":", 1)
-        lo, hi = _float(lo_s, f"--bounds {key}"), _float(hi_s, f"--bounds {key}")
+        lo, hi = parse_number(lo_s, f"--bounds {key}"), parse_number(hi_s, f"--bounds {key}")
         if not lo < hi:
             raise UsageError(f"--bounds {key}: lower bound {lo:g} must be below upper {hi:g}")
         out[key.strip()] = (lo, hi)
@@ -72,7 +61,7 @@ def parse_weights(items: list[str]) -> dict[str, float]:
         if name not in FEATURES:
             raise UsageError(f"--weights: unknown feature {name!r}; known features: "
                              f"{', '.join(FEATURES)}")
-        value = _float(w, f"--weights {name}")
+        value = parse_number(w, f"--weights {name}")
         if value < 0:
             raise UsageError(f"--weights {name}: weight must be >= 0, got {value:g}")
         out[name] = value
@@ -92,72 +81,96 @@ def _as_experiment(obj: dict) -> dict:
     return {k: obj[k] for k in _EXPERIMENT_FIELDS if k in obj}
 
 
-def _design_h(sets) -> float | None:
-    for key, value in reversed(parse_sets(sets)):
-        if key == "design.h":
-            return _float(value, "--set design.h")
-    return None
-
-
-#: How each command gives what a run log may lack (a ParamError's ``field``).
-_LOG_HINTS = {
-    "features:": {"design": "--design fast|slow", "h": "--set design.h=SECONDS"},
-    "--measured": {"design": "measure its features with 'frictionlab features --design "
-                             "fast|slow'", "h": "--set design.h=SECONDS"},
-}
-
-
-def _log_experiment(path: str, h: float | None, window: float | None = None,
-                    design: str | None = None, what: str = "--measured") -> dict:
-    from ..io.runlog import run_log_features
-
-    # `frictionlab features: error: ...` names the command already; --measured is an option
-    label = "" if what == "features:" else f"{what} "
-    if not os.path.isfile(path):  # the missing file, before any sidecar or design
-        raise UsageError(f"{label}{path}: no such file")
-    try:
-        return run_log_features(path, window=window, h=h, design=design)
-    except ParamError as exc:
-        hint = _LOG_HINTS[what].get(exc.field)
-        raise UsageError(f"{label}{exc}" + (f" ({hint})" if hint else "")) from None
-    except ValueError as exc:
-        text = str(exc)
-        raise UsageError(f"{label}{text if text.startswith(path) else f'{path}: {text}'}"
-                         ) from None
-
-
 def load_measured(paths, sets=()) -> list:
-    """The experiments of every ``--measured`` file: a JSON object ``{"experiments":
-    [...]}``, one ``frictionlab features`` object, or a run log (``.csv``/``.dat``,
-    its features over the last half; a ``.dat`` takes ``design.h`` from ``sets``
-    when it has no sidecar)."""
+    """The experiments of every ``--measured`` file (:func:`read_measured`)."""
+    return read_measured(paths, sets)[0]
+
+
+def _named_plant(obj: dict, where: str) -> str | None:
+    """The ``"plant"`` an experiment or a file names (None: not said)."""
+    plant = obj.get("plant")
+    if plant is None:
+        return None
+    if plant not in PLANT_NAMES:
+        raise UsageError(f"--measured {where}: \"plant\" {str(plant)[:40]!r} is not one of "
+                         f"{', '.join(PLANT_NAMES)}")
+    return plant
+
+
+def read_measured(paths, sets=()) -> tuple[list, list[tuple[str, str | None]]]:
+    """The experiments of every ``--measured`` file, and the plant each names.
+
+    A file is a JSON object ``{"experiments": [...]}`` (an optional ``"plant"``
+    for all its experiments, or one per experiment), one ``frictionlab
+    features`` object (its ``"plant"``, from the run's sidecar), or a run log
+    (``.csv``/``.dat``, its features over the last half and the plant of its
+    sidecar; a ``.dat`` takes ``design.h`` from ``sets`` when it has no sidecar).
+
+    Returns
+    -------
+    (experiments, plants)
+        The validated experiments, and ``(file, plant)`` for each experiment
+        (``plant`` None where the file does not say).
+    """
     from ..studies.identification.limit_cycle import parse_experiments
 
     items: list = []
+    plants: list[tuple[str, str | None]] = []
     for path in [paths] if isinstance(paths, str) else paths:
         if path.endswith((".csv", ".dat")):
-            feats = _log_experiment(path, _design_h(sets))
+            feats = log_experiment(path, design_h(sets))
             if feats["status"] == "fell":
                 raise UsageError(f"--measured {path}: the run fell (stop reason "
                                  f"{feats['stop_reason']}); it has no limit cycle")
             items.append(_as_experiment(feats))
+            plants.append((path, feats["plant"]))
             continue
         obj = _load_json(path)
         if isinstance(obj, dict) and "experiments" not in obj and "features" in obj:
             items.append(_as_experiment(obj))
+            plants.append((path, _named_plant(obj, path)))
         elif isinstance(obj, dict) and isinstance(obj.get("experiments"), list):
-            items.extend(_as_experiment(e) if isinstance(e, dict) and "status" in e else e
-                         for e in obj["experiments"])
+            common = _named_plant(obj, path)
+            for e in obj["experiments"]:
+                own = _named_plant(e, path) if isinstance(e, dict) else None
+                if own is not None and common is not None and own != common:
+                    raise UsageError(f"--measured {path}: an experiment of the {own} plant "
+                                     f"in a file of the {common} plant")
+                if isinstance(e, dict) and ("status" in e or "plant" in e):
+                    e = _as_experiment(e)
+                items.append(e)
+                plants.append((path, own or common))
         else:
             parse_experiments(obj)  # says what is wrong
             items.append(obj)
-    return parse_experiments({"experiments": items})
+            plants.append((path, None))
+    return parse_experiments({"experiments": items}), plants
 
 
-def _load_measured(path: str):
-    from ..studies.identification.limit_cycle import parse_experiments
+def measured_plant(plants: list[tuple[str, str | None]], given: str | None) -> str:
+    """The plant to fit on: ``--plant`` (``given``), else the one the measured files
+    name (:func:`read_measured`), else ``thesis``.
 
-    return parse_experiments(_load_json(path))
+    Raises
+    ------
+    UsageError
+        Files of different plants, or a ``--plant`` that contradicts them.
+    """
+    named: dict[str, str] = {}
+    for path, plant in plants:
+        if plant is not None:
+            named.setdefault(plant, path)
+    if len(named) > 1:
+        which = ", ".join(f"{path} the {plant}" for plant, path in named.items())
+        raise UsageError(f"--measured: the files are of different plants ({which}); fit "
+                         "the experiments of one plant at a time")
+    if named:
+        (plant, path), = named.items()
+        if given is not None and given != plant:
+            raise UsageError(f"--plant {given}: the measured experiments are of the {plant} "
+                             f"plant ({path}); drop --plant or give --plant {plant}")
+        return plant
+    return given or "thesis"
 
 
 def _load_json(path: str):
@@ -211,8 +224,10 @@ def cmd_limit_cycle(args) -> int:
         search_settings,
     )
 
-    experiments = load_measured(args.measured, args.sets)
-    keys = check_fit_keys([k.strip() for k in args.fit.split(",") if k.strip()])
+    experiments, plants = read_measured(args.measured, args.sets)
+    given = args.plant
+    args.plant = measured_plant(plants, given)
+    keys = check_fit_keys([k.strip() for k in args.fit.split(",") if k.strip()], args.plant)
     bounds = parse_bounds(args.bounds)
     weights = parse_weights(args.weights)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
@@ -241,8 +256,10 @@ def cmd_limit_cycle(args) -> int:
     finite("--search-duration", args.search_duration, 0.0)
     search_settings(args.duration, args.window, args.search_duration, args.search_window)
     err = sys.stderr
-    print(f"identify limit-cycle: {len(experiments)} experiment(s), fitting "
-          f"{', '.join(keys)} ({args.friction} friction, {args.duration:g} s runs)", file=err)
+    source = " (from the measured files)" if given is None and args.plant != "thesis" else ""
+    print(f"identify limit-cycle: {len(experiments)} experiment(s) on the {args.plant} "
+          f"plant{source}, fitting {', '.join(keys)} ({args.friction} friction, "
+          f"{args.duration:g} s runs)", file=err)
     tty = err.isatty()
     last = [-1]
 
@@ -313,7 +330,7 @@ _DEFAULT_FRICTION = {"stiction": "classical", "stribeck": "lugre",
 
 
 def _float_list(text: str, what: str) -> list[float]:
-    vals = [_float(x, what) for x in text.split(",") if x.strip()]
+    vals = [parse_number(x, what) for x in text.split(",") if x.strip()]
     if not vals:
         raise UsageError(f"{what}: give at least one value")
     return vals
@@ -536,53 +553,8 @@ def cmd_experiment(args) -> int:
     return 0
 
 
-def cmd_features(args) -> int:
-    if args.window is not None:
-        finite("--window", args.window, 0.0)
-    h = _design_h(args.sets)
-    for key, _ in parse_sets(args.sets):
-        if key != "design.h":
-            raise UsageError(f"--set {key}: features takes only design.h (the period of a "
-                             ".dat without its sidecar)")
-    out = _log_experiment(args.log, h, args.window, args.design, what="features:")
-    if args.window is not None and out["window"] < args.window:  # the log is shorter
-        check_window(args.window, out["window"], f"the log {args.log} holds")
-    if args.json:
-        emit_json(out)
-        return 0
-    for note in out["notes"]:
-        print(f"frictionlab features: note: {note}", file=sys.stderr)
-    print(f"{out['name']}: {out['design']} design, {out['status']} "
-          f"(last {out['window']:.3g} s)")
-    for line in feature_lines(out["features"]):
-        print(line)
-    return 0
-
-
-def register_features_cli(sub) -> None:
-    """Add ``frictionlab features`` to the parser."""
-    p = sub.add_parser(
-        "features", help="limit-cycle features of a run log (for identify limit-cycle)",
-        description="The limit-cycle features 'frictionlab simulate' reports, measured on a "
-                    "'frictionlab run' log (its .csv, or its .dat), with the design from the "
-                    "run's sidecar: one experiment as 'identify limit-cycle --measured' "
-                    "takes it (docs/identification.md).")
-    p.add_argument("log", metavar="LOG", help="the run's .csv or .dat")
-    p.add_argument("--window", type=float, default=None, metavar="S",
-                   help="analyse the last S seconds (default: the last half of the log)")
-    p.add_argument("--design", choices=("fast", "slow"), default=None,
-                   help="the run's design preset (default: the sidecar's; required for a "
-                        "log without a sidecar)")
-    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="design.h=SECONDS: the sampling period of a .dat without a sidecar")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=cmd_features)
-
-
 def register_cli(sub) -> None:
-    """Add ``identify limit-cycle`` and ``identify experiment`` (and ``features``)
-    to the parser."""
-    register_features_cli(sub)
+    """Add ``identify limit-cycle`` and ``identify experiment`` to the parser."""
     p = sub.add_parser("identify", help="friction and process identification (Sec. 5, "
                                         "App. A, B, E)")
     isub = p.add_subparsers(dest="identify_command", metavar="METHOD")
@@ -602,7 +574,8 @@ def register_cli(sub) -> None:
                    help="plant friction model of the simulations (default: classical)")
     q.add_argument("--fit", required=True, metavar="KEY[,KEY...]",
                    help="keys to estimate, e.g. friction.coulomb,plant.omega0")
-    add_plant_arg(q)
+    add_plant_arg(q, default_from="the plant the --measured files name (a run log's "
+                                  "sidecar, 'frictionlab features'), else thesis")
     add_key_args(q, "all experiments")
     q.add_argument("--bounds", action="append", default=[], metavar="KEY=LO:HI",
                    help="search bounds of a fitted key (repeatable; defaults per key)")

@@ -13,7 +13,7 @@ __all__ = ["register_cli"]
 
 def cmd_predict(args) -> int:
     from ..studies.predict import predict
-    from .common import check_output_path, config_from_args, emit_json
+    from .common import check_output_path, config_from_args, emit_json, feature_lines
 
     cfg = config_from_args(args)
     check_output_path(args.plot, (".png", ".pdf", ".svg"), "--plot")
@@ -34,8 +34,8 @@ def cmd_predict(args) -> int:
           + ("" if po.stable is None else (", stable" if po.stable else ", UNSTABLE"))
           + (f" ({po.message})" if po.message else ""))
     if po.found:
-        for k, v in po.features.interface_dict().items():
-            print(f"  {k:18s} {'-' if v is None else f'{v:.4g}'}")
+        for line in feature_lines(po.features.interface_dict(), cfg.plant_model.u_unit):
+            print(line)
         mods = ", ".join(f"{abs(m):.3g}" for m in po.floquet_multipliers[:3])
         print(f"  |Floquet multipliers| {mods}{' ...' if len(po.floquet_multipliers) > 3 else ''}")
     print(f"describing function ({df.nonlinearity or '-'}):")

@@ -9,11 +9,19 @@ module is installed, else it says so and runs headless until Ctrl-C.
 Exit status of ``run``: 0 when the run ended as asked (``duration``,
 ``signal``, ``user``, ``exit``), 1 after a safety stop or when the rig
 cannot be reached, 2 on bad input.
+
+The serving bound: with ``FRICTIONLAB_SERVE_LIMIT=S`` in the environment
+(the test suite sets it), a command that would otherwise serve until a signal
+(``rig-sim`` and ``run --headless`` without ``--duration``, and the console)
+stops after S seconds and exits with status 1, saying so: a test whose
+expected refusal went away fails instead of serving forever
+(docs/development.md).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import math
 import os
@@ -34,14 +42,70 @@ from .common import (
     safety_from_args,
 )
 
-__all__ = ["interface_stats", "register_cli", "start_console"]
+__all__ = ["SERVE_LIMIT_ENV", "WAIT_PRIORITY", "interface_stats", "register_cli",
+           "serve_limit", "start_console", "waiting_priority"]
 
 DEFAULT_RIG_PORT = 9870
 PREWARM_US = 300.0
 _OK_STOPS = ("duration", "signal", "user", "exit")
+#: The environment variable of the serving bound (seconds; unset: no bound).
+SERVE_LIMIT_ENV = "FRICTIONLAB_SERVE_LIMIT"
 #: ``--log-format`` choices (:data:`frictionlab.realtime.datalog.LOG_FORMATS`; kept here so
 #: that ``--help`` does not import the logger; a test checks they agree).
 LOG_FORMATS = ("csv", "parquet")
+
+
+def serve_limit() -> float | None:
+    """The serving bound in seconds (``$FRICTIONLAB_SERVE_LIMIT``), None when unset.
+
+    A command that serves until a signal (``rig-sim`` and ``run --headless``
+    without ``--duration``, the console) stops after this long and exits 1.
+    """
+    text = os.environ.get(SERVE_LIMIT_ENV, "").strip()
+    if not text:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0 and math.isfinite(value)):
+        raise UsageError(f"{SERVE_LIMIT_ENV}={text[:40]!r}: the serving bound must be a "
+                         "number of seconds > 0 (or unset)")
+    return value
+
+
+def _bound_hit(command: str, limit: float) -> int:
+    print(f"frictionlab {command}: error: stopped after {limit:g} s, the serving bound "
+          f"{SERVE_LIMIT_ENV} (give --duration for a run that ends by itself)",
+          file=sys.stderr)
+    return 1
+
+
+class _ConsoleBound:
+    """Ends the console after ``limit`` seconds as a SIGTERM would (the console and
+    :class:`RunSignals` catch it), only while :meth:`close` has not been called."""
+
+    def __init__(self, limit: float):
+        import threading
+
+        self.limit = limit
+        self.fired = False
+        self._done = False
+        self._lock = threading.Lock()
+        self._timer = threading.Timer(limit, self._fire)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _fire(self) -> None:
+        with self._lock:
+            if not self._done:
+                self.fired = True
+                os.kill(os.getpid(), signal.SIGTERM)
+
+    def close(self) -> None:
+        with self._lock:
+            self._done = True
+        self._timer.cancel()
 
 
 def _cpu_arg(text: str):
@@ -165,6 +229,8 @@ def register_cli(sub) -> None:
     p.add_argument("--no-realtime", action="store_true",
                    help="do not ask for SCHED_FIFO priority")
     p.add_argument("--cpu", type=_cpu_arg, default="auto", help=_CPU_HELP)
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="serve S seconds, then exit 0 (default: until Ctrl-C or SIGTERM)")
     p.add_argument("--json", action="store_true",
                    help="print {\"listening\", \"host\", \"port\"} as one JSON object when ready")
     p.set_defaults(func=cmd_rig_sim)
@@ -198,6 +264,10 @@ def _cmd_run(args) -> int:
                               gain_transition=args.gain_transition,
                               compensation_transition=args.compensation_transition)
     check_output_dir(args.log_dir, "--log-dir")
+    limit = serve_limit()
+    # the serving bound ends a headless run that has no --duration as a signal would
+    args.bound = limit if args.headless and args.duration is None else None
+    args.bound_hit = False
     flush_notes(args)
     with RunSignals() as signals:
         if signals.received is not None:  # came during the start-up: nothing ran
@@ -216,15 +286,20 @@ def _cmd_run(args) -> int:
             # until the console serves (and takes these signals over) a signal ends
             # `run` at once; nothing runs yet
             signals.interrupt = True
+            bound = None if limit is None else _ConsoleBound(limit)
             try:
                 if start_console(ctl, args.host, args.port, args.token):
-                    return 0
+                    return 0 if bound is None or not bound.fired else _bound_hit("run", limit)
             except KeyboardInterrupt:
+                if bound is not None and bound.fired:
+                    return _bound_hit("run", limit)
                 print(f"frictionlab run: stopped by {signals.received or 'a signal'}",
                       file=sys.stderr)
                 return 0
             finally:
                 signals.interrupt = False
+                if bound is not None:
+                    bound.close()
             print("frictionlab run: the operator console (frictionlab.console) is not "
                   "installed; running headless until Ctrl-C", file=sys.stderr)
         return _run_headless(ctl, args)
@@ -316,6 +391,33 @@ class RunSignals:
             signal.signal(signal.SIGTSTP, self._suspend)
 
 
+#: SCHED_FIFO priority of the main thread while a headless run waits for its end or a
+#: signal: that of the console's server (below the loop, 50, and the log writer, 10).
+WAIT_PRIORITY = 5
+
+
+@contextlib.contextmanager
+def waiting_priority(realtime: bool):
+    """The calling thread at :data:`WAIT_PRIORITY` (where permitted), its own
+    scheduling policy back afterwards (``run`` may run in a test's thread)."""
+    from ..realtime.osrt import try_realtime_priority
+
+    try:
+        before = (os.sched_getscheduler(0), os.sched_getparam(0))
+    except (AttributeError, OSError):
+        before = None
+    if realtime and before is not None:
+        try_realtime_priority(WAIT_PRIORITY)
+    try:
+        yield
+    finally:
+        if realtime and before is not None:
+            try:
+                os.sched_setscheduler(0, *before)
+            except OSError:
+                pass
+
+
 def _run_headless(ctl, args) -> int:
     from ..realtime import RigError
 
@@ -326,8 +428,15 @@ def _run_headless(ctl, args) -> int:
             print(f"frictionlab run: error: {exc}", file=sys.stderr)
             return 1
         # block without periodic wake-ups (a woken main thread takes the GIL); signal
-        # handlers still run, in this thread, and ask the loop to stop
-        ctl.wait()
+        # handlers still run, in this thread, and ask the loop to stop.  At a low
+        # SCHED_FIFO priority (below the loop's and the log writer's, as the console's
+        # server): on a loaded host a normal thread woke 15-30 ms late for the handler,
+        # and the motor ran on for 3-6 ticks after a SIGINT
+        with waiting_priority(getattr(ctl, "realtime", False)):
+            if not ctl.wait(getattr(args, "bound", None)):  # the serving bound
+                args.bound_hit = True
+                ctl.stop("signal", SERVE_LIMIT_ENV)
+                ctl.wait()
     finally:
         if ctl.running:
             ctl.stop("signal")
@@ -349,6 +458,8 @@ def _report(st: dict, args) -> int:
                   f" compute p50 {c['p50']:.0f} us, p99 {c['p99']:.0f} us")
         print(f"log: {st['log']}")
     reason = st.get("stop_reason")
+    if getattr(args, "bound_hit", False) and reason == "signal":  # not a safety stop first
+        return _bound_hit("run", args.bound)
     if reason in _OK_STOPS:
         return 0
     what = ("the log could not be written; the run was stopped with the motor at zero"
@@ -369,6 +480,8 @@ def cmd_rig_sim(args) -> int:
     if not (args.watchdog > 0 and math.isfinite(args.watchdog)):
         raise UsageError(f"--watchdog must be > 0, got {args.watchdog}")
     finite("--fault-after", args.fault_after, 0.0, lo_open=False)
+    finite("--duration", args.duration, 0.0)
+    limit = None if args.duration is not None else serve_limit()
     faults = {}
     for text in args.fault:
         key, sep, value = text.partition("=")
@@ -408,7 +521,11 @@ def cmd_rig_sim(args) -> int:
         if args.json:
             emit_json(info)
 
-    run_rig_sim(cfg, args.host, args.port, watchdog=args.watchdog, serial_device=args.serial,
-                faults=faults, fault_after=args.fault_after, realtime=not args.no_realtime,
-                cpu=_resolve_cpu(args.cpu), announce=announce, hand=hand or None)
+    ended = run_rig_sim(cfg, args.host, args.port, watchdog=args.watchdog,
+                        serial_device=args.serial, faults=faults,
+                        fault_after=args.fault_after, realtime=not args.no_realtime,
+                        cpu=_resolve_cpu(args.cpu), announce=announce, hand=hand or None,
+                        duration=args.duration if limit is None else limit)
+    if limit is not None and ended == "duration":
+        return _bound_hit("rig-sim", limit)
     return 0

@@ -99,7 +99,7 @@ def cmd_simulate(args) -> int:
                     else f"{swing.swing_up_time:.2f} s")
             print(f"  swing_up_time      {when} ({swing.catches} catch(es)"
                   + (f", stopped: {swing.stop_reason})" if swing.stop_reason else ")"))
-        for line in feature_lines(feats.interface_dict()):
+        for line in feature_lines(feats.interface_dict(), cfg.plant_model.u_unit):
             print(line)
     return 0
 

@@ -50,7 +50,7 @@ from starlette.staticfiles import StaticFiles
 from ..io.jsonsafe import json_safe
 from . import routes
 from .hub import MAX_PAGES, Hub, Page
-from .models import field_errors
+from .models import field_errors, field_units
 from .routes.page import STATIC_DIR
 from .security import Guard
 from .state import ConsoleState, Context
@@ -125,9 +125,11 @@ def create_app(controller, token: str | None = None, log_dir=None, *,
     app.state.stream = stream
     app.state.context = ctx
 
+    units = field_units(controller.cfg) if hasattr(controller, "cfg") else {}
+
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError):
-        errors = field_errors(exc)
+        errors = field_errors(exc, units)
         return JSONResponse({"detail": "; ".join(e["message"] for e in errors),
                              "errors": errors}, status_code=422)
 

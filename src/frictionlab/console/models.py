@@ -20,6 +20,7 @@ import re
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 from ..config import Config, build_config, describe_keys, motor_friction_defaults
 from ..model.controller import COMPENSATOR_FIELDS as _MODEL_FIELDS
@@ -41,6 +42,7 @@ __all__ = [
     "PushRequest",
     "RecordNameRequest",
     "field_errors",
+    "field_units",
     "request_field",
     "schema",
 ]
@@ -71,13 +73,22 @@ Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 
 
 def _check(cls, name: str, value: float, prefix: str) -> float:
-    """Construct ``cls`` with one field set; re-raise its ValueError with ``prefix``."""
+    """Construct ``cls`` with one field set; re-raise its ValueError with ``prefix``.
+
+    A value out of range is a ``param_range`` error whose context keeps the value and
+    the range apart (:func:`field_errors` then names the plant's unit, V or m/s^2)."""
     try:
         cls(**{name: value})
     except ParamError as exc:
         # named as the request names it: the error's field (design.omega0,
         # friction.coulomb) becomes the panel's key (compensation.coulomb)
         msg = str(exc)
+        if msg == str(ParamError(exc.field, exc.value, exc.allowed)):
+            shown = str(ParamError("", exc.value, exc.allowed)).split(" = ", 1)[1]
+            value_text, allowed = shown.split(" is out of range; allowed ", 1)
+            raise PydanticCustomError(
+                "param_range", "{key} = {value} is out of range; allowed {allowed}",
+                {"key": prefix + name, "value": value_text, "allowed": allowed}) from None
         if msg.startswith(exc.field):
             msg = prefix + name + msg[len(exc.field):]
         raise ValueError(msg) from None
@@ -113,10 +124,20 @@ class DesignRequest(_Request):
     observer_omega2: Number | None = None
     observer_zeta2: Number | None = None
 
+    @field_validator("preset", *FEEDBACK_FIELDS, *OBSERVER_FIELDS, mode="before")
+    @classmethod
+    def _not_null(cls, v, info):
+        # a field sent as null is refused at that field (left out, it keeps its value)
+        if v is None:
+            raise ValueError(f"{info.field_name} must not be null (leave it out to keep it)")
+        return v
+
     @field_validator(*FEEDBACK_FIELDS, *OBSERVER_FIELDS)
     @classmethod
     def _in_range(cls, v, info):
-        return v if v is None else _check(DesignSpec, info.field_name, v, "design.")
+        if info.data.get("preset") is not None:  # located at the field, not the body
+            raise ValueError("give either a preset or field values, not both")
+        return _check(DesignSpec, info.field_name, v, "design.")
 
     @model_validator(mode="after")
     def _one_kind(self):
@@ -185,6 +206,13 @@ class CompensationRequest(_Request):
     kind: Literal[COMPENSATORS] | None = None  # the same as Literal["coulomb", ...]
     params: FrictionModelRequest | None = None
     error_signal: Literal[ERROR_SIGNALS] | None = None  # type: ignore[valid-type]
+
+    @field_validator("enabled", "kind", "params", "error_signal", mode="before")
+    @classmethod
+    def _not_null(cls, v, info):
+        if v is None:  # refused at its field; left out, it keeps its value
+            raise ValueError(f"{info.field_name} must not be null (leave it out to keep it)")
+        return v
 
     @model_validator(mode="after")
     def _something(self):
@@ -273,6 +301,17 @@ _CHANGE_FIELDS = {"design": "preset", "compensation": "kind",
                   "error_signal": "error_signal"}
 
 
+def field_units(cfg: Config) -> dict[str, str]:
+    """The unit of each numeric request field on the plant of ``cfg`` (the panels' units,
+    :func:`schema`): ``omega1`` rad/s, ``params.coulomb`` V on a motor plant."""
+    sch = schema(cfg)
+    units = {f["name"]: f["unit"] for f in (*sch["feedback"], *sch["observer"])}
+    for fields in sch["compensation"]["fields"].values():
+        units.update({"params." + f["name"]: f["unit"] for f in fields})
+    units["kick"] = "rad/s"
+    return units
+
+
 def request_field(key: str) -> str:
     """The request field of a controller change key: ``design.zeta1`` -> ``zeta1``,
     ``compensation.sigma0`` -> ``params.sigma0``, ``compensation`` -> ``kind``."""
@@ -283,8 +322,9 @@ def request_field(key: str) -> str:
     return _CHANGE_FIELDS.get(key, key)
 
 
-def field_errors(exc: ValidationError | Any) -> list[dict]:
-    """``[{"field", "message"}]`` from a pydantic error list (``exc.errors()``)."""
+def field_errors(exc: ValidationError | Any, units: dict[str, str] | None = None) -> list[dict]:
+    """``[{"field", "message"}]`` from a pydantic error list (``exc.errors()``); a value
+    out of range is shown with ``units[field]`` (the run's plant's: :func:`field_units`)."""
     errors = exc.errors() if hasattr(exc, "errors") else exc
     out = []
     for err in errors:
@@ -292,7 +332,13 @@ def field_errors(exc: ValidationError | Any) -> list[dict]:
         field = ".".join(loc) if loc else None
         kind = err.get("type", "")
         name = loc[-1] if loc else "value"
-        if kind == "value_error":
+        if kind == "param_range":
+            ctx = err.get("ctx") or {}
+            unit = (units or {}).get(field or "", "")
+            unit = "" if unit in ("", "1") else " " + unit
+            message = (f"{ctx.get('key', name)} = {ctx.get('value')}{unit} is out of range; "
+                       f"allowed {ctx.get('allowed')}{unit}")
+        elif kind == "value_error":
             ctx = err.get("ctx") or {}
             message = str(ctx.get("error", err.get("msg", "")))
         elif kind in ("float_type", "float_parsing", "int_type", "int_parsing"):

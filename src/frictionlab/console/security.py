@@ -14,10 +14,11 @@ The console moves a motor, so it is closed by default:
   (403, also for a WebSocket handshake): no CORS, and no other site's page can
   drive the console through the operator's browser.  On a loopback bind the
   ``Host`` header must name a loopback address (DNS rebinding).
-* ``POST`` bodies must be ``application/json`` (415), at most
-  ``max_body`` bytes (413), counted as they arrive, and complete within
-  ``body_timeout`` seconds of the request head (408, and the connection is
-  closed): a client that sends a head and then stalls holds no connection.
+* ``POST`` bodies must be ``application/json`` (415).  Any request's body (a
+  ``GET``'s too) must be at most ``max_body`` bytes (413), counted as they
+  arrive, and complete within ``body_timeout`` seconds of the request head
+  (408, and the connection is closed): a client that sends a head and then
+  stalls, or trickles its body, holds no connection.
 * A refused request's connection is closed after the answer
   (``Connection: close``), so a client without the token holds no
   connection; connections that send no complete request are closed by the
@@ -209,10 +210,9 @@ class Guard:
             return
 
         send = _with_security_headers(send)
-        if scope["method"] in ("GET", "HEAD"):
-            await self.app(scope, receive, send)
-            return
-        # read the whole (small) body first, refusing it as soon as it is too large or late
+        # read the whole (small) body first, refusing it as soon as it is too large or late:
+        # every method's (a GET's body, which no route reads, trickled a byte at a time
+        # would otherwise hold its connection open for ever)
         chunks, size, more = [], 0, True
         deadline = asyncio.get_running_loop().time() + self.body_timeout
         while more:

@@ -14,7 +14,9 @@ a complete request head within :data:`HEAD_TIMEOUT` seconds, and when more
 than :data:`MAX_PENDING` connections are waiting for their first request it
 closes the oldest of them.  A refused request (no token, wrong origin)
 closes its connection (:mod:`.security`), and an idle kept-alive
-connection is closed after uvicorn's keep-alive timeout (5 s).
+connection is closed after uvicorn's keep-alive timeout (5 s).  A WebSocket
+handshake that announces a body is answered 400 and closed (it would wait for
+ever: see :meth:`ConsoleHTTP.handle_websocket_upgrade`).
 """
 
 from __future__ import annotations
@@ -52,10 +54,12 @@ class ConsoleHTTP(H11Protocol):
     """uvicorn's HTTP/1.1 protocol with a deadline for the first request head.
 
     A connection is *pending* from its opening until its first request head
-    is complete.  Pending connections are closed after :data:`HEAD_TIMEOUT`
-    seconds, and a new connection beyond :data:`MAX_PENDING` pending ones
-    closes the oldest, so idle or trickling connections (with or without the
-    token) can neither pile up nor hold a slot the operator needs.
+    is complete, and again from the first byte of each later request on a
+    kept-alive connection until that head is complete.  Pending connections
+    are closed after :data:`HEAD_TIMEOUT` seconds, and a new connection beyond
+    :data:`MAX_PENDING` pending ones closes the oldest, so idle or trickling
+    connections (with or without the token) can neither pile up nor hold a
+    slot the operator needs.
     """
 
     def _pending(self) -> OrderedDict:
@@ -66,6 +70,14 @@ class ConsoleHTTP(H11Protocol):
 
     def connection_made(self, transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
+        #: The request (scope) after which the connection waits for another (kept alive).
+        self._answered = None
+        #: The scope when the head deadline was set: a new one means the head arrived.
+        self._armed_at = None
+        self._arm()
+
+    def _arm(self) -> None:
+        """Pending from now: a complete request head within :data:`HEAD_TIMEOUT`."""
         pending = self._pending()
         pending[self] = self.loop.call_later(HEAD_TIMEOUT, self._head_timeout)
         while len(pending) > MAX_PENDING:
@@ -83,13 +95,42 @@ class ConsoleHTTP(H11Protocol):
             timer.cancel()
 
     def data_received(self, data: bytes) -> None:
+        if self._answered is not None and self._answered is self.scope:
+            # the first bytes of the next request on a kept-alive connection: its head has
+            # HEAD_TIMEOUT too (uvicorn's keep-alive timer restarts with every byte, so a
+            # head trickled a byte at a time held the connection for ever)
+            self._answered = None
+            self._armed_at = self.scope
+            self._arm()
         super().data_received(data)
-        if self.scope is not None:  # a request head arrived (an upgrade included)
+        if self.scope is not self._armed_at:  # a request head arrived (an upgrade too)
             self._not_pending()
+
+    def on_response_complete(self) -> None:
+        before = self.scope
+        super().on_response_complete()
+        if not self.transport.is_closing() and self.scope is before:
+            # no pipelined request started: wait for the next one's head; part of it
+            # may have come with this request already
+            self._answered = before
+            if self.conn.trailing_data[0]:
+                self._answered = None
+                self._armed_at = before
+                self._arm()
 
     def connection_lost(self, exc) -> None:
         self._not_pending()
         super().connection_lost(exc)
+
+    def handle_websocket_upgrade(self, event) -> None:
+        # a WebSocket handshake has no body; uvicorn hands the head alone to the
+        # WebSocket protocol, which then waited for ever on one announced (a stalled
+        # connection the body timeout never saw): refused, and the connection closed
+        if any(name in (b"content-length", b"transfer-encoding") and value.strip() != b"0"
+               for name, value in self.headers):
+            self.send_400_response("a WebSocket handshake has no body")
+            return
+        super().handle_websocket_upgrade(event)
 
 
 class _Server(uvicorn.Server):

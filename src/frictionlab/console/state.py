@@ -106,7 +106,8 @@ class Context:
         state = pendulum_state(hub.figures if hub is not None else {},
                                running=bool(st.get("running")),
                                upright=float((st.get("safety") or {}).get("angle_limit", 0.35)),
-                               phase=sw.get("phase"), experiment=bool(st.get("experiment")))
+                               phase=sw.get("phase"), experiment=bool(st.get("experiment")),
+                               stop_reason=st.get("stop_reason"))
         st["console"] = {
             "limit_cycle": honest_figures(hub.figures if hub is not None else {}, state),
             "clients": len(hub.clients) if hub is not None else 0,

@@ -237,7 +237,7 @@ FIGURE_KEYS = ("peak_to_peak", "period", "peak1", "max_u", "max_arm_velocity")
 
 
 def pendulum_state(fig: dict, *, running: bool, upright: float, phase: str | None = None,
-                   experiment: bool = False) -> str:
+                   experiment: bool = False, stop_reason: str | None = None) -> str:
     """What the pendulum is doing, from the last figures' angles and the run.
 
     ``"balancing"`` (running the balancing controller, and the angle stayed within
@@ -260,13 +260,17 @@ def pendulum_state(fig: dict, *, running: bool, upright: float, phase: str | Non
         The swing-up's phase (``swinging``, ``caught``, ``balancing``) if it is one.
     experiment : bool
         The run is an identification experiment (the pendulum is not balanced).
+    stop_reason : str, optional
+        Why the loop stopped: ``angle_limit`` is a fall, whatever the last sample
+        the figures hold (the reading past the limit ends the run: it is not in them).
     """
     if fig.get("max_angle") is None:
         return "unknown" if running else "stopped"
     if fig["min_angle_last_second"] >= math.pi - HANGING_BAND:
         return "hanging"
     if not running:
-        return "stopped" if fig["last_angle"] <= upright else "fallen"
+        fell = stop_reason == "angle_limit" or fig["last_angle"] > upright
+        return "fallen" if fell else "stopped"
     if experiment or phase == "swinging" or fig["max_angle_last_second"] > upright:
         return "swinging"
     if phase == "caught" or fig["max_angle"] > upright:

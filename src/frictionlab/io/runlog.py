@@ -12,7 +12,9 @@ the log), with ``max_u`` from ``u`` and ``max_arm_velocity`` from
 The result is an experiment of ``identify limit-cycle --measured``: the
 design preset (from the sidecar: the design in use when the run ended), the
 design keys when the run's design was not exactly a preset, and the
-features.
+features; with the plant the run controlled and the unit of its u (the
+sidecar's ``plant`` and ``u_unit``: ``max_u`` is in volts on a motor plant),
+so that the fit simulates that plant.
 """
 
 from __future__ import annotations
@@ -70,6 +72,11 @@ def _design_of(meta: dict | None) -> tuple[str | None, dict[str, Any]]:
     return None, {}
 
 
+def _text(meta: dict | None, key: str) -> str | None:
+    value = meta.get(key) if meta is not None else None
+    return value if isinstance(value, str) and value else None
+
+
 def run_log_features(path: str | Path, *, window: float | None = None,
                      h: float | None = None, design: str | None = None) -> dict[str, Any]:
     """Features of a run log, as an experiment of ``identify limit-cycle --measured``.
@@ -90,7 +97,9 @@ def run_log_features(path: str | Path, *, window: float | None = None,
     -------
     dict
         ``{"design", "status", "features", "set", "name", "log", "window",
-        "notes"}``.
+        "stop_reason", "plant", "u_unit", "notes"}``: ``plant`` the sidecar's
+        plant name (``thesis``, ``qube2``...) and ``u_unit`` the unit of u and
+        ``max_u`` (``m/s^2``, ``V``), None when no sidecar says.
 
     Raises
     ------
@@ -164,5 +173,7 @@ def run_log_features(path: str | Path, *, window: float | None = None,
         "log": str(p),
         "window": window if window is not None else 0.5 * span,
         "stop_reason": stop,
+        "plant": _text(meta, "plant"),
+        "u_unit": _text(meta, "u_unit"),
         "notes": notes,
     }

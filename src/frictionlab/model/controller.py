@@ -103,6 +103,7 @@ __all__ = [
     "Controller",
     "ControllerOutput",
     "Gains",
+    "arm_prediction",
     "check_compensator",
     "compensator_levels",
     "compensator_params",
@@ -457,6 +458,26 @@ def reset_compensator(s: np.record) -> None:
         setattr(s, name, 0.0)
 
 
+@jit_inline
+def arm_prediction(s, gp):
+    """The arm's angle and rate this tick as the plant's linear model predicts
+    them from the last tick's state in ``s`` (its estimate of theta and
+    theta_dot, the measured arm angle and rate) and the net voltage applied
+    since (u - F_hat with a compensator): rows 2 and 3 of Phi and Gamma in
+    ``gp.obs`` (:func:`~frictionlab.model.plants.furuta_dc_design.observer_row`).
+
+    The pendulum observer predicts no arm motion, so this is what the
+    compensators' innovations compare the measurements with: the arm gets
+    u - F, the prediction u - F_hat, and the difference is the friction's
+    estimation error (the role the thesis's arm observer plays, Sec. 6.3).
+    """
+    o = gp.obs
+    un = s.u - s.f_hat if gp.feed_net != 0.0 else s.u
+    a = o[8] * s.x1 + o[9] * s.x2 + o[10] * s.arm + o[11] * s.arm_dot + o[18] * un
+    ad = o[12] * s.x1 + o[13] * s.x2 + o[14] * s.arm + o[15] * s.arm_dot + o[19] * un
+    return a, ad
+
+
 @jit
 def controller_step(s, gp, cp, theta_m, arm_m, arm_dot_m):
     """One controller tick; updates the state record ``s`` in place.
@@ -506,6 +527,11 @@ def controller_tick(s, gp, cp, theta_m, arm_m, arm_dot_m, observer):
     if kind != 0:
         err = gp.error_signal
         e = 0.0
+        if current and (err == E_VEL_INNOV or err == E_POS_INNOV):
+            # no observer predicts the arm: the innovations against the
+            # model's one-tick prediction from the last tick's state and net
+            # voltage (arm_prediction)
+            arm_hat, armd_hat = arm_prediction(s, gp)
         if err == E_VEL_INNOV:
             e = arm_dot_m - armd_hat
         elif err == E_POS_INNOV:

@@ -89,6 +89,7 @@ from .closedloop import tick_jacobian
 from .controller import (
     ADAPTIVE,
     COMPENSATOR_CODES,
+    DC_PENDULUM_OBSERVER,
     Controller,
     Gains,
     new_state,
@@ -259,7 +260,9 @@ def loop_matrices(controller: Controller, plant=None, arm_speed: float = 0.0, *,
         State: the plant's (theta, theta_dot, Omega, Omega_dot), with a LuGre
         plant friction its bristle z and the friction of its last substep;
         then the controller's (theta_hat, theta_dot_hat / omega0, Omega_hat,
-        Omega_dot_hat) and, with the LuGre compensator, its z_hat.
+        Omega_dot_hat) and, with the LuGre compensator, its z_hat (with a motor
+        plant's pendulum observer also the last tick's u and F_hat, which its
+        innovation reads).
     N : ndarray (n, 3)
         Effect of additive errors w on the measured (theta, Omega, Omega_dot).
     K : ndarray (n,)
@@ -275,6 +278,10 @@ def loop_matrices(controller: Controller, plant=None, arm_speed: float = 0.0, *,
     states = list(_PEND_ARM)
     if compensate and controller.compensation in ("lugre", "adaptive"):
         states.append(state_index("z_hat"))
+        if gp.observer == DC_PENDULUM_OBSERVER:
+            # the innovation against the model's arm prediction reads the last
+            # tick's u and F_hat (controller.arm_prediction): they are states too
+            states += [state_index("u"), state_index("f_hat")]
     # sliding: the plant's friction is the compensator's own law (its premise), its
     # bristle or relay settled at the speed; at rest: no friction
     fkind, fp = _plant_friction(controller) if compensate and v != 0.0 else (NONE, cp)

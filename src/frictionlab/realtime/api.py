@@ -15,6 +15,8 @@ import time
 from concurrent.futures import Future
 from pathlib import Path
 
+import numpy as np
+
 from ..config import Config
 from ..model.adaptive import ADAPT_STATES
 from ..model.rig import RigScaling
@@ -362,7 +364,9 @@ class RealtimeController:
             or None if no run is in progress (the change then applies to the
             next run).
         """
-        with self._lock:
+        with self._lock, np.errstate(all="ignore"):
+            # values the design cannot compute with (an omega_0 of 1e-300) are refused by
+            # the check below, not printed as numpy's overflow warnings on the terminal
             current = self._params
             new = current.apply(changes)
             if not confirm and not new.loop_check.ok:

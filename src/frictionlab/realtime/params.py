@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import Config, ConfigError
+from ..config import Config, ConfigError, motor_friction_defaults
 from ..model.controller import COMPENSATORS, DEFAULT_ERROR_SIGNAL, ERROR_SIGNALS, Controller, Gains
 from ..model.design import PRESETS, Design, DesignSpec, design, gain_path, preset
 from ..model.friction import FrictionParams, friction_row
@@ -183,6 +183,9 @@ class ControlParams:
         enabled = cfg.compensation_kind != "none"
         kind = cfg.compensation_kind if enabled else "lugre"
         params = {k: FrictionParams.defaults(k, "compensation") for k in COMPENSATOR_MODELS}
+        if cfg.motor:  # every kind's defaults in the plant's units, as the page's schema
+            params = {k: motor_friction_defaults(cfg.plant_kind, p, p)[1]
+                      for k, p in params.items()}
         params[kind] = cfg.compensation
         return cls._build(cfg, cfg.design, enabled, kind, params, error_signal)
 

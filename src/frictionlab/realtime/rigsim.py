@@ -349,7 +349,6 @@ class RigEmulator:
             return  # older than the last command: a stale datagram
         if self._faults and self._take("ignore_commands", frame.seq):
             return
-        self.last_command_seq = frame.seq
         self.counts["commands"] += 1
         self.saturated = not (-1.0 <= u_da <= 1.0)
         u_da = dac.py_func(u_da, 1.0)
@@ -362,6 +361,8 @@ class RigEmulator:
         self._u = u_from_dac.py_func(u_da, self.scaling.u_scale)
         self._t_cmd = t
         self.tripped = False
+        # last: a thread that sees this command's number (without the lock) sees it applied
+        self.last_command_seq = frame.seq
 
     def _sample(self, seq: int, t: int) -> list[bytes]:
         self._advance(t)
@@ -652,43 +653,79 @@ def serve_stream(emulator: RigEmulator, fd: int, stop: threading.Event | None = 
 def run_rig_sim(cfg: Config, host: str, port: int, *, watchdog: float = 0.05,
                 serial_device: str | None = None, faults: dict | None = None,
                 fault_after: float = 0.0, realtime: bool = True, cpu: int | None = None,
-                announce=None, hand: dict | None = None) -> None:
-    """The ``frictionlab rig-sim`` process: serve until SIGINT/SIGTERM."""
+                announce=None, hand: dict | None = None,
+                duration: float | None = None) -> str:
+    """The ``frictionlab rig-sim`` process: serve until SIGINT/SIGTERM, or for
+    ``duration`` seconds when given.
+
+    Returns ``"signal"`` or ``"duration"``: what ended it.  On the way out the
+    calling thread gets back its signal handlers, scheduling policy and CPUs
+    (called in-process, by a test, the caller's thread is not left at SCHED_FIFO
+    priority, pinned, with SIGINT caught).
+    """
     import signal
 
     stop = threading.Event()
+    ended = ["signal"]
 
     def _stop(signum, frame):
         stop.set()
 
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
-    emulator = RigEmulator(cfg, MonotonicClock(), watchdog=watchdog)
-    if faults:
-        msg = {"cmd": "fault", **faults}
-        if fault_after:
-            msg["after"] = fault_after
-        reply = emulator.control(msg)
-        if not reply.get("ok"):
-            raise ValueError(reply.get("error"))
-    if hand:
-        reply = emulator.control(hand)  # {"cmd": "hand", ...} (``after`` from start-up)
-        if not reply.get("ok"):
-            raise ValueError(reply.get("error"))
-    # serve in the main thread: a single-threaded process never waits for the GIL
-    # (another thread holding it on a busy or paused CPU would silence the rig)
-    if realtime:
-        note = try_realtime_priority(40, cpu)
-        if note:
-            print(f"frictionlab rig-sim: {note}", file=sys.stderr)
-    if serial_device:
-        import serial
+    def _time_up():
+        ended[0] = "duration"
+        stop.set()
 
-        port_ = serial.serial_for_url(serial_device, timeout=0, **serial_settings())
-        if announce:
-            announce({"listening": f"serial://{serial_device}"})
-        serve_stream(emulator, port_.fileno(), stop)
-    else:
-        serve_udp(emulator, host, port, stop,
-                  ready=lambda a: announce and announce(
-                      {"listening": f"udp://{a[0]}:{a[1]}", "host": a[0], "port": a[1]}))
+    tid = threading.get_native_id()
+    try:
+        cpus = os.sched_getaffinity(tid)
+        policy = (os.sched_getscheduler(tid), os.sched_getparam(tid))
+    except (AttributeError, OSError):
+        cpus = policy = None
+    previous = {sig: signal.signal(sig, _stop) for sig in (signal.SIGTERM, signal.SIGINT)}
+    timer = None
+    try:
+        emulator = RigEmulator(cfg, MonotonicClock(), watchdog=watchdog)
+        if faults:
+            msg = {"cmd": "fault", **faults}
+            if fault_after:
+                msg["after"] = fault_after
+            reply = emulator.control(msg)
+            if not reply.get("ok"):
+                raise ValueError(reply.get("error"))
+        if hand:
+            reply = emulator.control(hand)  # {"cmd": "hand", ...} (``after`` from start-up)
+            if not reply.get("ok"):
+                raise ValueError(reply.get("error"))
+        # serve in the main thread: a single-threaded process never waits for the GIL
+        # (another thread holding it on a busy or paused CPU would silence the rig)
+        if realtime:
+            note = try_realtime_priority(40, cpu)
+            if note:
+                print(f"frictionlab rig-sim: {note}", file=sys.stderr)
+        if duration is not None:
+            timer = threading.Timer(duration, _time_up)
+            timer.daemon = True
+            timer.start()
+        if serial_device:
+            import serial
+
+            port_ = serial.serial_for_url(serial_device, timeout=0, **serial_settings())
+            if announce:
+                announce({"listening": f"serial://{serial_device}"})
+            serve_stream(emulator, port_.fileno(), stop)
+        else:
+            serve_udp(emulator, host, port, stop,
+                      ready=lambda a: announce and announce(
+                          {"listening": f"udp://{a[0]}:{a[1]}", "host": a[0], "port": a[1]}))
+    finally:
+        if timer is not None:
+            timer.cancel()
+        if realtime and cpus is not None:
+            try:
+                os.sched_setscheduler(tid, *policy)
+                os.sched_setaffinity(tid, cpus)
+            except (OSError, ValueError):
+                pass
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return ended[0]

@@ -122,6 +122,7 @@ __all__ = [
     "check_compensator",
     "check_grid",
     "compare",
+    "default_grid",
     "features_and_chatter",
     "make_compensator",
     "reversals",
@@ -541,6 +542,38 @@ DEFAULT_GRIDS: dict[str, list[tuple[str, list[float]]]] = {
 }
 
 
+#: The grid keys that :func:`default_grid` scales to a motor plant's defaults
+#: (levels and gains; velocities, bands and the law's bandwidth are kept).
+_SCALED_GRID_FIELDS = ("coulomb", "stiction", "sigma0", "sigma1", "observer_gain",
+                       "adaptation_gain")
+
+
+def default_grid(cfg: Config) -> list[tuple[str, list[float]]]:
+    """The default tuning grid of ``cfg``'s compensator.
+
+    :data:`DEFAULT_GRIDS` on the thesis plant.  On a motor plant the same
+    grid about the plant's own defaults (:func:`frictionlab.config.motor_friction_defaults`,
+    volts): each level or gain value is the motor default times the thesis
+    grid's value over the thesis default (the LuGre k grid 1, 3, 7, 15 about
+    7 becomes 0.14 to 2.1 times the motor plant's k), so the grid spans the
+    same ratios around a setting that is meaningful there.
+    """
+    kind = cfg.compensation_kind
+    grid = DEFAULT_GRIDS.get(kind, [])
+    if not cfg.motor:
+        return list(grid)
+    thesis = FrictionParams.defaults(kind, "compensation")
+    out = []
+    for key, values in grid:
+        field = key.split(".", 1)[1]
+        ref = getattr(thesis, field)
+        if field in _SCALED_GRID_FIELDS and ref:
+            own = getattr(cfg.compensation, field)
+            values = [float(f"{v * own / ref:.4g}") for v in values]
+        out.append((key, list(values)))
+    return out
+
+
 @dataclass(frozen=True)
 class TuneResult:
     """Outcome of :func:`tune`.
@@ -647,7 +680,8 @@ def tune(
         ``compensation.*`` values.
     grid : sequence of (key, values), optional
         ``compensation.*`` keys and their values (Cartesian product);
-        default :data:`DEFAULT_GRIDS` of the compensator.
+        default :func:`default_grid` (:data:`DEFAULT_GRIDS` of the compensator,
+        scaled to a motor plant's defaults).
     duration, window : float, optional
         Per run (defaults: ``sim.duration``; the last half).
     chatter_weight : float
@@ -682,7 +716,7 @@ def tune(
     if not (isinstance(chatter_weight, int | float) and math.isfinite(chatter_weight)
             and chatter_weight >= 0):
         raise ConfigError(f"chatter weight must be >= 0, got {chatter_weight!r}")
-    grid = list(grid) if grid is not None else DEFAULT_GRIDS.get(cfg.compensation_kind, [])
+    grid = list(grid) if grid is not None else default_grid(cfg)
     points = check_grid(cfg, grid)
     total = len(points) + 1
 

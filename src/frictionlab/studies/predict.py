@@ -141,13 +141,15 @@ def friction_nonlinearity(cfg: Config):
     """
     p = cfg.friction
     kind = cfg.friction_kind
+    u = cfg.plant_model.u_unit  # the friction levels' unit, that of u
+    uv = f"{u}/(rad/s)"
     if kind == "coulomb":
         nl = ct.relay_hysteresis_nonlinearity(p.coulomb, p.hysteresis)
-        return nl, f"relay F_C = {p.coulomb:g} with hysteresis eps = {p.hysteresis:g} rad/s"
+        return nl, f"relay F_C = {p.coulomb:g} {u} with hysteresis eps = {p.hysteresis:g} rad/s"
     if kind == "classical":
         nl = ct.relay_hysteresis_nonlinearity(p.coulomb, 0.0)
-        return nl, (f"Coulomb relay F_C = {p.coulomb:g} (stiction F_S = {p.stiction:g} acts "
-                    "only at rest, which a sinusoidal velocity never is)")
+        return nl, (f"Coulomb relay F_C = {p.coulomb:g} {u} (stiction F_S = {p.stiction:g} {u} "
+                    "acts only at rest, which a sinusoidal velocity never is)")
     if kind in ("stribeck", "lugre"):
         # steady sliding: s(v) sgn v (+ F_v v for LuGre); the stribeck form's
         # zero-velocity band counts as rest (no friction without applied force)
@@ -161,9 +163,9 @@ def friction_nonlinearity(cfg: Config):
                 return stribeck_classical_force(v, 0.0, rec)
             band = (p.hysteresis if p.hysteresis > 0 else p.zero_velocity_band,)
         return (StaticFrictionNonlinearity(curve, f"{kind} steady-state curve", band),
-                f"{kind} steady-state curve (F_S = {p.stiction:g}, F_C = {p.coulomb:g}, "
-                f"v_S = {p.stribeck_velocity:g}"
-                + (f", F_v = {p.viscous:g})" if kind == "lugre" else ")"))
+                f"{kind} steady-state curve (F_S = {p.stiction:g} {u}, F_C = {p.coulomb:g} {u}, "
+                f"v_S = {p.stribeck_velocity:g} rad/s"
+                + (f", F_v = {p.viscous:g} {uv})" if kind == "lugre" else ")"))
     return None, f"the {kind!r} friction has no describing-function limit cycle"
 
 

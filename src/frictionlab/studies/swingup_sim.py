@@ -37,7 +37,18 @@ from ..model.swingup import (
 )
 from ..runs import make_controller, make_sensor
 
-__all__ = ["SwingUpResult", "simulate_swingup", "swingup_outcome"]
+__all__ = ["ROBUST_DESIGN", "SwingUpResult", "simulate_swingup", "swingup_outcome"]
+
+#: The balancing design for a plant the design does not know (``--set`` pairs,
+#: the same for the thesis plant and the motor plants): both closed-loop pole
+#: pairs critically damped and the arm's pair at 5 rad/s.  The fast preset's
+#: arm pair (omega_2 = 10 rad/s, zeta 0.7; eqs. 13-16) leaves too little margin
+#: for a plant drawn within the swing-up Monte Carlo's spread: on the thesis
+#: plant its friction limit cycle needs more than a 10 m/s^2 actuator when
+#: F_C is high and the plant's omega_0 near the design's, on the QUBE-Servo 2
+#: its linear loop is unstable or nearly so on about 2 % of the plants
+#: (docs/swingup.md, "Plants the design does not know").
+ROBUST_DESIGN = (("design.omega2", 5.0), ("design.zeta1", 1.0), ("design.zeta2", 1.0))
 
 @dataclass(frozen=True)
 class SwingUpResult:

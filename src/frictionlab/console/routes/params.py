@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from concurrent.futures import TimeoutError as FutureTimeout
 
 from fastapi import APIRouter
@@ -35,6 +36,15 @@ def router(ctx: Context) -> APIRouter:
 
     @r.post("/api/design")
     def set_design(req: DesignRequest):
+        cfg = controller.cfg
+        if cfg.motor and req.omega0 is not None and not math.isclose(
+                req.omega0, cfg.plant.omega0, rel_tol=1e-5):  # the page's 6 digits pass
+            # a motor plant's designs are made on its own linearisation, with its
+            # omega_0: another value would be shown but change nothing
+            raise http_error(422, f"design.omega0 = {req.omega0:g} rad/s refused: the "
+                             f"{cfg.plant_kind} plant's designs use its own omega_0, "
+                             f"{cfg.plant.omega0:.6g} rad/s (plant.omega0, set at the start)",
+                             "omega0")
         return _submit(req.changes(), req.confirm)
 
     @r.post("/api/compensation")

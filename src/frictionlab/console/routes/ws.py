@@ -63,9 +63,13 @@ async def serve_page(websocket: WebSocket, page: Page, receiver: asyncio.Task) -
     page.backlog = []
     while True:
         getter = asyncio.create_task(page.queue.get())
-        done, _ = await asyncio.wait({getter, receiver}, return_when=asyncio.FIRST_COMPLETED)
+        try:
+            done, _ = await asyncio.wait({getter, receiver},
+                                         return_when=asyncio.FIRST_COMPLETED)
+        finally:  # the page left, or the server cancelled us: no getter left pending
+            if not getter.done():
+                getter.cancel()
         if receiver in done:
-            getter.cancel()
             return
         text = getter.result()
         if text is None:

@@ -80,7 +80,8 @@
     if (!Number.isFinite(v)) return { error: `${f.name} must be a finite number` };
     const below = f.lo !== null && (v < f.lo || (f.lo_open && v === f.lo));
     const above = f.hi !== null && (v > f.hi || (f.hi_open && v === f.hi));
-    if (below || above) return { error: `${f.name} = ${v} is out of range; allowed ${rangeText(f)}` };
+    const unit = f.unit && f.unit !== "1" ? " " + f.unit : "";
+    if (below || above) return { error: `${f.name} = ${v}${unit} is out of range; allowed ${rangeText(f)}${unit}` };
     return { value: v };
   }
 
@@ -90,7 +91,12 @@
     const id = `${prefix}-${f.name}`;
     row.innerHTML = `<label for="${id}"></label><input id="${id}" type="text" inputmode="decimal" autocomplete="off"><span class="error" id="${id}-error"></span>`;
     const label = row.querySelector("label");
-    label.textContent = f.name + (f.unit && f.unit !== "1" ? ` (${f.unit})` : "");
+    // a long name breaks after an underscore, not inside a word (<wbr>)
+    f.name.split("_").forEach((part, i) => {
+      if (i) label.append("_", document.createElement("wbr"));
+      label.append(part);
+    });
+    if (f.unit && f.unit !== "1") label.append(` (${f.unit})`);
     label.title = `${f.doc}; allowed ${rangeText(f)}`;
     const input = row.querySelector("input");
     input.dataset.field = f.name;

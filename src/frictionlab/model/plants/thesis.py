@@ -68,6 +68,30 @@ costs almost no accuracy against pendulum steps as fine as the arm's (the
 features change by at most 0.15 %, the classical model's max u; 0.02 %
 otherwise) for a quarter of the pendulum's cost.
 
+Pivot friction (``plant.pivot_friction``, off by default)
+---------------------------------------------------------
+Eq. (6) damps the pendulum viscously (:math:`-2\zeta\omega_0\dot\theta`), but
+App. A blames the spread of its damping estimates on "friction in the pivot
+point": the peaks of the free oscillation of Figure 33 (0.21, 0.17, 0.13,
+0.09, 0.06, 0.03 rad, one period apart) fall by nearly the same amount each
+period (0.04, 0.04, 0.04, 0.03, 0.03), where viscous damping alone would
+shrink them by the same *ratio* (App. A.2's per-peak zeta rises from 0.032
+to 0.062).  An oscillator :math:`\ddot\theta = -\omega_0^2\theta - 2\zeta
+\omega_0\dot\theta - f_p\,\mathrm{sgn}\,\dot\theta` loses
+:math:`4f_p/\omega_0^2` of amplitude per period to the Coulomb term and the
+fraction :math:`2\pi\zeta` to the viscous one, so the decrements
+:math:`d_n = A_n - A_{n+1} = 2\pi\zeta A_n + 4f_p/\omega_0^2`: the least-squares
+line through the five gives :math:`\zeta = 0.0125` and :math:`f_p = 0.30`
+rad/s^2 at :math:`\omega_0 = 6.8` (:func:`fit_pivot_friction`;
+:data:`A2_PIVOT_FRICTION`).  With ``plant.pivot_friction`` = f_p the plant's
+pendulum obeys eq. (6) plus :math:`-f_p\,\mathrm{sgn}\,\dot\theta`
+(:func:`pivot_accel`), the sign made linear below
+:data:`PIVOT_VELOCITY` (0.005 rad/s, so that the explicit pendulum step stays
+stable); the friction acts on the pendulum's velocity relative to the arm,
+and its reaction on the arm is not modelled (the arm is driven by an
+acceleration, eq. 5).  The observers know nothing of it, as the thesis's did
+not.  With 0 (the default) nothing of it is evaluated: eq. (6), bit for bit.
+
 Zero-velocity band (classical model)
 ------------------------------------
 As in the thesis's Simnon runs (Sec. 5.2), speeds inside the band count as
@@ -92,9 +116,12 @@ from ..friction import LUGRE, NONE, friction_step
 from ..params import Validated, param
 
 __all__ = [
+    "A2_PEAKS",
+    "A2_PIVOT_FRICTION",
     "ARM",
     "ARM_DOT",
     "NX",
+    "PIVOT_VELOCITY",
     "SUBSTEPS",
     "THETA",
     "THETA_DOT",
@@ -103,8 +130,10 @@ __all__ = [
     "Z",
     "accelerations",
     "accelerations_sc",
+    "fit_pivot_friction",
     "linearize",
     "linearized_model",
+    "pivot_accel",
     "plant_record",
     "rhs",
     "step_without_back_emf",
@@ -113,6 +142,23 @@ __all__ = [
     "zoh",
     "zoh_closed_form",
 ]
+
+#: App. A.2's peaks of the free oscillation (Figure 33), rad from the hanging
+#: position, one period apart.
+A2_PEAKS = (0.21, 0.17, 0.13, 0.09, 0.06, 0.03)
+#: App. A.2's pivot friction, rad/s^2 (:func:`fit_pivot_friction`, rounded).
+A2_PIVOT_FRICTION = 0.30
+
+
+def fit_pivot_friction(peaks=A2_PEAKS, omega0: float = 6.8) -> tuple[float, float]:
+    """``(zeta, f_p)`` of the least-squares line through the decrements of
+    successive peaks one period apart, ``d_n = 2 pi zeta A_n + 4 f_p / omega0^2``
+    (module docstring, "Pivot friction"); App. A.2's peaks by default."""
+    a = np.asarray(peaks, dtype=float)
+    d = a[:-1] - a[1:]
+    (slope, icpt), *_ = np.linalg.lstsq(np.column_stack([a[:-1], np.ones(len(d))]), d,
+                                        rcond=None)
+    return float(slope / (2.0 * math.pi)), float(icpt * omega0**2 / 4.0)
 
 THETA, THETA_DOT, ARM, ARM_DOT, Z = 0, 1, 2, 3, 4
 NX = 5
@@ -138,6 +184,10 @@ class PlantParams(Validated):
                      lo_open=True)
     input_gain: float = param(1.0, "multiplier on the u the plant receives (App. B.4's k_u "
                               "uncertainty)", "1", lo=0.0, hi=10.0, lo_open=True)
+    pivot_friction: float = param(0.0, "Coulomb friction of the pendulum's pivot, as the "
+                                  "angular deceleration it gives (App. A.2's decay: "
+                                  f"{A2_PIVOT_FRICTION}; 0 = none, eq. 6)", "rad/s^2",
+                                  lo=0.0, hi=100.0)
 
     @property
     def pendulum_length(self) -> float:
@@ -151,7 +201,7 @@ class PlantParams(Validated):
         default: the ideal input)."""
         act = (0.0, 0.0) if actuator is None else tuple(actuator)
         return np.array([self.omega0, self.zeta, self.g, self.arm_length, self.input_gain,
-                         *act], dtype=float)
+                         *act, self.pivot_friction], dtype=float)
 
 
 class PlantRecord(NamedTuple):
@@ -166,12 +216,27 @@ class PlantRecord(NamedTuple):
     #: the actuator (:mod:`frictionlab.model.actuator`): curvature c, back-EMF b
     act_curvature: float
     act_back_emf: float
+    #: the pendulum pivot's Coulomb friction (rad/s^2; :func:`pivot_accel`)
+    pivot_friction: float
 
 
 @jit
 def plant_record(row):
     """The :class:`PlantRecord` stored as the float row ``np.array(record)``."""
-    return PlantRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6])
+    return PlantRecord(row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7])
+
+
+#: The pivot friction's velocity scale: below it the friction is proportional to
+#: the pendulum's velocity (a regularised sign, rad/s; :func:`pivot_accel`).
+PIVOT_VELOCITY = 0.005
+
+
+@jit_inline
+def pivot_accel(theta_dot, level):
+    r"""The pendulum pivot's Coulomb friction, in :math:`\ddot\theta` (rad/s^2):
+    :math:`-f_p\,\mathrm{sgn}(\dot\theta)`, the sign regularised below
+    :data:`PIVOT_VELOCITY` (module docstring, "Pivot friction")."""
+    return -level * theta_dot / max(abs(theta_dot), PIVOT_VELOCITY)
 
 
 @jit
@@ -239,6 +304,8 @@ def rhs(t: float, x, u, params: PlantParams) -> np.ndarray:
         x[THETA], x[THETA_DOT], x[ARM_DOT], a, params.omega0, params.zeta, params.g,
         params.arm_length,
     )
+    if params.pivot_friction != 0.0:
+        th_dd += pivot_accel(float(x[THETA_DOT]), params.pivot_friction)
     dx = np.zeros_like(x)
     dx[THETA] = x[THETA_DOT]
     dx[THETA_DOT] = th_dd
@@ -396,6 +463,7 @@ def _step(x, u, mem, substeps, ratio, h, p, fkind, fp, back_emf):
     says whether the actuator's back-EMF is evaluated in the substeps, a
     constant where the caller passes one."""
     omega0, zeta, g, arm_len, ku = p.omega0, p.zeta, p.g, p.arm_length, p.input_gain
+    pivot = p.pivot_friction
     dt = h / substeps
     # the actuator (App. B.4): the acceleration the motor gives for k_u u, at the
     # substep's arm velocity when it has a back-EMF
@@ -455,6 +523,8 @@ def _step(x, u, mem, substeps, ratio, h, p, fkind, fp, back_emf):
         a_m = a_sum / m
         v_rms = math.sqrt(v2_sum / (3.0 * m))
         acc0, _ = accelerations_sc(sn, cs, thd, v_rms, a_m, omega0, zeta, g, arm_len)
+        if pivot != 0.0:
+            acc0 += pivot_accel(thd, pivot)
         dth = dtp * (thd + 0.5 * dtp * acc0)
         th = th + dth
         if abs(dth) < 1e-2:
@@ -469,6 +539,8 @@ def _step(x, u, mem, substeps, ratio, h, p, fkind, fp, back_emf):
             cs = np.cos(th)
         acc1, _ = accelerations_sc(sn, cs, thd + dtp * acc0, v_rms, a_m, omega0, zeta, g,
                                    arm_len)
+        if pivot != 0.0:
+            acc1 += pivot_accel(thd + dtp * acc0, pivot)
         thd = thd + 0.5 * dtp * (acc0 + acc1)
     x[0], x[1], x[2], x[3], x[4] = th, thd, arm, ad, z
     return f_sum / substeps, mem

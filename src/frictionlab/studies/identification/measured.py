@@ -56,6 +56,7 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
     "plant.omega0": (5.0, 9.0),
     "plant.input_gain": (0.5, 2.0),
     "plant.zeta": (0.0, 0.2),
+    "plant.pivot_friction": (0.0, 2.0),
     "actuator.curvature": (0.0, 0.5),
     "actuator.back_emf": (0.0, 20.0),
 }
