@@ -72,14 +72,17 @@ NOT_REALTIME = ("tests/test_realtime_cli.py::"
 #: (chromium takes a CPU of its own while it renders), a timing statistic (missed
 #: deadlines compared with a quiet period, or at most 1 % of them), and a safety stop
 #: whose slack is below half a second (the log's end within 100 ms of a SIGKILL, a
-#: pause limit of 0.15 s).  Two of them, or one beside another real-time test, lost
-#: deadlines on a loaded machine (docs/performance.md, "Test suite"); the other
-#: realtime tests run two at a time (scripts/test, phase 2).
+#: pause limit of 0.15 s, the motor at zero two writes after a SIGINT).  Two of them,
+#: or one beside another real-time test, lost deadlines on a loaded machine
+#: (docs/performance.md, "Test suite"); the other realtime tests run two at a time
+#: (scripts/test, phase 2).
 ALONE = ("tests/browser/",
          "tests/test_console.py::test_connecting_pages_cannot_stall_the_loop",
          "tests/test_firmware_hil.py::"
          "test_the_controller_balances_the_emulated_rig_and_a_stall_zeroes_the_motor",
          "tests/test_qube_acceptance.py::test_sigstop_the_board_watchdog_zeroes_the_motor",
+         "tests/test_qube_acceptance.py::"
+         "test_sigint_while_balancing_zeroes_the_motor_and_closes_the_board",
          "tests/test_realtime_cli.py::test_sigkill_loses_at_most_the_last_100_ms")
 
 
