@@ -59,6 +59,7 @@ def test_scripts_run_installs_and_serves_the_console(tmp_path):
 FAKE_PYTHON = """#!/usr/bin/env bash
 here=$(cd "$(dirname "$0")" && pwd)
 if [ "$1" = "-VV" ]; then echo "Python 3.11.7 (fake)"; exit 0; fi
+if [ "$1 $2" = "-m compileall" ]; then echo "compileall $*" >> "$here/../../pip.log"; exit 0; fi
 if [ "$1 $2" = "-m pip" ]; then
   echo "pip $*" >> "$here/../../pip.log"
   [ -n "${FAIL_PIP:-}" ] && exit 1
@@ -95,6 +96,11 @@ def test_installs_once_then_only_when_pyproject_changes(clone):
     assert res.returncode == 0, res.stderr
     assert len(calls) == 1 and calls[0].endswith("-e .")
     assert "installing . into .venv" in res.stderr and "Collecting numpy" in res.stderr
+    # pip installs without byte-compiling; compileall compiles on every CPU after it
+    log = (clone / "pip.log").read_text().splitlines()
+    assert "--no-compile" in calls[0].split()
+    assert "-j 0" in log[log.index(calls[0]) + 1] and log[log.index(calls[0]) + 1].startswith(
+        "compileall")
     res, calls = _ensure(clone)  # nothing changed: no pip, no output
     assert res.returncode == 0 and len(calls) == 1 and res.stderr == ""
     (clone / "pyproject.toml").write_text((clone / "pyproject.toml").read_text() + "\n# x\n")

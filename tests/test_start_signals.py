@@ -129,3 +129,40 @@ def test_the_start_up_handler_remembers_and_hands_over(monkeypatch):
     st = startsignals.not_started("SIGTERM")
     out = startsignals.interface_stats(st)
     assert out["stop_reason"] == "signal" and out["ticks"] == 0 and out["log"] is None
+
+
+def test_a_signal_while_the_handlers_are_being_installed_ends_the_run(monkeypatch, capsys):
+    """In-process: SIGINT arriving after the first handler is in place but before the
+    others are (the test above sends it as soon as SIGTERM is caught) ends the start-up
+    as a signal before the run, exit status 0, not as a traceback."""
+    import frictionlab.__main__ as entry
+    from frictionlab import startsignals
+
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM,
+                                                     signal.SIGHUP, signal.SIGQUIT)}
+    monkeypatch.setattr(startsignals, "_state",
+                        {"received": None, "raising": False, "previous": {}})
+    real_signal = signal.signal
+    installs = []
+
+    def install_then_interrupt(sig, handler):
+        previous = real_signal(sig, handler)
+        installs.append(sig)
+        if sig == signal.SIGTERM:  # SIGINT's handler is in place, SIGHUP's is not
+            signal.raise_signal(signal.SIGINT)
+        return previous
+
+    monkeypatch.setattr(signal, "signal", install_then_interrupt)
+    monkeypatch.setattr(sys, "argv", ["frictionlab", "run", "--headless", "--json"])
+    try:
+        rc = entry.main()
+    finally:
+        monkeypatch.setattr(signal, "signal", real_signal)
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    out, err = capsys.readouterr()
+    assert installs[:2] == [signal.SIGINT, signal.SIGTERM]
+    assert rc == 0
+    st = json.loads(out)
+    assert st["stop_reason"] == "signal" and st["ticks"] == 0 and st["log"] is None
+    assert "stopped: signal" in err

@@ -17,9 +17,11 @@ def main() -> int:
         # start-up: the stop handler before anything slow is imported (docs/realtime.md)
         from . import startsignals
 
-        startsignals.install()
         interrupted = (startsignals.Interrupted,)
     try:
+        if interrupted:
+            # inside the try: a signal between two of its handlers' installs raises too
+            startsignals.install()
         # start-up: the command line (and what it imports) after the stop handler
         from .cli import main as cli_main
 

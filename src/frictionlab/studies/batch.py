@@ -99,13 +99,18 @@ def _one(i, x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     sup_row = np.zeros(_SUP_N)
     wx = np.zeros(_SWING_N)
     phase = np.zeros(0)
-    done, fell_code, mem, zero = 0, 0, 0.0, 0.0
+    # np.int64 and np.bool_, not the constants 0, True, False: numba compiles a callee
+    # for literal argument types (Literal[int](0), Literal[bool](True)) apart from the
+    # int64 and bool of the Python callers (simulate, the periodic orbits, the swing-up):
+    # run_loop, the longest compile of the package, would be compiled three times
+    done, fell_code, mem, zero = np.int64(0), 0, 0.0, 0.0
+    record, swing = np.bool_(True), np.bool_(False)
     while done < n and fell_code == 0:
         m = min(chunk, n - done)
         d, fell_code, mem, zero = run_loop(x, mem, m, pc[i], sub[i], rat[i], pp[i], fk[i],
                                            plant_friction, gains, comp, state_view(s_row), sp,
-                                           done, zero, fall[i], buf, True, False, sup_row, wx,
-                                           phase)
+                                           done, zero, fall[i], buf, record, swing, sup_row,
+                                           wx, phase)
         for k in range(d):
             sig[0, done + k] = buf[k, 0]
             sig[1, done + k] = buf[k, 3]
@@ -139,7 +144,8 @@ def _one(i, x0, nt, pc, sub, rat, h, pp, fk, fp, gp, cp, s0, sens, fall, win,
     lo = min(lo, done - 3)
     t = np.arange(lo, done) * hi
     code, fv, cyc = features_kernel(t, sig[0, lo:done], sig[1, lo:done], sig[2, lo:done], span,
-                                     fell, sp.noise, REL_PROMINENCE, SETTLE_TOL, SMOOTH)
+                                     fell, sp.noise, REL_PROMINENCE, SETTLE_TOL,
+                                     np.int64(SMOOTH))  # not a literal: as from Python
     codes[i] = code
     vals[i, :] = fv
     cycles[i] = cyc
