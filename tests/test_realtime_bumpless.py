@@ -81,25 +81,33 @@ def test_switching_lugre_on_at_once_would_kick_the_motor():
     assert worst > 3.0
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name", SWITCHES)
-def test_a_switch_in_the_loop_is_bumpless_and_the_simulators(name):
-    cfg, _before, after, change = setup(name)
-    t_switch = 8.3
+def switch_in_the_loop(cfg, change, t_switch, h=H):
+    """Run the 200 Hz loop on a fake clock and the simulated rig, submit ``change``
+    (confirmed) while it sleeps after the tick of ``t_switch`` (in effect from the next),
+    and stop 0.5 s later.  Returns the commands u of every tick and the tick the change
+    took effect in, having checked that the run ended by its duration with one change."""
     clock = FakeClock()
     ctl = RealtimeController(cfg, SimRig(cfg, lockstep=True), log_dir=None, clock=clock,
                              duration=t_switch + 0.5, safety=Safety(angle_limit=1.2),
                              realtime=False, manage_gc=False)
     sub = ctl.subscribe(maxlen=4000)
     futures = []
-    # submitted while the loop sleeps after the tick of t_switch: in effect from the next
-    clock.call_at(clock.now_ns() + round((t_switch + H / 2) * 1e9),
+    clock.call_at(clock.now_ns() + round((t_switch + h / 2) * 1e9),
                   lambda: futures.append(ctl.submit(change, confirm=True)))
     stats = ctl.run()
     assert stats["stop_reason"] == "duration" and stats["changes_applied"] == 1
     u = np.array([s.u for s in sub.drain() if not s.flags & STOP])
     k = futures[0].result(timeout=0)
-    assert k == round(t_switch / H) + 1
+    assert k == round(t_switch / h) + 1
+    return u, k
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SWITCHES)
+def test_a_switch_in_the_loop_is_bumpless_and_the_simulators(name):
+    cfg, _before, after, change = setup(name)
+    t_switch = 8.3
+    u, k = switch_in_the_loop(cfg, change, t_switch)
     assert ratio(u, k) <= BOUND
     # the simulator makes the same switch, tick for tick (the loop's ADC round trip
     # rounds the measurements: no noise, no quantisation here)

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from test_realtime_bumpless import switch_in_the_loop
 from test_realtime_safety import check_stopped, fault_tick, run_with_emulator
 
 from frictionlab.cli.common import plant_from_args
@@ -200,24 +201,11 @@ def test_a_switch_while_the_motor_plant_runs_is_bumpless_and_the_simulators(cfg,
     beyond the cycle's own (max |u| over 0.3 s after the switch at most 1.1 times that
     over the 5 s before), and the loop's run is the simulator's, tick for tick."""
     from frictionlab.realtime.params import ControlParams
-    from frictionlab.realtime.samples import STOP
     from frictionlab.runs import simulate_config
 
     h, t_switch = 0.005, 5.3
     after = ControlParams.from_config(cfg).apply(change)
-    clock = FakeClock()
-    ctl = RealtimeController(cfg, SimRig(cfg, lockstep=True), log_dir=None, clock=clock,
-                             duration=t_switch + 0.5, safety=Safety(angle_limit=1.2),
-                             realtime=False, manage_gc=False)
-    sub = ctl.subscribe(maxlen=4000)
-    futures = []
-    clock.call_at(clock.now_ns() + round((t_switch + h / 2) * 1e9),
-                  lambda: futures.append(ctl.submit(change, confirm=True)))
-    stats = ctl.run()
-    assert stats["stop_reason"] == "duration" and stats["changes_applied"] == 1
-    u = np.array([s.u for s in sub.drain() if not s.flags & STOP])
-    k = futures[0].result(timeout=0)
-    assert k == round(t_switch / h) + 1
+    u, k = switch_in_the_loop(cfg, change, t_switch, h)
     a = np.abs(u)
     assert a[k:k + 60].max() <= 1.1 * a[k - 1000:k].max()
     tr = simulate_config(cfg, t_switch + 0.5, switches=[(k * h, after.controller)])
