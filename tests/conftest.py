@@ -76,7 +76,10 @@ NOT_REALTIME = ("tests/test_realtime_cli.py::"
 #: (chromium takes a CPU of its own while it renders), a timing statistic (missed
 #: deadlines compared with a quiet period, or at most 1 % of them), and a safety stop
 #: whose slack is below half a second (the log's end within 100 ms of a SIGKILL, a
-#: pause limit of 0.15 s, the motor at zero two writes after a SIGINT).  Two of them,
+#: pause limit of 0.15 s, the motor at zero two writes after a SIGINT), and the
+#: documents' real-time runs as written (the default run's 0.35 rad angle limit over a
+#: 0.17 rad cycle: beside another real-time test a stalled host once took it past the
+#: limit, after a first try stopped ``paused``).  Two of them,
 #: or one beside another real-time test, lost deadlines on a loaded machine
 #: (docs/performance.md, "Test suite"); the other realtime tests run two at a time
 #: (scripts/test, phase 2).
@@ -87,7 +90,8 @@ ALONE = ("tests/browser/",
          "tests/test_qube_acceptance.py::test_sigstop_the_board_watchdog_zeroes_the_motor",
          "tests/test_qube_acceptance.py::"
          "test_sigint_while_balancing_zeroes_the_motor_and_closes_the_board",
-         "tests/test_realtime_cli.py::test_sigkill_loses_at_most_the_last_100_ms")
+         "tests/test_realtime_cli.py::test_sigkill_loses_at_most_the_last_100_ms",
+         "tests/test_readme_commands.py::test_documented_real_time_runs_work_as_written")
 
 
 def pytest_addoption(parser):
